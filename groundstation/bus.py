@@ -1,0 +1,213 @@
+"""The bus seen by the service, simulator, dashboard and recorder: bytes on key expressions.
+
+:class:`Bus` is the interface; :class:`InMemoryBus` serves unit tests and single-process runs
+(as httpx pairs a transport with ``MockTransport``), :class:`groundstation.zenoh_bus.ZenohBus`
+is the real adapter. Both deliver callbacks on a thread that is not the caller's, so code
+written against one behaves the same on the other: callbacks must only validate and hand over.
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Protocol
+
+__all__ = [
+    "Bus",
+    "InMemoryBus",
+    "QueryHandler",
+    "Sample",
+    "SampleHandler",
+    "Subscription",
+    "keyexpr_matches",
+]
+
+_log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True, slots=True)
+class Sample:
+    """One message on the bus."""
+
+    key: str
+    payload: bytes
+
+
+SampleHandler = Callable[[Sample], None]
+QueryHandler = Callable[[str], "list[Sample]"]
+"""Called with the query's key expression; returns the replies."""
+
+
+class Subscription(Protocol):
+    def close(self) -> None: ...
+
+
+class Bus(Protocol):
+    """Publish/subscribe/query on key expressions (zenoh's ``*`` and ``**`` wildcards)."""
+
+    def publish(self, key: str, payload: bytes) -> None: ...
+
+    def subscribe(self, keyexpr: str, handler: SampleHandler) -> Subscription: ...
+
+    def queryable(self, keyexpr: str, handler: QueryHandler) -> Subscription: ...
+
+    def query(self, selector: str, timeout_s: float = 1.0) -> list[Sample]: ...
+
+    def liveliness_token(self, key: str) -> Subscription: ...
+
+    def close(self) -> None: ...
+
+
+def keyexpr_matches(keyexpr: str, key: str) -> bool:
+    """Whether concrete ``key`` is matched by ``keyexpr`` (``*``: one chunk, ``**``: any).
+
+    Chunks may also carry ``*`` inside them (``lab-a-*``), as in zenoh.
+    """
+    return _match(keyexpr.split("/"), key.split("/"))
+
+
+def _chunk_matches(pattern: str, chunk: str) -> bool:
+    if pattern == "*":
+        return True
+    if "*" not in pattern:
+        return pattern == chunk
+    parts = pattern.split("*")
+    if not chunk.startswith(parts[0]) or not chunk.endswith(parts[-1]):
+        return False
+    pos = len(parts[0])
+    end = len(chunk) - len(parts[-1])
+    for mid in parts[1:-1]:
+        idx = chunk.find(mid, pos, end)
+        if idx < 0:
+            return False
+        pos = idx + len(mid)
+    return pos <= end
+
+
+def _match(pattern: list[str], chunks: list[str]) -> bool:
+    if not pattern:
+        return not chunks
+    head = pattern[0]
+    if head == "**":
+        return any(_match(pattern[1:], chunks[i:]) for i in range(len(chunks) + 1))
+    if not chunks:
+        return False
+    return _chunk_matches(head, chunks[0]) and _match(pattern[1:], chunks[1:])
+
+
+class _Closer:
+    def __init__(self, fn: Callable[[], None]) -> None:
+        self._fn: Callable[[], None] | None = fn
+
+    def close(self) -> None:
+        fn, self._fn = self._fn, None
+        if fn is not None:
+            fn()
+
+
+class InMemoryBus:
+    """A process-local bus with the :class:`Bus` interface.
+
+    Publications are delivered in order on one dispatcher thread, like a transport would,
+    so publishers never run subscriber code on their own stack.
+    """
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._subs: dict[int, tuple[str, SampleHandler]] = {}
+        self._queryables: dict[int, tuple[str, QueryHandler]] = {}
+        self._tokens: set[str] = set()
+        self._next_id = 0
+        self._queue: queue.SimpleQueue[Sample | None] = queue.SimpleQueue()
+        self._closed = False
+        self._idle = threading.Condition()
+        self._pending = 0
+        self._thread = threading.Thread(target=self._dispatch, name="inmemory-bus", daemon=True)
+        self._thread.start()
+
+    def _new_id(self) -> int:
+        self._next_id += 1
+        return self._next_id
+
+    def publish(self, key: str, payload: bytes) -> None:
+        if self._closed:
+            return
+        with self._idle:
+            self._pending += 1
+        self._queue.put(Sample(key, bytes(payload)))
+
+    def subscribe(self, keyexpr: str, handler: SampleHandler) -> Subscription:
+        with self._lock:
+            sid = self._new_id()
+            self._subs[sid] = (keyexpr, handler)
+        return _Closer(lambda: self._drop(self._subs, sid))
+
+    def queryable(self, keyexpr: str, handler: QueryHandler) -> Subscription:
+        with self._lock:
+            qid = self._new_id()
+            self._queryables[qid] = (keyexpr, handler)
+        return _Closer(lambda: self._drop(self._queryables, qid))
+
+    def query(self, selector: str, timeout_s: float = 1.0) -> list[Sample]:
+        with self._lock:
+            handlers = list(self._queryables.values())
+        replies: list[Sample] = []
+        for keyexpr, handler in handlers:
+            if _intersects(keyexpr, selector):
+                replies.extend(handler(selector))
+        return replies
+
+    def liveliness_token(self, key: str) -> Subscription:
+        with self._lock:
+            self._tokens.add(key)
+        return _Closer(lambda: self._tokens.discard(key))
+
+    def alive(self, keyexpr: str) -> list[str]:
+        """Liveliness tokens matching ``keyexpr`` (test helper)."""
+        with self._lock:
+            return sorted(t for t in self._tokens if keyexpr_matches(keyexpr, t))
+
+    def flush(self, timeout_s: float = 5.0) -> bool:
+        """Wait until every publication so far has been delivered. Returns False on timeout."""
+        with self._idle:
+            return self._idle.wait_for(lambda: self._pending == 0, timeout=timeout_s)
+
+    def close(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        self._queue.put(None)
+        self._thread.join(timeout=2.0)
+
+    def _drop(self, table: dict[int, tuple[str, object]], ident: int) -> None:
+        with self._lock:
+            table.pop(ident, None)
+
+    def _dispatch(self) -> None:
+        while True:
+            sample = self._queue.get()
+            if sample is None:
+                return
+            with self._lock:
+                handlers = [h for k, h in self._subs.values() if keyexpr_matches(k, sample.key)]
+            for handler in handlers:
+                try:
+                    handler(sample)
+                except Exception:  # a bad handler must not kill delivery to the others
+                    _log.exception("handler for %s raised", sample.key)
+            with self._idle:
+                self._pending -= 1
+                if self._pending == 0:
+                    self._idle.notify_all()
+
+
+def _intersects(a: str, b: str) -> bool:
+    """Whether two key expressions can match a common key (enough for queries here)."""
+    if "*" not in b:
+        return keyexpr_matches(a, b)
+    if "*" not in a:
+        return keyexpr_matches(b, a)
+    return keyexpr_matches(a, b) or keyexpr_matches(b, a)

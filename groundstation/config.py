@@ -1,0 +1,329 @@
+"""The one root configuration: defaults, then a TOML file, then the environment, then the CLI.
+
+The TOML layout is the public contract (``../shared/INTERFACE.md``, "Configuration file"):
+``[zenoh]``, ``[drone]``, ``[tether]``, ``[base]`` and per-drone overrides under
+``[drones.<id>]`` with the same sub-tables. Tables added beside the contract: ``[follow]``,
+``[filter]``, ``[web]``, ``[service]``, ``[sim]`` (documented in README.md).
+
+Environment overrides use the prefix ``GROUNDSTATION_`` and ``__`` between levels, e.g.
+``GROUNDSTATION_TETHER__WEIGHT_N_PER_M=0.04`` or ``GROUNDSTATION_ZENOH__CONNECT='["tcp/..."]'``.
+
+Nothing here is read at import time: :func:`load_settings` builds the object once and the
+caller passes it on.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import tomllib
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic_settings import (
+    BaseSettings,
+    PydanticBaseSettingsSource,
+    SettingsConfigDict,
+)
+
+__all__ = [
+    "DRONE_ID_PATTERN",
+    "BaseSection",
+    "ConfigError",
+    "DroneOverride",
+    "DroneParams",
+    "DroneSection",
+    "FilterSection",
+    "FollowSection",
+    "ServiceSection",
+    "Settings",
+    "SimSection",
+    "TetherSection",
+    "WebSection",
+    "ZenohSection",
+    "load_settings",
+]
+
+DRONE_ID_PATTERN = re.compile(r"[A-Za-z0-9_-]{1,64}")
+
+Vec3 = tuple[float, float, float]
+
+
+class ConfigError(ValueError):
+    """A configuration value is invalid; the message names the key and the value."""
+
+
+class _Section(BaseModel):
+    model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
+
+
+class ZenohSection(_Section):
+    """``[zenoh]``: how the service joins the bus."""
+
+    mode: Literal["peer", "client", "router"] = "peer"
+    connect: tuple[str, ...] = ()
+    """Endpoints to connect to, e.g. ``tcp/127.0.0.1:7447``."""
+    listen: tuple[str, ...] = ()
+    """Endpoints to listen on."""
+    multicast_scouting: bool = False
+    """Off unless asked for: a lab network should not find peers by accident."""
+    config_file: str | None = None
+    """Optional zenoh JSON5 config (TLS, access control) loaded before the keys above."""
+    raw: dict[str, Any] = Field(default_factory=dict)
+    """Extra zenoh config entries, ``{"path/in/config": value}``, inserted as JSON5."""
+
+
+class DroneSection(_Section):
+    """``[drone]``: the vehicle."""
+
+    mass_kg: float = Field(0.030, gt=0.0, le=100.0)
+    accel_noise_mps2: float = Field(0.3, gt=0.0)
+    """Accelerometer white-noise standard deviation per axis (filter tuning)."""
+    thrust_noise_n: float = Field(0.003, gt=0.0)
+    """Collective-thrust noise standard deviation (filter tuning)."""
+
+
+class TetherSection(_Section):
+    """``[tether]``: the tether's weight per length (ω) and its default length."""
+
+    weight_n_per_m: float = Field(0.05, gt=0.0)
+    length_m: float = Field(1.6, gt=0.0)
+    """Used until a Reel message arrives."""
+
+
+class BaseSection(_Section):
+    """``[base]``: where the tether leaves the base, and the floor a slack tether rests on."""
+
+    position_m: Vec3 = (0.0, 0.0, 0.754)
+    floor_z_m: float = 0.0
+
+
+class FollowSection(_Section):
+    """``[follow]``: tension following and tug-to-land defaults (off until enabled)."""
+
+    threshold_n: float = Field(0.15, gt=0.0)
+    hysteresis_ratio: float = Field(0.2, ge=0.0, lt=1.0)
+    land_below_m: float | None = None
+    max_speed_mps: float = Field(0.5, gt=0.0)
+    reach_margin_m: float = Field(0.05, ge=0.0)
+    stale_after_s: float = Field(0.5, gt=0.0)
+
+
+class FilterSection(_Section):
+    """``[filter]``: tension-filter knobs beside the noise figures of ``[drone]``."""
+
+    ground_thrust_ratio: float = Field(0.5, gt=0.0, lt=1.0)
+    """Below this fraction of the weight the drone is taken to be on the ground."""
+
+
+class WebSection(_Section):
+    """``[web]``: the dashboard."""
+
+    host: str = "127.0.0.1"
+    port: int = Field(8080, ge=0, le=65535)
+    scene_rate_hz: float = Field(20.0, gt=0.0, le=30.0)
+
+
+class ServiceSection(_Section):
+    """``[service]``: the estimation service."""
+
+    drones: str = "*"
+    """Key-expression chunk selecting the drones this instance owns (``tether/{drones}/...``)."""
+    queue_size: int = Field(8192, ge=16)
+    max_payload_bytes: int = Field(65536, ge=256)
+    stale_after_s: float = Field(0.5, gt=0.0)
+    status_period_s: float = Field(1.0, gt=0.0)
+    log_level: Literal["DEBUG", "INFO", "WARNING", "ERROR"] = "INFO"
+    log_json: bool = False
+    record: str | None = None
+    """Record every bus sample to this MCAP file while serving."""
+
+
+class SimSection(_Section):
+    """``[sim]``: the simulator."""
+
+    scenario: str = "hover"
+    rate_hz: float = Field(250.0, gt=0.0, le=2000.0)
+    drones: tuple[str, ...] = ("cf1",)
+    accel_noise_mps2: float = Field(0.3, ge=0.0)
+    thrust_noise_n: float = Field(0.003, ge=0.0)
+    thrust_bias_ratio: float = Field(0.0, ge=-0.5, le=0.5)
+    mocap: bool = True
+    """Publish the motion-capture ``position_m`` in Telemetry."""
+    seed: int = 0
+    speed: float = Field(1.0, gt=0.0)
+    """Real-time factor (1 = wall clock)."""
+    duration_s: float | None = None
+
+
+class DroneOverride(_Section):
+    """``[drones.<id>]``: any of the per-drone tables, partially."""
+
+    drone: dict[str, Any] = Field(default_factory=dict)
+    tether: dict[str, Any] = Field(default_factory=dict)
+    base: dict[str, Any] = Field(default_factory=dict)
+    follow: dict[str, Any] = Field(default_factory=dict)
+
+
+class DroneParams(_Section):
+    """The resolved parameters of one drone (root tables merged with its override)."""
+
+    drone: DroneSection
+    tether: TetherSection
+    base: BaseSection
+    follow: FollowSection
+    filter: FilterSection
+
+
+class Settings(BaseSettings):
+    """The root configuration object."""
+
+    model_config = SettingsConfigDict(
+        env_prefix="GROUNDSTATION_",
+        env_nested_delimiter="__",
+        extra="forbid",
+        frozen=True,
+    )
+
+    zenoh: ZenohSection = ZenohSection()
+    drone: DroneSection = DroneSection()
+    tether: TetherSection = TetherSection()
+    base: BaseSection = BaseSection()
+    follow: FollowSection = FollowSection()
+    filter: FilterSection = FilterSection()
+    web: WebSection = WebSection()
+    service: ServiceSection = ServiceSection()
+    sim: SimSection = SimSection()
+    drones: dict[str, DroneOverride] = Field(default_factory=dict)
+
+    @field_validator("drones")
+    @classmethod
+    def _drone_ids(cls, value: dict[str, DroneOverride]) -> dict[str, DroneOverride]:
+        for drone_id in value:
+            if not DRONE_ID_PATTERN.fullmatch(drone_id):
+                raise ValueError(f"drone id {drone_id!r} does not match [A-Za-z0-9_-]{{1,64}}")
+        return value
+
+    @classmethod
+    def settings_customise_sources(
+        cls,
+        settings_cls: type[BaseSettings],
+        init_settings: PydanticBaseSettingsSource,
+        env_settings: PydanticBaseSettingsSource,
+        dotenv_settings: PydanticBaseSettingsSource,
+        file_secret_settings: PydanticBaseSettingsSource,
+    ) -> tuple[PydanticBaseSettingsSource, ...]:
+        # Only ``Settings()`` reads the environment; load_settings lays it between the
+        # file and the CLI. ``model_validate`` reads no source at all.
+        return (init_settings, env_settings)
+
+    def for_drone(self, drone_id: str) -> DroneParams:
+        """Resolve the parameters of ``drone_id`` (its ``[drones.<id>]`` over the root tables).
+
+        Raises:
+            ConfigError: the override makes a value invalid (names key and value).
+        """
+        override = self.drones.get(drone_id)
+        sections: dict[str, BaseModel] = {
+            "drone": self.drone,
+            "tether": self.tether,
+            "base": self.base,
+            "follow": self.follow,
+        }
+        merged: dict[str, Any] = {"filter": self.filter}
+        for name, section in sections.items():
+            patch = getattr(override, name) if override is not None else {}
+            if not patch:
+                merged[name] = section
+                continue
+            try:
+                merged[name] = type(section).model_validate(section.model_dump() | patch)
+            except ValidationError as exc:
+                raise ConfigError(
+                    _describe(exc, prefix=f"drones.{drone_id}.{name}", data=patch)
+                ) from None
+        return DroneParams(**merged)
+
+
+def _lookup(data: Any, loc: tuple[int | str, ...]) -> Any:
+    for part in loc:
+        if (isinstance(data, Mapping) and part in data) or (
+            isinstance(data, list | tuple) and isinstance(part, int) and part < len(data)
+        ):
+            data = data[part]
+        else:
+            return "<missing>"
+    return data
+
+
+def _describe(exc: ValidationError, *, prefix: str = "", data: Any = None) -> str:
+    lines = []
+    for err in exc.errors():
+        loc = tuple(err["loc"])
+        key = ".".join(str(p) for p in loc)
+        if prefix:
+            key = f"{prefix}.{key}" if key else prefix
+        value = err.get("input", _lookup(data, loc))
+        if isinstance(value, float) and not math.isfinite(value):
+            value = repr(value)
+        lines.append(f"{key} = {value!r}: {err['msg']}")
+    return "invalid configuration: " + "; ".join(lines)
+
+
+def _deep_merge(base: dict[str, Any], patch: Mapping[str, Any]) -> dict[str, Any]:
+    out = dict(base)
+    for key, value in patch.items():
+        if isinstance(value, Mapping) and isinstance(out.get(key), Mapping):
+            out[key] = _deep_merge(dict(out[key]), value)
+        else:
+            out[key] = value
+    return out
+
+
+def load_settings(
+    config_path: str | Path | None = None,
+    cli_overrides: Mapping[str, Any] | None = None,
+    *,
+    base: Mapping[str, Any] | None = None,
+    use_env: bool = True,
+) -> Settings:
+    """Build the root :class:`Settings`: defaults < ``base`` < file < environment < CLI.
+
+    Args:
+        config_path: a TOML file in the contract's layout, or None.
+        cli_overrides: nested dict of values given on the command line.
+        base: nested dict applied before the file (e.g. an embedded demo default).
+        use_env: read ``GROUNDSTATION_*`` variables.
+
+    Raises:
+        ConfigError: unreadable file, TOML syntax error, or an invalid value (the message
+            names the key and the value).
+    """
+    layered: dict[str, Any] = dict(base or {})
+    if config_path is not None:
+        path = Path(config_path)
+        try:
+            with path.open("rb") as fh:
+                file_data = tomllib.load(fh)
+        except OSError as exc:
+            raise ConfigError(f"cannot read config file {str(path)!r}: {exc.strerror}") from None
+        except tomllib.TOMLDecodeError as exc:
+            raise ConfigError(f"config file {str(path)!r} is not valid TOML: {exc}") from None
+        layered = _deep_merge(layered, file_data)
+
+    try:
+        if use_env:
+            # Environment beats the file: validate env alone, then lay it over the file.
+            env_only = Settings()
+            env_set = env_only.model_dump(exclude_unset=True)
+            layered = _deep_merge(layered, env_set)
+        layered = _deep_merge(layered, dict(cli_overrides or {}))
+        settings = Settings.model_validate(layered)
+    except ValidationError as exc:
+        raise ConfigError(_describe(exc, data=layered)) from None
+    # Resolve every override once at start-up so a bad per-drone value fails now.
+    for drone_id in settings.drones:
+        settings.for_drone(drone_id)
+    return settings

@@ -1,0 +1,151 @@
+"""The Zenoh adapter: :class:`groundstation.bus.Bus` on a real ``zenoh.Session``.
+
+It only maps key expressions and bytes; validation and estimation live elsewhere. Publishers
+declare ``application/json``. Multicast scouting is off unless configured, and there is no
+scouting delay, so a session opens at once and connects only where it is told to.
+
+The session must always be closed (:meth:`ZenohBus.close`, or use it as a context manager):
+a declared callback subscriber keeps a Python process alive forever otherwise.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import threading
+from types import TracebackType
+from typing import Any
+
+import zenoh
+
+from groundstation.bus import QueryHandler, Sample, SampleHandler, Subscription
+from groundstation.config import ZenohSection
+
+__all__ = ["ZenohBus", "make_zenoh_config", "open_session"]
+
+_log = logging.getLogger(__name__)
+_JSON = zenoh.Encoding.APPLICATION_JSON
+_log_initialised = False
+
+
+def make_zenoh_config(section: ZenohSection) -> zenoh.Config:
+    """Build a ``zenoh.Config`` from the ``[zenoh]`` table.
+
+    Order: the optional JSON5 file (TLS, access control), then mode, endpoints, scouting,
+    then ``raw`` entries.
+    """
+    conf = zenoh.Config.from_file(section.config_file) if section.config_file else zenoh.Config()
+    conf.insert_json5("mode", json.dumps(section.mode))
+    if section.connect:
+        conf.insert_json5("connect/endpoints", json.dumps(list(section.connect)))
+    if section.listen:
+        conf.insert_json5("listen/endpoints", json.dumps(list(section.listen)))
+    conf.insert_json5("scouting/multicast/enabled", json.dumps(section.multicast_scouting))
+    # A session waits scouting/delay for peers before returning; we know our endpoints.
+    conf.insert_json5("scouting/delay", "0")
+    for path, value in section.raw.items():
+        conf.insert_json5(path, json.dumps(value))
+    return conf
+
+
+def open_session(section: ZenohSection) -> zenoh.Session:
+    """Open a zenoh session for the ``[zenoh]`` table (logging from ``RUST_LOG`` or errors)."""
+    global _log_initialised
+    if not _log_initialised:
+        zenoh.init_log_from_env_or("error")
+        _log_initialised = True
+    return zenoh.open(make_zenoh_config(section))
+
+
+class _Handle:
+    def __init__(self, entity: Any) -> None:
+        self._entity = entity
+        self._lock = threading.Lock()
+
+    def close(self) -> None:
+        with self._lock:
+            entity, self._entity = self._entity, None
+        if entity is not None:
+            try:
+                entity.undeclare()
+            except zenoh.ZError:  # session already closed
+                pass
+
+
+class ZenohBus:
+    """:class:`~groundstation.bus.Bus` over a zenoh session."""
+
+    def __init__(self, section: ZenohSection | None = None, session: zenoh.Session | None = None):
+        self._owns_session = session is None
+        self.session = session if session is not None else open_session(section or ZenohSection())
+        self._publishers: dict[str, zenoh.Publisher] = {}
+        self._lock = threading.Lock()
+        self._closed = False
+
+    def __enter__(self) -> ZenohBus:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    def publish(self, key: str, payload: bytes) -> None:
+        pub = self._publishers.get(key)
+        if pub is None:
+            with self._lock:
+                if self._closed:
+                    return
+                pub = self._publishers.get(key)
+                if pub is None:
+                    pub = self.session.declare_publisher(key, encoding=_JSON)
+                    self._publishers[key] = pub
+        pub.put(payload)
+
+    def subscribe(self, keyexpr: str, handler: SampleHandler) -> Subscription:
+        def callback(sample: zenoh.Sample) -> None:
+            try:
+                handler(Sample(str(sample.key_expr), sample.payload.to_bytes()))
+            except Exception:  # never let a handler error unwind into zenoh's thread
+                _log.exception("subscriber handler for %s raised", keyexpr)
+
+        return _Handle(self.session.declare_subscriber(keyexpr, callback))
+
+    def queryable(self, keyexpr: str, handler: QueryHandler) -> Subscription:
+        def callback(query: zenoh.Query) -> None:
+            try:
+                for reply in handler(str(query.key_expr)):
+                    query.reply(reply.key, reply.payload, encoding=_JSON)
+            except Exception:
+                _log.exception("queryable handler for %s raised", keyexpr)
+
+        return _Handle(self.session.declare_queryable(keyexpr, callback))
+
+    def query(self, selector: str, timeout_s: float = 1.0) -> list[Sample]:
+        out: list[Sample] = []
+        for reply in self.session.get(selector, timeout=timeout_s):
+            ok = reply.ok
+            if ok is not None:
+                out.append(Sample(str(ok.key_expr), ok.payload.to_bytes()))
+        return out
+
+    def liveliness_token(self, key: str) -> Subscription:
+        return _Handle(self.session.liveliness().declare_token(key))
+
+    def close(self) -> None:
+        with self._lock:
+            if self._closed:
+                return
+            self._closed = True
+            publishers = list(self._publishers.values())
+            self._publishers.clear()
+        for pub in publishers:
+            try:
+                pub.undeclare()
+            except zenoh.ZError:
+                pass
+        if self._owns_session:
+            self.session.close()
