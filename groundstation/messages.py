@@ -10,7 +10,7 @@ Fields added beside the contract are marked "(added)"; they are documented in RE
 from __future__ import annotations
 
 import re
-from typing import Annotated
+from typing import Annotated, Self
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
@@ -25,13 +25,24 @@ __all__ = [
     "Setpoint",
     "Stop",
     "Telemetry",
+    "TetherParams",
     "Truth",
     "parse_key",
 ]
 
 DRONE_ID_RE = re.compile(r"[A-Za-z0-9_-]{1,64}")
-_KEY_RE = re.compile(r"tether/([^/]+)/(telemetry|reel|estimate|follow|cmd/setpoint|cmd/stop|truth)")
-KEY_KINDS = ("telemetry", "reel", "estimate", "follow", "cmd/setpoint", "cmd/stop", "truth")
+KEY_KINDS = (
+    "telemetry",
+    "reel",
+    "estimate",
+    "follow",
+    "params",
+    "status",
+    "cmd/setpoint",
+    "cmd/stop",
+    "truth",
+)
+_KEY_RE = re.compile(r"tether/([^/]+)/(" + "|".join(KEY_KINDS) + ")")
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 Vec3 = tuple[Finite, Finite, Finite]
@@ -69,7 +80,7 @@ class _In(BaseModel):
     model_config = ConfigDict(frozen=True, strict=True, extra="ignore", allow_inf_nan=False)
 
     @classmethod
-    def parse(cls, payload: bytes) -> _In:
+    def parse(cls, payload: bytes) -> Self:
         """Validate a JSON payload.
 
         Raises:
@@ -134,6 +145,16 @@ class FollowCommand(_In):
     """Tug-to-land height, metres (world z); absent keeps the current setting."""
     land: bool | None = None
     """(added) Switch tug-to-land off (False) or back on (True) without changing the height."""
+
+
+class TetherParams(_In):
+    """(added) Operator → ground station, ``tether/{drone}/params``: tether ω and length.
+
+    The length is taken only while no reel reports one.
+    """
+
+    weight_n_per_m: Finite | None = Field(default=None, gt=0.0)
+    length_m: Finite | None = Field(default=None, gt=0.0)
 
 
 class FollowInfo(_Out):

@@ -1,0 +1,378 @@
+"""Command line: ``groundstation serve | sim | demo | record | replay``.
+
+Flags of the public contract are kept exactly (``../shared/INTERFACE.md``); the ones added
+beside them are listed in README.md. Every long-running command stops on SIGINT or SIGTERM,
+closes its zenoh session and exits 0.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import os
+import signal
+import socket
+import sys
+import threading
+import time
+from collections.abc import Sequence
+from types import FrameType
+from typing import Any
+
+from groundstation import __version__
+from groundstation.config import ConfigError, Settings, load_settings
+
+__all__ = ["main"]
+
+_log = logging.getLogger("groundstation")
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+class _JsonFormatter(logging.Formatter):
+    def format(self, record: logging.LogRecord) -> str:
+        entry: dict[str, Any] = {
+            "ts": round(record.created, 6),
+            "level": record.levelname,
+            "logger": record.name,
+            "msg": record.getMessage(),
+        }
+        if record.exc_info:
+            entry["exc"] = self.formatException(record.exc_info)
+        return json.dumps(entry)
+
+
+def _setup_logging(level: str, as_json: bool) -> None:
+    handler = logging.StreamHandler(sys.stderr)
+    if as_json:
+        handler.setFormatter(_JsonFormatter())
+    else:
+        handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
+    root = logging.getLogger()
+    root.handlers[:] = [handler]
+    root.setLevel(level)
+
+
+def _stop_on_signals() -> threading.Event:
+    """An event set by SIGINT/SIGTERM; a second signal exits at once (status 1)."""
+    stop = threading.Event()
+
+    def handler(signum: int, frame: FrameType | None) -> None:
+        if stop.is_set():
+            os._exit(1)
+        _log.info("signal %d: stopping", signum)
+        stop.set()
+
+    signal.signal(signal.SIGINT, handler)
+    signal.signal(signal.SIGTERM, handler)
+    return stop
+
+
+def _wait(stop: threading.Event) -> None:
+    # Event.wait with a timeout keeps the main thread responsive to signals.
+    while not stop.wait(0.2):
+        pass
+
+
+def _add_common(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--config", metavar="PATH", help="TOML configuration file")
+    p.add_argument(
+        "--connect", metavar="ENDPOINT", action="append", default=[], help="zenoh endpoint"
+    )
+    p.add_argument("--listen", metavar="ENDPOINT", action="append", default=[])
+    p.add_argument("--mode", choices=["peer", "client", "router"], help="zenoh mode")
+    p.add_argument("--log-level", choices=["DEBUG", "INFO", "WARNING", "ERROR"])
+    p.add_argument("--log-json", action="store_true", help="log JSON lines on stderr")
+
+
+def _cli_overrides(args: argparse.Namespace) -> dict[str, Any]:
+    over: dict[str, Any] = {}
+    zenoh: dict[str, Any] = {}
+    if getattr(args, "connect", None):
+        zenoh["connect"] = list(args.connect)
+        # Given an endpoint to connect to and no mode, act as a client of it.
+        zenoh.setdefault("mode", "client" if not getattr(args, "listen", None) else "peer")
+    if getattr(args, "listen", None):
+        zenoh["listen"] = list(args.listen)
+    if getattr(args, "mode", None):
+        zenoh["mode"] = args.mode
+    if zenoh:
+        over["zenoh"] = zenoh
+    service: dict[str, Any] = {}
+    if getattr(args, "log_level", None):
+        service["log_level"] = args.log_level
+    if getattr(args, "log_json", False):
+        service["log_json"] = True
+    if getattr(args, "drones", None) and args.command == "serve":
+        service["drones"] = args.drones
+    if getattr(args, "record", None):
+        service["record"] = args.record
+    if service:
+        over["service"] = service
+    web: dict[str, Any] = {}
+    if getattr(args, "web_host", None):
+        web["host"] = args.web_host
+    if getattr(args, "web_port", None) is not None:
+        web["port"] = args.web_port
+    if web:
+        over["web"] = web
+    return over
+
+
+def _load(args: argparse.Namespace, base: dict[str, Any] | None = None) -> Settings:
+    overrides = _cli_overrides(args)
+    extra = getattr(args, "sim_overrides", None)
+    if extra:
+        overrides["sim"] = extra
+    settings = load_settings(args.config, overrides, base=base)
+    _setup_logging(settings.service.log_level, settings.service.log_json)
+    return settings
+
+
+def _free_port(host: str, preferred: int) -> int:
+    for port in (preferred, 0):
+        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+            try:
+                s.bind((host, port))
+            except OSError:
+                continue
+            return int(s.getsockname()[1])
+    raise OSError(f"no free TCP port on {host}")
+
+
+def _start_dashboard(settings: Settings, bus: Any) -> Any:
+    from groundstation.dashboard import Dashboard
+
+    dashboard = Dashboard(settings, bus)
+    dashboard.start()
+    print(f"dashboard: {dashboard.url}", flush=True)
+    return dashboard
+
+
+# --------------------------------------------------------------------------- commands
+
+
+def cmd_serve(args: argparse.Namespace) -> int:
+    from groundstation.service import Service
+    from groundstation.zenoh_bus import ZenohBus
+
+    settings = _load(args)
+    stop = _stop_on_signals()
+    with ZenohBus(settings.zenoh) as bus:
+        service = Service(settings, bus)
+        dashboard = None
+        try:
+            service.start()
+            if not args.headless:
+                dashboard = _start_dashboard(settings, bus)
+            print(f"groundstation serve: running (instance {service.instance})", flush=True)
+            _wait(stop)
+        finally:
+            if dashboard is not None:
+                dashboard.close()
+            service.close()
+    return 0
+
+
+def cmd_sim(args: argparse.Namespace) -> int:
+    from groundstation.sim import SCENARIOS, Simulator
+    from groundstation.zenoh_bus import ZenohBus
+
+    if args.list:
+        for name in sorted(SCENARIOS):
+            print(f"{name:14s} {SCENARIOS[name].description}")
+        return 0
+    settings = _load(args)
+    stop = _stop_on_signals()
+    with ZenohBus(settings.zenoh) as bus:
+        sim = Simulator(settings, bus, scenario=args.scenario)
+        sim.start()
+        try:
+            print(
+                f"groundstation sim: scenario {sim.scenario.name} for {', '.join(sim.drones)}",
+                flush=True,
+            )
+            while not stop.wait(0.2):
+                if sim.wait(0.0):
+                    break
+        finally:
+            sim.close()
+    return 0
+
+
+DEMO_DEFAULTS: dict[str, Any] = {
+    "zenoh": {"mode": "peer", "listen": ["tcp/127.0.0.1:7447"]},
+    "sim": {"scenario": "hover_spots", "drones": ["cf1"]},
+    "web": {"host": "127.0.0.1", "port": 8080},
+}
+"""The embedded demo configuration: peer on loopback, one simulated drone, dashboard."""
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    from groundstation.service import Service
+    from groundstation.sim import Simulator
+    from groundstation.zenoh_bus import ZenohBus
+
+    base = json.loads(json.dumps(DEMO_DEFAULTS))
+    zport = _free_port("127.0.0.1", 7447)
+    base["zenoh"]["listen"] = [f"tcp/127.0.0.1:{zport}"]
+    if args.web_port is None:
+        base["web"]["port"] = _free_port("127.0.0.1", 8080)
+    settings = _load(args, base=base)
+    stop = _stop_on_signals()
+    with ZenohBus(settings.zenoh) as bus:
+        service = Service(settings, bus)
+        sim = Simulator(settings, bus, scenario=args.scenario)
+        dashboard = None
+        try:
+            service.start()
+            if not args.headless:
+                dashboard = _start_dashboard(settings, bus)
+            sim.start()
+            print(
+                f"groundstation demo: scenario {sim.scenario.name}, drones "
+                f"{', '.join(sim.drones)}; zenoh on tcp/127.0.0.1:{zport}; Ctrl-C stops",
+                flush=True,
+            )
+            deadline = time.monotonic() + args.duration if args.duration else None
+            while not stop.wait(0.2):
+                if deadline is not None and time.monotonic() > deadline:
+                    break
+                if sim.wait(0.0) and sim.scenario.duration_s is not None and args.once:
+                    break
+        finally:
+            sim.close()
+            if dashboard is not None:
+                dashboard.close()
+            service.close()
+    return 0
+
+
+def cmd_record(args: argparse.Namespace) -> int:
+    from groundstation.recording import run_record
+
+    settings = _load(args)
+    stop = _stop_on_signals()
+    return int(run_record(settings, args.out, args.key or ["tether/**"], stop))
+
+
+def cmd_replay(args: argparse.Namespace) -> int:
+    from groundstation import recording
+
+    settings = _load(args)
+    if args.offline:
+        if not args.out:
+            print("replay --offline needs --out OUT.mcap", file=sys.stderr)
+            return 2
+        return int(
+            recording.run_replay_offline(settings, args.file, args.out, figures_dir=args.figures)
+        )
+    stop = _stop_on_signals()
+    return int(recording.run_replay(settings, args.file, speed=args.speed, stop_event=stop))
+
+
+# --------------------------------------------------------------------------- parser
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="groundstation",
+        description="Ground station for tethered micro drones (Zenoh service, simulator, "
+        "dashboard, recorder).",
+    )
+    parser.add_argument("--version", action="version", version=f"groundstation {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser("serve", help="run the estimation service")
+    _add_common(p)
+    p.add_argument("--headless", action="store_true", help="no dashboard")
+    p.add_argument("--web-host", metavar="HOST", help="dashboard bind address (127.0.0.1)")
+    p.add_argument("--web-port", metavar="N", type=int, help="dashboard port (8080)")
+    p.add_argument(
+        "--drones", metavar="CHUNK", help="own only drones matching tether/CHUNK/* (e.g. lab-a-*)"
+    )
+    p.add_argument("--record", metavar="FILE", help="also record the bus to this MCAP file")
+    p.set_defaults(func=cmd_serve)
+
+    p = sub.add_parser("sim", help="run the drone + tether simulator")
+    _add_common(p)
+    p.add_argument("--scenario", metavar="NAME", help="scenario (see --list)")
+    p.add_argument("--list", action="store_true", help="list the scenarios")
+    p.add_argument("--drones", metavar="ID", nargs="+", help="drone ids to simulate")
+    p.add_argument("--duration", type=float, metavar="S", help="stop after S simulated seconds")
+    p.add_argument("--speed", type=float, help="real-time factor")
+    p.add_argument("--seed", type=int)
+    p.add_argument("--rate", type=float, metavar="HZ", help="telemetry rate")
+    p.add_argument("--no-mocap", action="store_true", help="omit motion-capture position_m")
+    p.add_argument("--thrust-bias", type=float, metavar="RATIO", help="e.g. 0.02 for +2 %%")
+    p.set_defaults(func=cmd_sim)
+
+    p = sub.add_parser("demo", help="simulator + service + dashboard in one process")
+    _add_common(p)
+    p.add_argument("--scenario", metavar="NAME", help="scenario (default hover_spots)")
+    p.add_argument("--headless", action="store_true", help="no dashboard")
+    p.add_argument("--web-host", metavar="HOST")
+    p.add_argument("--web-port", metavar="N", type=int)
+    p.add_argument("--duration", type=float, metavar="S", help="stop after S wall seconds")
+    p.add_argument("--once", action="store_true", help="stop when the scenario ends")
+    p.set_defaults(func=cmd_demo)
+
+    p = sub.add_parser("record", help="record the bus into MCAP")
+    _add_common(p)
+    p.add_argument("--out", required=True, metavar="FILE.mcap")
+    p.add_argument("--key", action="append", metavar="KEYEXPR", help="default tether/**")
+    p.set_defaults(func=cmd_record)
+
+    p = sub.add_parser("replay", help="play a recording back (or re-estimate it offline)")
+    _add_common(p)
+    p.add_argument("file", metavar="FILE.mcap")
+    p.add_argument("--speed", type=float, default=1.0, metavar="X")
+    p.add_argument("--offline", action="store_true", help="re-run estimation, no bus")
+    p.add_argument("--out", metavar="OUT.mcap")
+    p.add_argument("--figures", metavar="DIR", help="with --offline: draw figures here")
+    p.set_defaults(func=cmd_replay)
+    return parser
+
+
+def _sim_overrides(args: argparse.Namespace) -> dict[str, Any]:
+    over: dict[str, Any] = {}
+    if args.command not in ("sim", "demo"):
+        return over
+    if getattr(args, "scenario", None):
+        over["scenario"] = args.scenario
+    if args.command == "sim":
+        if args.drones:
+            over["drones"] = list(args.drones)
+        if args.duration is not None:
+            over["duration_s"] = args.duration
+        if args.speed is not None:
+            over["speed"] = args.speed
+        if args.seed is not None:
+            over["seed"] = args.seed
+        if args.rate is not None:
+            over["rate_hz"] = args.rate
+        if args.no_mocap:
+            over["mocap"] = False
+        if args.thrust_bias is not None:
+            over["thrust_bias_ratio"] = args.thrust_bias
+    return over
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``groundstation`` console script."""
+    args = build_parser().parse_args(argv)
+    args.sim_overrides = _sim_overrides(args)
+    try:
+        return int(args.func(args))
+    except ConfigError as exc:
+        print(f"groundstation: {exc}", file=sys.stderr)
+        return 2
+    except FileNotFoundError as exc:
+        print(f"groundstation: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

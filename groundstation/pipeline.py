@@ -1,0 +1,489 @@
+"""The seam between messages and math: validate a sample, step the per-drone estimators.
+
+Data flows one way (STYLE.md)::
+
+    Telemetry ─▶ tension observation ─▶ tension filter ─▶ localization ─▶ follow ─▶ outputs
+
+:class:`Pipeline` is synchronous and single-threaded: :meth:`Pipeline.validate` turns bytes
+into a model (or an :class:`~groundstation.messages.InvalidMessage`) and may run on any
+thread; :meth:`Pipeline.process` steps the drone's state and returns the samples to publish.
+:meth:`Pipeline.handle` does both. Time is a parameter (``now_s``, the receive clock), so the
+same code runs live (:mod:`groundstation.service`) and offline on a recording.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from collections import Counter, deque
+from collections.abc import Iterable
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from groundstation import follow as follow_mod
+from groundstation.bus import Sample
+from groundstation.config import DroneParams, Settings
+from groundstation.localization import PositionEstimate, localize
+from groundstation.messages import (
+    Estimate,
+    FollowCommand,
+    FollowInfo,
+    InvalidMessage,
+    Reel,
+    Setpoint,
+    Stop,
+    Telemetry,
+    TetherParams,
+    parse_key,
+)
+from groundstation.tension import (
+    DegenerateQuaternionError,
+    TensionError,
+    TensionFilter,
+    TensionFilterParams,
+    observe_tension,
+)
+
+__all__ = ["DroneRuntime", "Parsed", "Pipeline"]
+
+_INPUT_MODELS: dict[str, type[Telemetry] | type[Reel] | type[FollowCommand] | type[TetherParams]]
+_INPUT_MODELS = {
+    "telemetry": Telemetry,
+    "reel": Reel,
+    "follow": FollowCommand,
+    "params": TetherParams,
+}
+MAX_DRONES = 256
+"""Drones tracked at most; more ids are dropped (kind ``too_many_drones``), bounding memory."""
+_MAX_GAP_S = 1.0
+"""A telemetry gap longer than this restarts the filter (the tension may have changed)."""
+
+
+@dataclass(frozen=True, slots=True)
+class Parsed:
+    """A validated input: the drone, the kind (``telemetry``, ``reel``, ...), the model."""
+
+    drone: str
+    kind: str
+    message: Telemetry | Reel | FollowCommand | TetherParams
+    received_s: float
+
+
+class _Rate:
+    """Messages per second over a sliding window of receive times."""
+
+    def __init__(self, window_s: float = 2.0) -> None:
+        self.window_s = window_s
+        self.times: deque[float] = deque()
+
+    def add(self, now_s: float) -> None:
+        self.times.append(now_s)
+        cutoff = now_s - self.window_s
+        while self.times and self.times[0] < cutoff:
+            self.times.popleft()
+
+    def hz(self, now_s: float) -> float:
+        cutoff = now_s - self.window_s
+        n = sum(1 for t in self.times if t >= cutoff)
+        return n / self.window_s
+
+
+@dataclass
+class DroneRuntime:
+    """Everything the pipeline keeps about one drone (owned by the processing thread)."""
+
+    drone: str
+    params: DroneParams
+    filter: TensionFilter
+    follow_params: follow_mod.FollowParams
+    follow_state: follow_mod.FollowState
+    length_m: float
+    base_world_m: np.ndarray
+    weight_n_per_m: float
+    length_source: str = "config"
+    last_seq: int | None = None
+    last_stamp_s: float | None = None
+    last_seen_s: float | None = None
+    stale: bool = True
+    received: int = 0
+    accepted: int = 0
+    estimates: int = 0
+    setpoints: int = 0
+    stops: int = 0
+    seq_gaps: int = 0
+    change_detections: int = 0
+    drops: Counter[str] = field(default_factory=Counter)
+    telemetry_rate: _Rate = field(default_factory=_Rate)
+    estimate_rate: _Rate = field(default_factory=_Rate)
+    last_estimate: Estimate | None = None
+    land_below_m_memory: float | None = None
+    """Last tug-to-land height, restored when tug-to-land is switched back on."""
+
+
+class Pipeline:
+    """Per-drone estimation from validated messages (single-threaded; see module doc).
+
+    Args:
+        settings: the root configuration.
+        on_drop: called as ``on_drop(drone_or_None, kind, detail)`` for every rejected
+            input (the service logs the first of each kind).
+    """
+
+    def __init__(
+        self,
+        settings: Settings,
+        on_drop: Any = None,
+    ) -> None:
+        self.settings = settings
+        self.drones: dict[str, DroneRuntime] = {}
+        self.global_drops: Counter[str] = Counter()
+        self._on_drop = on_drop
+        self._lock = threading.Lock()  # guards drop counters touched from bus threads
+
+    # ---------------------------------------------------------------- validation
+
+    def validate(self, sample: Sample, now_s: float) -> Parsed | None:
+        """Validate one bus sample; count and report it when rejected.
+
+        Safe to call from any thread. Returns None for a rejected sample.
+        """
+        drone: str | None = None
+        try:
+            drone, kind = parse_key(sample.key)
+            model = _INPUT_MODELS.get(kind)
+            if model is None:
+                raise InvalidMessage("unexpected_key", f"{sample.key!r} is not an input")
+            limit = self.settings.service.max_payload_bytes
+            if len(sample.payload) > limit:
+                raise InvalidMessage(
+                    "too_large", f"{len(sample.payload)} bytes on {sample.key} (limit {limit})"
+                )
+            message = model.parse(sample.payload)
+        except InvalidMessage as exc:
+            self.count_drop(drone, exc.kind, exc.detail)
+            return None
+        return Parsed(drone, kind, message, now_s)  # type: ignore[arg-type]
+
+    def count_drop(self, drone: str | None, kind: str, detail: str) -> None:
+        """Count a rejected input per drone and kind (thread-safe) and report it."""
+        with self._lock:
+            runtime = self.drones.get(drone) if drone is not None else None
+            if runtime is not None:
+                runtime.drops[kind] += 1
+            else:
+                self.global_drops[kind] += 1
+        if self._on_drop is not None:
+            self._on_drop(drone, kind, detail)
+
+    # ---------------------------------------------------------------- processing
+
+    def handle(self, sample: Sample, now_s: float) -> list[Sample]:
+        """Validate and process one sample; return the samples to publish."""
+        parsed = self.validate(sample, now_s)
+        if parsed is None:
+            return []
+        return self.process(parsed, now_s)
+
+    def process(self, parsed: Parsed, now_s: float) -> list[Sample]:
+        """Step the drone's state with a validated input; return the samples to publish."""
+        runtime = self.drones.get(parsed.drone)
+        if runtime is None:
+            if len(self.drones) >= MAX_DRONES:
+                self.count_drop(None, "too_many_drones", f"drone {parsed.drone!r} not tracked")
+                return []
+            runtime = self._new_runtime(parsed.drone)
+        msg = parsed.message
+        if isinstance(msg, Telemetry):
+            return self._telemetry(runtime, msg, now_s)
+        if isinstance(msg, Reel):
+            runtime.length_m = msg.length_m
+            runtime.length_source = "reel"
+            if msg.base_m is not None:
+                runtime.base_world_m = np.array(msg.base_m, dtype=float)
+            return []
+        if isinstance(msg, TetherParams):
+            if msg.weight_n_per_m is not None:
+                runtime.weight_n_per_m = msg.weight_n_per_m
+            if msg.length_m is not None:
+                if runtime.length_source == "reel":
+                    self.count_drop(runtime.drone, "length_from_reel", "a reel reports length")
+                else:
+                    runtime.length_m = msg.length_m
+                    runtime.length_source = "operator"
+            return []
+        assert isinstance(msg, FollowCommand)
+        self._follow_command(runtime, msg)
+        return []
+
+    def tick(self, now_s: float) -> list[Sample]:
+        """Mark drones silent for ``stale_after_s`` as stale; disengage their follow mode."""
+        stale_after = self.settings.service.stale_after_s
+        for runtime in self.drones.values():
+            if runtime.stale or runtime.last_seen_s is None:
+                continue
+            if now_s - runtime.last_seen_s > stale_after:
+                runtime.stale = True
+                runtime.follow_state = follow_mod.mark_stale(runtime.follow_state)
+        return []
+
+    # ---------------------------------------------------------------- internals
+
+    def _new_runtime(self, drone: str) -> DroneRuntime:
+        params = self.settings.for_drone(drone)
+        fparams = TensionFilterParams(
+            mass_kg=params.drone.mass_kg,
+            accel_noise_mps2=params.drone.accel_noise_mps2,
+            thrust_noise_n=params.drone.thrust_noise_n,
+        )
+        fcfg = params.follow
+        runtime = DroneRuntime(
+            drone=drone,
+            params=params,
+            filter=TensionFilter(fparams),
+            follow_params=follow_mod.FollowParams(
+                threshold_n=fcfg.threshold_n,
+                hysteresis_ratio=fcfg.hysteresis_ratio,
+                land_below_m=fcfg.land_below_m,
+                max_speed_mps=fcfg.max_speed_mps,
+                reach_margin_m=fcfg.reach_margin_m,
+                stale_after_s=fcfg.stale_after_s,
+            ),
+            follow_state=follow_mod.FollowState(),
+            length_m=params.tether.length_m,
+            base_world_m=np.array(params.base.position_m, dtype=float),
+            weight_n_per_m=params.tether.weight_n_per_m,
+        )
+        with self._lock:
+            self.drones[drone] = runtime
+        return runtime
+
+    def _follow_command(self, runtime: DroneRuntime, cmd: FollowCommand) -> None:
+        fp = runtime.follow_params
+        if cmd.threshold_n is not None:
+            fp = replace(fp, threshold_n=cmd.threshold_n)
+        if cmd.land_below_m is not None:
+            fp = replace(fp, land_below_m=cmd.land_below_m)
+        if fp.land_below_m is not None:
+            runtime.land_below_m_memory = fp.land_below_m
+        if cmd.land is False:
+            fp = replace(fp, land_below_m=None)
+        elif cmd.land is True and fp.land_below_m is None:
+            fp = replace(fp, land_below_m=runtime.land_below_m_memory)
+        runtime.follow_params = fp
+        runtime.follow_state = follow_mod.set_enabled(runtime.follow_state, cmd.enabled)
+
+    def _telemetry(self, runtime: DroneRuntime, msg: Telemetry, now_s: float) -> list[Sample]:
+        runtime.received += 1
+        resumed = runtime.stale or (
+            runtime.last_seen_s is not None and now_s - runtime.last_seen_s > _MAX_GAP_S
+        )
+        if runtime.last_seq is not None and msg.seq <= runtime.last_seq and not resumed:
+            kind = "seq_repeated" if msg.seq == runtime.last_seq else "seq_backwards"
+            self.count_drop(
+                runtime.drone, kind, f"seq {msg.seq} after {runtime.last_seq} on {runtime.drone}"
+            )
+            return []
+        if runtime.last_stamp_s is not None and msg.stamp_s <= runtime.last_stamp_s and not resumed:
+            self.count_drop(
+                runtime.drone,
+                "stamp_backwards",
+                f"stamp_s {msg.stamp_s} after {runtime.last_stamp_s} on {runtime.drone}",
+            )
+            return []
+        try:
+            obs = observe_tension(
+                msg.accel_mps2,
+                msg.quat_wxyz,
+                msg.thrust_n,
+                runtime.params.drone.mass_kg,
+                armed=msg.armed,
+            )
+        except DegenerateQuaternionError as exc:
+            self.count_drop(runtime.drone, "bad_quaternion", str(exc))
+            return []
+        except TensionError as exc:
+            self.count_drop(runtime.drone, "bad_observation", str(exc))
+            return []
+
+        if runtime.last_seq is not None and msg.seq > runtime.last_seq + 1 and not resumed:
+            runtime.seq_gaps += msg.seq - runtime.last_seq - 1
+        if resumed:
+            runtime.filter.reset()
+        dt_s = (
+            0.0 if runtime.last_stamp_s is None or resumed else msg.stamp_s - runtime.last_stamp_s
+        )
+        runtime.last_seq = msg.seq
+        runtime.last_stamp_s = msg.stamp_s
+        runtime.last_seen_s = now_s
+        runtime.stale = False
+        runtime.accepted += 1
+        runtime.telemetry_rate.add(now_s)
+
+        position: PositionEstimate | None = None
+        tension = np.zeros(3)
+        std = np.zeros(3)
+        converged = False
+        if obs.tension_world_n is None:
+            # On the ground the floor carries the drone: no tension estimate. The filter
+            # restarts from the first airborne sample rather than from the floor's reaction.
+            runtime.filter.reset()
+        else:
+            est = runtime.filter.update(obs.tension_world_n, dt_s, msg.quat_wxyz)
+            if est.change_detected:
+                runtime.change_detections += 1
+            tension = est.tension_world_n
+            std = est.std_n
+            converged = est.converged
+            if converged:
+                position = localize(
+                    tension,
+                    est.cov_n2,
+                    runtime.weight_n_per_m,
+                    runtime.length_m,
+                    runtime.base_world_m,
+                    runtime.params.base.floor_z_m,
+                )
+
+        follow_position = (
+            np.array(msg.position_m, dtype=float)
+            if msg.position_m is not None
+            else (position.position_world_m if position is not None else None)
+        )
+        decision = follow_mod.follow_step(
+            runtime.follow_state,
+            runtime.follow_params,
+            stamp_s=msg.stamp_s,
+            tension_norm_n=float(np.linalg.norm(tension)) if converged else None,
+            position_world_m=follow_position,
+            base_world_m=runtime.base_world_m,
+            length_m=runtime.length_m,
+            floor_z_m=runtime.params.base.floor_z_m,
+        )
+        runtime.follow_state = decision.state
+        out: list[Sample] = []
+        estimate = self._estimate(runtime, msg, tension, std, position, obs.on_ground, converged)
+        if estimate is not None:
+            runtime.last_estimate = estimate
+            runtime.estimates += 1
+            runtime.estimate_rate.add(now_s)
+            out.append(Sample(f"tether/{runtime.drone}/estimate", estimate.to_json()))
+        if decision.setpoint_world_m is not None and _finite(decision.setpoint_world_m):
+            sp = Setpoint(stamp_s=msg.stamp_s, position_m=_vec3(decision.setpoint_world_m))
+            runtime.setpoints += 1
+            out.append(Sample(f"tether/{runtime.drone}/cmd/setpoint", sp.to_json()))
+        if decision.stop_reason is not None:
+            runtime.stops += 1
+            stop = Stop(stamp_s=msg.stamp_s, reason=decision.stop_reason)
+            out.append(Sample(f"tether/{runtime.drone}/cmd/stop", stop.to_json()))
+        return out
+
+    def _estimate(
+        self,
+        runtime: DroneRuntime,
+        msg: Telemetry,
+        tension: np.ndarray,
+        std: np.ndarray,
+        position: PositionEstimate | None,
+        on_ground: bool,
+        converged: bool,
+    ) -> Estimate | None:
+        if not (_finite(tension) and _finite(std)):
+            self.count_drop(runtime.drone, "non_finite_estimate", "filter produced NaN/inf")
+            runtime.filter.reset()
+            return None
+        if position is not None and not (
+            _finite(position.position_world_m) and _finite(position.std_world_m)
+        ):
+            position = None
+        fs = runtime.follow_state
+        fp = runtime.follow_params
+        lo_hi = position.radial_interval_m if position is not None else None
+        return Estimate(
+            seq=msg.seq,
+            stamp_s=msg.stamp_s,
+            tension_n=_vec3(tension),
+            tension_std_n=_vec3(std),
+            horizontal_n=math.hypot(float(tension[0]), float(tension[1])),
+            vertical_n=-float(tension[2]),
+            position_m=_vec3(position.position_world_m) if position is not None else None,
+            follow=FollowInfo(
+                enabled=fs.enabled,
+                active=fs.active,
+                threshold_n=fp.threshold_n,
+                land_below_m=fp.land_below_m,
+                landing_armed=fs.landing_armed,
+                stopped=fs.stopped,
+                reason=fs.reason,
+            ),
+            position_std_m=_vec3(position.std_world_m) if position is not None else None,
+            radial_m=float(position.radial_m) if position is not None else None,
+            radial_interval_m=(float(lo_hi[0]), float(lo_hi[1])) if lo_hi is not None else None,
+            azimuth_determined=position.azimuth_determined if position is not None else None,
+            floor_contact=bool(position.floor_contact) if position is not None else None,
+            on_ground=on_ground,
+            converged=converged,
+            length_m=runtime.length_m,
+            base_m=_vec3(runtime.base_world_m),
+        )
+
+    # ---------------------------------------------------------------- health
+
+    def status(self, drone: str, now_s: float) -> dict[str, Any] | None:
+        """Health of one drone as a JSON-ready dict (``tether/{drone}/status``)."""
+        with self._lock:
+            runtime = self.drones.get(drone)
+            if runtime is None:
+                return None
+            drops = dict(runtime.drops)
+        fs = runtime.follow_state
+        fp = runtime.follow_params
+        return {
+            "drone": drone,
+            "stale": runtime.stale,
+            "telemetry_hz": runtime.telemetry_rate.hz(now_s),
+            "estimate_hz": runtime.estimate_rate.hz(now_s),
+            "last_seen_age_s": None
+            if runtime.last_seen_s is None
+            else max(0.0, now_s - runtime.last_seen_s),
+            "received": runtime.received,
+            "accepted": runtime.accepted,
+            "estimates": runtime.estimates,
+            "setpoints": runtime.setpoints,
+            "stops": runtime.stops,
+            "seq_gaps": runtime.seq_gaps,
+            "drops": drops,
+            "invalid": sum(v for k, v in drops.items() if k != "queue_overflow"),
+            "queue_overflow": drops.get("queue_overflow", 0),
+            "filter": {
+                "initialized": runtime.filter.initialized,
+                "change_detections": runtime.change_detections,
+            },
+            "follow": {
+                "enabled": fs.enabled,
+                "active": fs.active,
+                "threshold_n": fp.threshold_n,
+                "land_below_m": fp.land_below_m,
+                "landing_armed": fs.landing_armed,
+                "stopped": fs.stopped,
+                "reason": fs.reason,
+            },
+            "length_m": runtime.length_m,
+            "length_source": runtime.length_source,
+            "base_m": list(map(float, runtime.base_world_m)),
+            "weight_n_per_m": runtime.weight_n_per_m,
+        }
+
+    def drone_ids(self) -> Iterable[str]:
+        with self._lock:
+            return list(self.drones)
+
+
+def _finite(values: np.ndarray | Iterable[float]) -> bool:
+    return bool(np.all(np.isfinite(np.asarray(values, dtype=float))))
+
+
+def _vec3(values: np.ndarray | Iterable[float]) -> tuple[float, float, float]:
+    a = np.asarray(values, dtype=float)
+    return (float(a[0]), float(a[1]), float(a[2]))
