@@ -10,6 +10,7 @@ a declared callback subscriber keeps a Python process alive forever otherwise.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import threading
@@ -66,10 +67,8 @@ class _Handle:
         with self._lock:
             entity, self._entity = self._entity, None
         if entity is not None:
-            try:
+            with contextlib.suppress(zenoh.ZError):  # session already closed
                 entity.undeclare()
-            except zenoh.ZError:  # session already closed
-                pass
 
 
 class ZenohBus:
@@ -143,9 +142,7 @@ class ZenohBus:
             publishers = list(self._publishers.values())
             self._publishers.clear()
         for pub in publishers:
-            try:
+            with contextlib.suppress(zenoh.ZError):
                 pub.undeclare()
-            except zenoh.ZError:
-                pass
         if self._owns_session:
             self.session.close()

@@ -1,0 +1,77 @@
+"""The in-memory bus and key-expression matching."""
+
+import threading
+
+import pytest
+
+from groundstation.bus import InMemoryBus, Sample, keyexpr_matches
+
+
+@pytest.mark.parametrize(
+    ("expr", "key", "ok"),
+    [
+        ("tether/*/telemetry", "tether/cf1/telemetry", True),
+        ("tether/*/telemetry", "tether/cf1/reel", False),
+        ("tether/*/telemetry", "tether/a/b/telemetry", False),
+        ("tether/**", "tether/cf1/cmd/stop", True),
+        ("tether/**", "tether", True),
+        ("tether/lab-a-*/telemetry", "tether/lab-a-7/telemetry", True),
+        ("tether/lab-a-*/telemetry", "tether/lab-b-7/telemetry", False),
+        ("tether/**/stop", "tether/x/cmd/stop", True),
+    ],
+)
+def test_keyexpr(expr: str, key: str, ok: bool) -> None:
+    assert keyexpr_matches(expr, key) is ok
+
+
+def test_publish_subscribe_in_order_on_another_thread() -> None:
+    bus = InMemoryBus()
+    got: list[Sample] = []
+    threads: set[int] = set()
+
+    def handler(s: Sample) -> None:
+        got.append(s)
+        threads.add(threading.get_ident())
+
+    sub = bus.subscribe("tether/*/telemetry", handler)
+    for i in range(100):
+        bus.publish("tether/a/telemetry", str(i).encode())
+    bus.publish("tether/a/reel", b"x")
+    assert bus.flush()
+    assert [s.payload for s in got] == [str(i).encode() for i in range(100)]
+    assert threading.get_ident() not in threads
+    sub.close()
+    bus.publish("tether/a/telemetry", b"late")
+    assert bus.flush()
+    assert len(got) == 100
+    bus.close()
+
+
+def test_query_and_liveliness() -> None:
+    bus = InMemoryBus()
+    q = bus.queryable("tether/*/status", lambda sel: [Sample("tether/a/status", b"{}")])
+    assert bus.query("tether/*/status") == [Sample("tether/a/status", b"{}")]
+    assert bus.query("tether/a/status") == [Sample("tether/a/status", b"{}")]
+    assert bus.query("other/**") == []
+    q.close()
+    assert bus.query("tether/*/status") == []
+    tok = bus.liveliness_token("groundstation/service/1")
+    assert bus.alive("groundstation/service/*") == ["groundstation/service/1"]
+    tok.close()
+    assert bus.alive("groundstation/service/*") == []
+    bus.close()
+
+
+def test_failing_handler_does_not_stop_delivery() -> None:
+    bus = InMemoryBus()
+    got: list[Sample] = []
+
+    def bad(s: Sample) -> None:
+        raise RuntimeError("boom")
+
+    bus.subscribe("k", bad)
+    bus.subscribe("k", got.append)
+    bus.publish("k", b"1")
+    assert bus.flush()
+    assert got == [Sample("k", b"1")]
+    bus.close()

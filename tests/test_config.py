@@ -1,0 +1,79 @@
+"""Configuration: file < environment < CLI, per-drone overrides, errors that name key and value."""
+
+from pathlib import Path
+
+import pytest
+
+from groundstation.config import ConfigError, load_settings
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def test_defaults_match_the_contract() -> None:
+    s = load_settings(None, use_env=False)
+    assert s.zenoh.mode == "peer"
+    assert s.zenoh.connect == () and s.zenoh.listen == ()
+    assert s.zenoh.multicast_scouting is False
+    assert s.drone.mass_kg == pytest.approx(0.030)
+    assert s.tether.weight_n_per_m == pytest.approx(0.05)
+    assert s.tether.length_m == pytest.approx(1.6)
+    assert s.base.position_m == (0.0, 0.0, 0.754)
+    assert s.base.floor_z_m == 0.0
+    assert s.web.host == "127.0.0.1" and s.web.port == 8080
+
+
+@pytest.mark.parametrize("name", ["default.toml", "sim.toml", "reel.toml"])
+def test_example_configs_load(name: str) -> None:
+    path = REPO / "config" / name
+    if not path.exists():
+        pytest.fail(f"config/{name} is missing")
+    load_settings(path, use_env=False)
+
+
+def test_layers_file_env_cli(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(
+        '[tether]\nlength_m = 2.0\nweight_n_per_m = 0.06\n[zenoh]\nmode = "client"\n'
+        "[drones.cf2.tether]\nweight_n_per_m = 0.07\n"
+    )
+    monkeypatch.setenv("GROUNDSTATION_TETHER__WEIGHT_N_PER_M", "0.04")
+    monkeypatch.setenv("GROUNDSTATION_TETHER__LENGTH_M", "3.0")
+    s = load_settings(cfg, {"tether": {"length_m": 2.5}})
+    assert s.tether.weight_n_per_m == pytest.approx(0.04)  # env beats file
+    assert s.tether.length_m == pytest.approx(2.5)  # CLI beats env
+    assert s.zenoh.mode == "client"
+    assert s.for_drone("cf2").tether.weight_n_per_m == pytest.approx(0.07)
+    assert s.for_drone("cf2").tether.length_m == pytest.approx(2.5)
+    assert s.for_drone("other").tether.weight_n_per_m == pytest.approx(0.04)
+
+
+@pytest.mark.parametrize(
+    ("text", "needle"),
+    [
+        ("[tether]\nweight_n_per_m = -0.05\n", "tether.weight_n_per_m = -0.05"),
+        ("[tether]\nlength_m = 0\n", "tether.length_m = 0"),
+        ('[zenoh]\nmode = "satellite"\n', "zenoh.mode = 'satellite'"),
+        ("[base]\nposition_m = [0.0, 0.0]\n", "base.position_m"),
+        ("[tethr]\nlength_m = 1\n", "tethr"),
+        ("[drones.cf1.tether]\nweight_n_per_m = 0.0\n", "drones.cf1.tether.weight_n_per_m = 0.0"),
+        ('[drones."bad id!"]\n', "bad id!"),
+        ("[tether\n", "not valid TOML"),
+    ],
+)
+def test_bad_config_names_key_and_value(tmp_path: Path, text: str, needle: str) -> None:
+    cfg = tmp_path / "bad.toml"
+    cfg.write_text(text)
+    with pytest.raises(ConfigError) as info:
+        load_settings(cfg, use_env=False)
+    assert needle in str(info.value)
+
+
+def test_bad_env_value(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("GROUNDSTATION_DRONE__MASS_KG", "heavy")
+    with pytest.raises(ConfigError, match="drone.mass_kg = 'heavy'"):
+        load_settings(None)
+
+
+def test_missing_file() -> None:
+    with pytest.raises(ConfigError, match="cannot read config file"):
+        load_settings("/nonexistent/gs.toml", use_env=False)
