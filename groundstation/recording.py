@@ -61,6 +61,7 @@ __all__ = [
     "run_replay",
     "run_replay_offline",
     "schema_for_key",
+    "write_figures",
 ]
 
 _log = logging.getLogger(__name__)
@@ -221,6 +222,7 @@ class Recorder:
             "groundstation.recording",
             {"keyexprs": json.dumps(self.keyexprs), "started_unix_ns": str(time.time_ns())},
         )
+        self._writer.flush()  # a valid, empty recording is on disk from the start
         # Receive clock: monotonic, anchored once to the wall clock (ns since the epoch).
         self._t0_wall_ns = time.time_ns()
         self._t0_mono_ns = time.monotonic_ns()
@@ -272,6 +274,11 @@ class Recorder:
     def messages_written(self) -> int:
         """Samples written so far (approximate while recording)."""
         return self._written
+
+    @property
+    def samples_received(self) -> int:
+        """Samples the bus has delivered so far (queued or dropped)."""
+        return self._queued + self._dropped
 
     def _run(self) -> None:
         last_flush = time.monotonic()
@@ -750,15 +757,34 @@ def write_figures(path: str | Path, figures_dir: str | Path) -> list[Path]:
 # --------------------------------------------------------------------------- CLI bodies
 
 
+def _linger(recorder: Recorder, *, quiet_s: float, max_s: float) -> None:
+    # A stop often comes right after the publishers finish, with their last samples still in
+    # flight (publisher batch, router, socket): keep listening until the bus has been quiet
+    # for ``quiet_s``, for at most ``max_s``.
+    deadline = time.monotonic() + max_s
+    seen = recorder.samples_received
+    while time.monotonic() < deadline:
+        time.sleep(min(quiet_s, max(0.0, deadline - time.monotonic())))
+        now_seen = recorder.samples_received
+        if now_seen == seen:
+            return
+        seen = now_seen
+
+
 def run_record(
     settings: Settings,
     out_path: str | Path,
     keyexprs: Sequence[str] = DEFAULT_KEYEXPRS,
     stop_event: threading.Event | None = None,
+    *,
+    linger_quiet_s: float = 0.25,
+    linger_max_s: float = 1.5,
 ) -> int:
     """Body of ``groundstation record``: record the Zenoh bus until ``stop_event`` is set.
 
-    Opens a session from ``settings.zenoh``, records, and on the event finishes the file.
+    Opens a session from ``settings.zenoh`` and records. When the event is set it keeps
+    recording until the bus has been quiet for ``linger_quiet_s`` (at most ``linger_max_s``),
+    so samples still in flight when SIGINT arrives are not lost, then finishes the file.
 
     Returns:
         0 once the file is finished.
@@ -776,6 +802,7 @@ def run_record(
             # Short waits keep the main thread responsive to the CLI's signal handlers.
             while not stop.wait(0.2):
                 pass
+            _linger(recorder, quiet_s=linger_quiet_s, max_s=linger_max_s)
         finally:
             stats = recorder.close()
     _log.info(

@@ -1,0 +1,56 @@
+"""Stand-in for ``zenohd`` in integration tests: a zenoh session in router mode.
+
+Usage::
+
+    python tests/integration/router.py --listen tcp/127.0.0.1:7447 [--listen ...]
+        [--config ROUTER.json5]
+
+It opens the session (multicast scouting off; the optional JSON5 file first, so TLS and
+access control come from it, then the listen endpoints), prints ``ready <zid>`` on stdout
+once it listens, and runs until SIGTERM or SIGINT; then it closes the session and exits 0.
+A test waits for the ``ready`` line (with a timeout) before starting anything that connects.
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+import threading
+from pathlib import Path
+from types import FrameType
+
+# Runs as a script from any directory: make the repository importable.
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+
+from groundstation.config import ZenohSection
+from groundstation.zenoh_bus import open_session
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--listen", action="append", required=True, metavar="ENDPOINT")
+    parser.add_argument("--config", metavar="JSON5", help="zenoh config file (TLS, ACL)")
+    args = parser.parse_args(argv)
+
+    stop = threading.Event()
+
+    def on_signal(signum: int, frame: FrameType | None) -> None:
+        stop.set()
+
+    signal.signal(signal.SIGTERM, on_signal)
+    signal.signal(signal.SIGINT, on_signal)
+
+    section = ZenohSection(mode="router", listen=tuple(args.listen), config_file=args.config)
+    session = open_session(section)
+    try:
+        print(f"ready {session.zid()}", flush=True)
+        while not stop.wait(0.2):
+            pass
+    finally:
+        session.close()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
