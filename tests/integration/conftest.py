@@ -1,0 +1,3 @@
+from tests.integration.harness import make_probe, procs
+
+__all__ = ["make_probe", "procs"]

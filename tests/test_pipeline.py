@@ -1,0 +1,167 @@
+"""The pipeline seam against the simulator's truth, and its handling of bad input."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from groundstation.bus import Sample
+from groundstation.pipeline import Pipeline
+from tests.closed_loop import closed_loop, settings_for
+
+GOOD = {
+    "seq": 0,
+    "stamp_s": 0.0,
+    "accel_mps2": [0.0, 0.0, 9.81 + 1.0],
+    "quat_wxyz": [1.0, 0.0, 0.0, 0.0],
+    "thrust_n": 0.33,
+}
+
+
+def _telemetry(seq: int, **patch: object) -> Sample:
+    body = GOOD | {"seq": seq, "stamp_s": seq * 0.004} | patch
+    return Sample("tether/cf1/telemetry", json.dumps(body).encode())
+
+
+def test_hover_without_mocap_matches_truth() -> None:
+    run, pipe, _ = closed_loop(settings_for(mocap=False, seed=1), "hover", 12.0)
+    assert len(run.estimates) == run.telemetry, "one estimate per accepted telemetry"
+    assert [e["seq"] for e in run.estimates] == list(range(run.telemetry))
+    late = [e for e in run.estimates if e["stamp_s"] > 7.0]
+    pos_err = [
+        np.linalg.norm(np.subtract(e["position_m"], run.truth_at(e["stamp_s"])["position_m"]))
+        for e in late
+    ]
+    ten_err = [np.subtract(e["tension_n"], run.truth_at(e["stamp_s"])["tension_n"]) for e in late]
+    assert float(np.median(pos_err)) < 0.05
+    assert float(np.percentile(pos_err, 95)) < 0.10
+    assert np.all(np.sqrt(np.mean(np.square(ten_err), axis=0)) < 1.5e-3)
+    assert not run.setpoints and not run.stops
+    status = pipe.status("cf1", 12.0)
+    assert status is not None and status["accepted"] == run.telemetry and status["drops"] == {}
+
+
+@pytest.mark.parametrize(
+    ("sample", "kind"),
+    [
+        (Sample("tether/cf1/telemetry", b"not json"), "not_json"),
+        (Sample("tether/cf1/telemetry", b'{"seq": 1}'), "invalid"),
+        (Sample("tether/cf1/telemetry", b"[]"), "invalid"),
+        (_telemetry(5, thrust_n=-1.0), "invalid"),
+        (_telemetry(5, quat_wxyz=[0.0, 0.0, 0.0, 0.0]), "bad_quaternion"),
+        (_telemetry(5, accel_mps2=[0.0, 0.0]), "invalid"),
+        (Sample("tether/cf1/telemetry", b'{"seq": 5, "stamp_s": NaN}'), "invalid"),
+        (Sample("tether/cf1/telemetry", b"x" * 2_000_000), "too_large"),
+        (Sample("tether/" + "d" * 65 + "/telemetry", json.dumps(GOOD).encode()), "bad_drone_id"),
+        (Sample("tether/cf1/reel", b'{"stamp_s": 0, "length_m": -1}'), "invalid"),
+        (Sample("tether/cf1/follow", b'{"enabled": "yes"}'), "invalid"),
+    ],
+)
+def test_bad_input_is_dropped_and_counted(sample: Sample, kind: str) -> None:
+    pipe = Pipeline(settings_for())
+    assert len(pipe.handle(_telemetry(0), 0.0)) == 1
+    before = pipe.status("cf1", 0.0)
+    assert before is not None
+    assert pipe.handle(sample, 0.01) == []
+    after = pipe.status("cf1", 0.01)
+    assert after is not None
+    drops = after["drops"] if kind != "bad_drone_id" else dict(pipe.global_drops)
+    assert drops.get(kind) == 1
+    assert after["accepted"] == before["accepted"]
+    # still serving: the next good message gets its estimate
+    out = pipe.handle(_telemetry(6), 0.02)
+    assert [json.loads(o.payload)["seq"] for o in out] == [6]
+
+
+def test_seq_backwards_and_repeated_are_dropped() -> None:
+    pipe = Pipeline(settings_for())
+    assert pipe.handle(_telemetry(10), 0.0)
+    assert pipe.handle(_telemetry(9), 0.004) == []
+    assert pipe.handle(_telemetry(10), 0.008) == []
+    assert pipe.handle(_telemetry(11), 0.012)
+    status = pipe.status("cf1", 0.012)
+    assert status is not None
+    assert status["drops"] == {"seq_backwards": 1, "seq_repeated": 1}
+
+
+def test_drone_restart_after_silence_is_accepted() -> None:
+    pipe = Pipeline(settings_for())
+    assert pipe.handle(_telemetry(500), 0.0)
+    pipe.tick(2.0)
+    status = pipe.status("cf1", 2.0)
+    assert status is not None and status["stale"] is True
+    assert pipe.handle(_telemetry(0), 2.0), "a rebooted drone starts again at seq 0"
+
+
+def test_ground_contact_gives_no_tension() -> None:
+    pipe = Pipeline(settings_for())
+    for seq, patch in enumerate([{"armed": False}, {"thrust_n": 0.1}]):
+        (out,) = pipe.handle(_telemetry(seq, **patch), seq * 0.004)
+        est = json.loads(out.payload)
+        assert est["on_ground"] is True
+        assert est["tension_n"] == [0.0, 0.0, 0.0] and est["position_m"] is None
+
+
+def test_stale_drone_disengages_follow_and_publishes_nothing() -> None:
+    pipe = Pipeline(settings_for())
+    pipe.handle(_telemetry(0), 0.0)
+    pipe.handle(Sample("tether/cf1/follow", b'{"enabled": true}'), 0.01)
+    (out,) = pipe.handle(_telemetry(1), 0.02)
+    assert json.loads(out.payload)["follow"]["enabled"] is True
+    assert pipe.tick(0.3) == []
+    assert pipe.drones["cf1"].follow_state.enabled is True
+    assert pipe.tick(0.6) == []
+    assert pipe.drones["cf1"].stale is True
+    assert pipe.drones["cf1"].follow_state.enabled is False
+
+
+def test_reel_params_and_follow_command_apply() -> None:
+    pipe = Pipeline(settings_for())
+    pipe.handle(_telemetry(0), 0.0)
+    pipe.handle(Sample("tether/cf1/params", b'{"weight_n_per_m": 0.07, "length_m": 2.0}'), 0.0)
+    status = pipe.status("cf1", 0.0)
+    assert status is not None
+    assert status["weight_n_per_m"] == 0.07 and status["length_m"] == 2.0
+    assert status["length_source"] == "operator"
+    pipe.handle(Sample("tether/cf1/reel", b'{"stamp_s": 1, "length_m": 1.4, "base_m": [1,2,0]}'), 0)
+    pipe.handle(Sample("tether/cf1/params", b'{"length_m": 3.0}'), 0.0)
+    status = pipe.status("cf1", 0.0)
+    assert status is not None
+    assert status["length_m"] == 1.4 and status["length_source"] == "reel"
+    assert status["base_m"] == [1.0, 2.0, 0.0]
+    cmd = b'{"enabled": true, "threshold_n": 0.2, "land_below_m": 0.3}'
+    pipe.handle(Sample("tether/cf1/follow", cmd), 0.0)
+    (out,) = pipe.handle(_telemetry(1), 0.004)
+    follow = json.loads(out.payload)["follow"]
+    assert follow["enabled"] is True and follow["threshold_n"] == 0.2
+    assert follow["land_below_m"] == 0.3
+    pipe.handle(Sample("tether/cf1/follow", b'{"enabled": true, "land": false}'), 0.0)
+    (out,) = pipe.handle(_telemetry(2), 0.008)
+    assert json.loads(out.payload)["follow"]["land_below_m"] is None
+    pipe.handle(Sample("tether/cf1/follow", b'{"enabled": false, "land": true}'), 0.0)
+    (out,) = pipe.handle(_telemetry(3), 0.012)
+    follow = json.loads(out.payload)["follow"]
+    assert follow["land_below_m"] == 0.3 and follow["enabled"] is False
+
+
+def test_follow_only_when_enabled_and_tug_landing_stops_once() -> None:
+    run, _, sim = closed_loop(settings_for(seed=3), "tug_landing", 16.0)
+    assert all(sp["stamp_s"] >= 3.0 for sp in run.setpoints)
+    assert run.setpoints, "the pull engages follow mode"
+    assert len(run.stops) == 1
+    z_at_stop = run.truth_at(run.stops[0]["stamp_s"])["position_m"][2]
+    assert z_at_stop < 0.25 + 0.02
+    assert not sim.drones["cf1"].armed
+    reach = 1.6
+    for sp in run.setpoints:
+        assert np.linalg.norm(np.subtract(sp["position_m"], [0.0, 0.0, 0.754])) <= reach
+
+
+def test_no_nan_ever_published() -> None:
+    run, _, _ = closed_loop(settings_for(seed=4), "reel_in", 16.0)
+    for e in run.estimates:
+        values = [*e["tension_n"], *e["tension_std_n"], e["horizontal_n"], e["vertical_n"]]
+        values += e["position_m"] or []
+        assert np.all(np.isfinite(values))

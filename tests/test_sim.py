@@ -1,0 +1,130 @@
+"""The simulator's physics: equilibrium against the tether, sensors consistent with truth."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from groundstation.bus import Sample
+from groundstation.sim import (
+    SCENARIOS,
+    DroneSim,
+    Simulator,
+    quat_wxyz_from_z_axis,
+    rotation_from_quat,
+)
+from groundstation.tension import observe_tension
+from tests.closed_loop import settings_for
+
+
+class _Bus:
+    def publish(self, key: str, payload: bytes) -> None:
+        pass
+
+
+def _sim(scenario: str, **sim: object) -> Simulator:
+    return Simulator(settings_for(**sim), _Bus(), scenario=scenario)  # type: ignore[arg-type]
+
+
+def _run(sim: Simulator, seconds: float) -> list[Sample]:
+    out: list[Sample] = []
+    for _ in range(round(seconds / sim.dt_s)):
+        out.extend(sim.step())
+    return out
+
+
+@pytest.mark.parametrize("z_axis", [(0, 0, 1), (0.3, -0.2, 0.9), (-0.5, 0.5, 0.7)])
+def test_quaternion_body_z(z_axis: tuple[float, float, float]) -> None:
+    z = np.array(z_axis, float) / np.linalg.norm(z_axis)
+    q = quat_wxyz_from_z_axis(z)
+    assert np.linalg.norm(q) == pytest.approx(1.0)
+    np.testing.assert_allclose(rotation_from_quat(q)[:, 2], z, atol=1e-12)
+
+
+def test_hover_holds_position_against_the_tether() -> None:
+    sim = _sim("hover", accel_noise_mps2=0.0, thrust_noise_n=0.0)
+    _run(sim, 8.0)
+    drone = sim.drones["cf1"]
+    np.testing.assert_allclose(drone.position_world_m, (1.2, 0.0, 1.0), atol=2e-3)
+    assert np.linalg.norm(drone.tension_world_n) > 0.01
+
+
+def test_noise_free_sensors_reproduce_the_true_tension() -> None:
+    sim = _sim("tug", accel_noise_mps2=0.0, thrust_noise_n=0.0)
+    samples = _run(sim, 11.0)  # includes the onset of the 30 mN pull at 10 s
+    tel = [json.loads(s.payload) for s in samples if s.key.endswith("/telemetry")]
+    truth = [json.loads(s.payload) for s in samples if s.key.endswith("/truth")]
+    for t, gt in list(zip(tel, truth, strict=True))[::50]:
+        obs = observe_tension(t["accel_mps2"], t["quat_wxyz"], t["thrust_n"], 0.030)
+        assert obs.tension_world_n is not None
+        np.testing.assert_allclose(obs.tension_world_n, gt["tension_n"], atol=1e-9)
+
+
+def test_takeoff_from_the_floor_above_the_base() -> None:
+    sim = _sim("takeoff_1.3", accel_noise_mps2=0.0, thrust_noise_n=0.0)
+    samples = _run(sim, 1.0)
+    first = json.loads(next(s.payload for s in samples if s.key.endswith("/telemetry")))
+    assert first["armed"] is False and first["thrust_n"] == 0.0
+    np.testing.assert_allclose(first["accel_mps2"], (0.0, 0.0, 9.81), atol=1e-9)
+    _run(sim, 14.0)
+    drone = sim.drones["cf1"]
+    assert drone.position_world_m[2] == pytest.approx(1.3, abs=0.01)
+    # Straight above a base on the floor: T_v = ω z, no horizontal tension (paper, sec. 4.1).
+    assert -drone.tension_world_n[2] == pytest.approx(0.05 * 1.3, rel=0.02)
+    assert math.hypot(*drone.tension_world_n[:2]) < 1e-6
+
+
+def test_coin_bench_horizontal_tension() -> None:
+    sim = _sim("coin", accel_noise_mps2=0.0, thrust_noise_n=0.0)
+    _run(sim, 10.0)
+    drone = sim.drones["cf1"]
+    arm = np.array(SCENARIOS["coin"].coin_arm_m)
+    r = math.hypot(*(arm - drone.position_world_m)[:2])
+    gamma = math.atan((drone.position_world_m[2] - arm[2]) / r)  # eq:exp_gamma
+    h_truth = math.cos(gamma) * 0.0041 * 9.81  # eq:exp_HorGroundThruth
+    assert math.hypot(*drone.tension_world_n[:2]) == pytest.approx(h_truth, rel=1e-6)
+
+
+def test_stop_turns_the_motors_off_and_it_falls() -> None:
+    sim = _sim("hover")
+    _run(sim, 1.0)
+    sim._on_command(Sample("tether/cf1/cmd/stop", b'{"stamp_s": 1.0, "reason": "test"}'))
+    _run(sim, 2.0)
+    drone = sim.drones["cf1"]
+    assert not drone.armed and drone.thrust_n == 0.0
+    assert drone.position_world_m[2] == pytest.approx(0.0, abs=1e-9)
+
+
+def test_setpoint_moves_the_target_and_bad_commands_are_ignored() -> None:
+    sim = _sim("hover")
+    sim._on_command(Sample("tether/cf1/cmd/setpoint", b'{"stamp_s": 0, "position_m": [1,0.2,1]}'))
+    sim._on_command(Sample("tether/cf1/cmd/setpoint", b'{"stamp_s": 0, "position_m": [1, 0]}'))
+    _run(sim, 6.0)
+    np.testing.assert_allclose(sim.drones["cf1"].position_world_m, (1.0, 0.2, 1.0), atol=0.01)
+
+
+def test_taut_stop_keeps_the_drone_within_reach() -> None:
+    drone = DroneSim(
+        base_world_m=np.array([0.0, 0.0, 0.754]),
+        length_m=1.0,
+        weight_n_per_m=0.05,
+        floor_z_m=0.0,
+        position_world_m=np.array([0.5, 0.0, 1.0]),
+        target_world_m=np.array([3.0, 0.0, 1.0]),  # far beyond reach
+    )
+    for _ in range(2000):
+        drone.step(0.004, np.zeros(3))
+        assert np.linalg.norm(drone.position_world_m - drone.base_world_m) <= 1.0
+        assert np.all(np.isfinite(drone.tension_world_n))
+    assert drone.taut
+
+
+def test_reel_in_shortens_the_tether() -> None:
+    sim = _sim("reel_in")
+    samples = _run(sim, 15.0)
+    reels = [json.loads(s.payload) for s in samples if s.key.endswith("/reel")]
+    assert reels[0]["length_m"] == pytest.approx(1.6)
+    assert reels[-1]["length_m"] == pytest.approx(1.3, abs=0.01)
