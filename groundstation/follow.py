@@ -1,0 +1,359 @@
+"""Tension following and tug-to-land, as a pure state machine (paper sec. Tension following).
+
+The paper: "The goal position of the quadcopter changes if the estimated tension is
+greater than a pre-defined threshold. When this occurs, the goal position of the
+quadcopter is successively updated to its current position, making it to follow the
+pull's direction. When the tension ... is no longer greater than the threshold, the
+goal position stops being updated and the quadcopter remains hovering at its last
+position." And for landing: "after the first tug, a flag is activated ... if the
+quadcopter flies under a certain height, the motors are turned off."
+
+This module is that logic and nothing else: :func:`follow_step` takes the previous
+:class:`FollowState` and this step's inputs and returns the next state with what to
+publish (a setpoint, a Stop, or nothing). No clock, no I/O: time is ``stamp_s``.
+
+Behaviour, in the order :func:`follow_step` applies it:
+
+1. **Stale input.** More than ``stale_after_s`` since the previous step, or a stamp
+   that goes backwards: following disengages (``enabled`` and ``active`` False, with
+   the reason); the operator must enable it again. :func:`mark_stale` does the same
+   when the caller knows the input is stale (a silent drone).
+2. **Off.** Not enabled, or stopped after a tug-to-land: nothing is published.
+3. **No position.** A missing or non-finite position never yields a setpoint; the
+   follower releases (``active`` False) and the goal stays frozen.
+4. **Hysteresis.** Engage when the tension norm exceeds ``threshold_n``; release
+   when it falls below ``threshold_n * (1 - hysteresis_ratio)``; in between keep the
+   previous mode, so noise around the threshold does not chatter the goal. A missing
+   tension estimate releases.
+5. **Tug-to-land.** The first activation with ``land_below_m`` set arms landing. Once
+   armed, a position below ``land_below_m`` issues exactly one Stop, and the machine
+   stays ``stopped`` (no setpoints, no more Stops) until enabled again.
+6. **Setpoint while active** = the current position, made safe: projected onto the
+   reachable set (the ball of radius ``length_m - reach_margin_m`` around the base,
+   above ``floor_z_m + floor_margin_m``), then moved from the previous setpoint by at
+   most ``max_speed_mps`` times the time since that setpoint. If the reachable set
+   changed under it (the reel took tether in) the result is projected again: reach
+   wins over the rate limit.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = [
+    "FollowDecision",
+    "FollowParams",
+    "FollowState",
+    "clamp_to_reach",
+    "follow_step",
+    "mark_stale",
+    "set_enabled",
+]
+
+FloatArray = NDArray[np.float64]
+Vec3 = tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class FollowParams:
+    """Tuning of tension following.
+
+    Attributes:
+        threshold_n: Tension norm above which following engages, N, > 0.
+        hysteresis_ratio: Following releases below ``threshold_n * (1 - ratio)``,
+            dimensionless in [0, 1).
+        land_below_m: Height (world z) below which an armed follower stops the motors,
+            m; None disables tug-to-land.
+        max_speed_mps: Largest setpoint speed, m/s, > 0.
+        reach_margin_m: Setpoints stay within ``length_m - reach_margin_m`` of the base,
+            m, >= 0.
+        stale_after_s: Input older than this disengages following, s, > 0.
+        floor_margin_m: Setpoints stay this far above the floor, m, >= 0.
+    """
+
+    threshold_n: float = 0.15
+    hysteresis_ratio: float = 0.2
+    land_below_m: float | None = None
+    max_speed_mps: float = 0.5
+    reach_margin_m: float = 0.05
+    stale_after_s: float = 0.5
+    floor_margin_m: float = 0.05
+
+    def __post_init__(self) -> None:
+        checks = [
+            ("threshold_n", self.threshold_n, self.threshold_n > 0.0),
+            ("hysteresis_ratio", self.hysteresis_ratio, 0.0 <= self.hysteresis_ratio < 1.0),
+            ("max_speed_mps", self.max_speed_mps, self.max_speed_mps > 0.0),
+            ("reach_margin_m", self.reach_margin_m, self.reach_margin_m >= 0.0),
+            ("stale_after_s", self.stale_after_s, self.stale_after_s > 0.0),
+            ("floor_margin_m", self.floor_margin_m, self.floor_margin_m >= 0.0),
+        ]
+        for name, value, ok in checks:
+            if not (math.isfinite(value) and ok):
+                raise ValueError(f"FollowParams.{name} out of range: {value!r}")
+        if self.land_below_m is not None and not math.isfinite(self.land_below_m):
+            raise ValueError(f"FollowParams.land_below_m must be finite, got {self.land_below_m!r}")
+
+    @property
+    def release_n(self) -> float:
+        """Tension norm below which an active follower releases, N."""
+        return self.threshold_n * (1.0 - self.hysteresis_ratio)
+
+
+@dataclass(frozen=True)
+class FollowState:
+    """State of the follower between steps (immutable; each step returns a new one).
+
+    Attributes:
+        enabled: Following switched on by the operator.
+        active: The tension is above the threshold: the goal follows the drone.
+        landing_armed: A tug has happened with tug-to-land configured.
+        stopped: A Stop was issued; terminal until enabled again.
+        setpoint_world_m: The last published setpoint (the frozen goal), m, or None.
+        setpoint_stamp_s: Stamp of that setpoint, s, or None.
+        last_stamp_s: Stamp of the previous step, s, or None.
+        reason: Why the follower is in this state (human-readable; "" when nothing to
+            say).
+    """
+
+    enabled: bool = False
+    active: bool = False
+    landing_armed: bool = False
+    stopped: bool = False
+    setpoint_world_m: Vec3 | None = None
+    setpoint_stamp_s: float | None = None
+    last_stamp_s: float | None = None
+    reason: str = ""
+
+
+@dataclass(frozen=True)
+class FollowDecision:
+    """Outcome of one :func:`follow_step`.
+
+    Attributes:
+        state: The next state.
+        setpoint_world_m: Publish this Setpoint (world, m, shape (3,)), or None.
+        stop_reason: Publish a Stop with this reason, or None.
+    """
+
+    state: FollowState
+    setpoint_world_m: FloatArray | None = None
+    stop_reason: str | None = None
+
+
+def set_enabled(state: FollowState, enabled: bool) -> FollowState:
+    """Applies an operator's FollowCommand.
+
+    Enabling an already enabled (and not stopped) follower changes nothing, so a
+    repeated command does not disarm landing. Enabling a disabled or stopped follower
+    starts afresh: not active, landing disarmed, goal cleared. Disabling releases and
+    disarms; a ``stopped`` flag stays visible until the next enable.
+
+    Args:
+        state: Current state.
+        enabled: The requested mode.
+
+    Returns:
+        The next state.
+    """
+    if enabled:
+        if state.enabled and not state.stopped:
+            return state
+        # A fresh start also forgets the last stamp: the gap before an enable is not a
+        # stale input.
+        return FollowState(enabled=True, reason="enabled")
+    return replace(state, enabled=False, active=False, landing_armed=False, reason="disabled")
+
+
+def mark_stale(state: FollowState, stamp_s: float | None = None) -> FollowState:
+    """Disengages following because the input stopped or is known to be stale.
+
+    Args:
+        state: Current state.
+        stamp_s: When the staleness was noticed, s (kept for the next step's gap
+            check), or None to leave the previous stamp.
+
+    Returns:
+        The next state: not enabled, not active, landing disarmed, with the reason.
+    """
+    if not state.enabled and not state.active:
+        return state
+    return replace(
+        state,
+        enabled=False,
+        active=False,
+        landing_armed=False,
+        last_stamp_s=state.last_stamp_s if stamp_s is None else stamp_s,
+        reason="stale input: following disengaged",
+    )
+
+
+def clamp_to_reach(
+    point_world_m: ArrayLike,
+    base_world_m: ArrayLike,
+    radius_m: float,
+    min_z_m: float,
+) -> FloatArray | None:
+    """Closest point to ``point_world_m`` in the ball around the base above ``min_z_m``.
+
+    The reachable set {|p - base| <= radius, z >= min_z} is convex; the Euclidean
+    projection onto it is the projection onto the half-space if that lies in the ball,
+    else onto the ball if that lies above ``min_z``, else onto the disc where the
+    plane ``z = min_z`` cuts the ball.
+
+    Args:
+        point_world_m: Point, world, m, shape (3,).
+        base_world_m: Centre of the ball (the tether's base exit), world, m, shape (3,).
+        radius_m: Radius, m.
+        min_z_m: Lowest allowed height, m (``-inf`` for none).
+
+    Returns:
+        The projected point, m, shape (3,), or None when the set is empty (radius < 0,
+        or the plane lies above the ball) or an input is not finite.
+    """
+    p = np.asarray(point_world_m, dtype=np.float64)
+    b = np.asarray(base_world_m, dtype=np.float64)
+    if not (np.all(np.isfinite(p)) and np.all(np.isfinite(b)) and math.isfinite(radius_m)):
+        return None
+    if radius_m < 0.0 or math.isnan(min_z_m) or min_z_m > b[2] + radius_m:
+        return None
+    q = p.copy()
+    q[2] = max(q[2], min_z_m)
+    d = q - b
+    if float(d @ d) <= radius_m * radius_m:
+        return q
+    d = p - b
+    dist = math.sqrt(float(d @ d))
+    on_ball = b + d * (radius_m / dist)  # dist > radius > = 0 here
+    if on_ball[2] >= min_z_m:
+        return on_ball
+    disc_r = math.sqrt(max(radius_m * radius_m - (min_z_m - b[2]) ** 2, 0.0))
+    h = p[:2] - b[:2]
+    h_norm = math.hypot(float(h[0]), float(h[1]))
+    if h_norm > disc_r:
+        h = h * (disc_r / h_norm)
+    return np.array([b[0] + h[0], b[1] + h[1], min_z_m])
+
+
+def _finite_vec3(value: ArrayLike | None) -> FloatArray | None:
+    if value is None:
+        return None
+    arr = np.asarray(value, dtype=np.float64)
+    if arr.shape != (3,) or not np.all(np.isfinite(arr)):
+        return None
+    return arr
+
+
+def follow_step(
+    state: FollowState,
+    params: FollowParams,
+    *,
+    stamp_s: float,
+    tension_norm_n: float | None,
+    position_world_m: ArrayLike | None,
+    base_world_m: ArrayLike,
+    length_m: float,
+    floor_z_m: float = -math.inf,
+    stale: bool = False,
+) -> FollowDecision:
+    """One step of tension following and tug-to-land (see the module docstring).
+
+    Args:
+        state: State after the previous step.
+        params: Tuning.
+        stamp_s: Stamp of this step's input, s (telemetry clock).
+        tension_norm_n: Norm of the estimated tether tension, N, or None when there is
+            no (converged) estimate.
+        position_world_m: Current drone position, world, m, shape (3,): motion capture
+            when the telemetry has it, else the tether-based estimate; None if unknown.
+        base_world_m: Tether base exit, world, m, shape (3,).
+        length_m: Tether length paid out, m.
+        floor_z_m: Floor height, m (``-inf`` for none).
+        stale: The caller knows this input is stale: disengage.
+
+    Returns:
+        The next state, and the setpoint and/or Stop to publish.
+
+    Raises:
+        ValueError: If ``stamp_s`` is not finite.
+    """
+    if not math.isfinite(stamp_s):
+        raise ValueError(f"stamp_s must be finite, got {stamp_s!r}")
+    prev = state.last_stamp_s
+    state = replace(state, last_stamp_s=stamp_s)
+
+    # 1. Stale input disengages; the operator re-enables.
+    if state.enabled or state.active:
+        why = None
+        if stale:
+            why = "stale input: following disengaged"
+        elif prev is not None and stamp_s - prev > params.stale_after_s:
+            why = f"input gap {stamp_s - prev:.3f} s > {params.stale_after_s} s: disengaged"
+        elif prev is not None and stamp_s < prev:
+            why = f"stamp went backwards ({prev} -> {stamp_s}): disengaged"
+        if why is not None:
+            state = replace(state, enabled=False, active=False, landing_armed=False, reason=why)
+            return FollowDecision(state)
+
+    # 2. Off, or stopped after tug-to-land.
+    if not state.enabled or state.stopped:
+        return FollowDecision(replace(state, active=False))
+
+    # 3. Never act on a missing position.
+    position = _finite_vec3(position_world_m)
+    if position is None:
+        return FollowDecision(replace(state, active=False, reason="no position: goal frozen"))
+
+    # 4. Hysteresis on the tension norm.
+    norm_n = tension_norm_n
+    if norm_n is None or not math.isfinite(norm_n):
+        active = False
+        reason = "no tension estimate: goal frozen"
+    else:
+        active = bool(norm_n >= params.release_n if state.active else norm_n > params.threshold_n)
+        reason = "following the pull" if active else "below threshold: goal frozen"
+    landing_armed = state.landing_armed or (active and params.land_below_m is not None)
+    state = replace(state, active=active, landing_armed=landing_armed, reason=reason)
+
+    # 5. Tug-to-land: exactly one Stop, then terminal until enabled again.
+    if (
+        state.landing_armed
+        and params.land_below_m is not None
+        and position[2] < params.land_below_m
+    ):
+        stop_reason = (
+            f"tug-to-land: z {position[2]:.3f} m below land_below_m {params.land_below_m} m"
+        )
+        state = replace(state, enabled=False, active=False, stopped=True, reason=stop_reason)
+        return FollowDecision(state, stop_reason=stop_reason)
+
+    if not active:
+        return FollowDecision(state)
+
+    # 6. The goal follows the drone, within reach and at a bounded speed.
+    radius_m = length_m - params.reach_margin_m if math.isfinite(length_m) else math.nan
+    min_z_m = floor_z_m + params.floor_margin_m if not math.isnan(floor_z_m) else math.nan
+    target = clamp_to_reach(position, base_world_m, radius_m, min_z_m)
+    if target is None:
+        state = replace(state, reason="position out of reach and no reachable goal")
+        return FollowDecision(state)
+    last = _finite_vec3(state.setpoint_world_m)
+    if last is not None and state.setpoint_stamp_s is not None:
+        max_step_m = params.max_speed_mps * max(stamp_s - state.setpoint_stamp_s, 0.0)
+        step = target - last
+        dist = math.sqrt(float(step @ step))
+        if dist > max_step_m:
+            target = last + step * (max_step_m / dist)
+            # Reach wins over the rate limit if the reachable set moved.
+            target = clamp_to_reach(target, base_world_m, radius_m, min_z_m)
+            if target is None:  # cannot happen: the set was non-empty just above
+                return FollowDecision(state)
+    setpoint: Vec3 = (float(target[0]), float(target[1]), float(target[2]))
+    state = replace(state, setpoint_world_m=setpoint, setpoint_stamp_s=stamp_s)
+    out = np.array(setpoint)
+    out.setflags(write=False)
+    return FollowDecision(state, setpoint_world_m=out)

@@ -1,0 +1,307 @@
+"""Tests of groundstation.follow: the tension-following / tug-to-land state machine."""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from numpy.typing import ArrayLike
+
+from groundstation.follow import (
+    FollowDecision,
+    FollowParams,
+    FollowState,
+    clamp_to_reach,
+    follow_step,
+    mark_stale,
+    set_enabled,
+)
+
+BASE_M = np.array([0.0, 0.0, 0.754])
+LENGTH_M = 1.6
+FLOOR_M = 0.0
+DT_S = 0.004
+PARAMS = FollowParams(threshold_n=0.15, hysteresis_ratio=0.2, max_speed_mps=0.5)
+
+
+def step(
+    state: FollowState,
+    stamp_s: float,
+    tension_n: float | None,
+    position_m: ArrayLike | None,
+    params: FollowParams = PARAMS,
+    *,
+    base_world_m: ArrayLike = BASE_M,
+    length_m: float = LENGTH_M,
+    floor_z_m: float = FLOOR_M,
+    stale: bool = False,
+) -> FollowDecision:
+    return follow_step(
+        state,
+        params,
+        stamp_s=stamp_s,
+        tension_norm_n=tension_n,
+        position_world_m=position_m,
+        base_world_m=base_world_m,
+        length_m=length_m,
+        floor_z_m=floor_z_m,
+        stale=stale,
+    )
+
+
+def test_import_does_not_pull_io_libraries() -> None:
+    code = (
+        "import sys, groundstation.follow\n"
+        "bad = [m for m in ('zenoh', 'viser') if m in sys.modules]\n"
+        "assert not bad, bad\n"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True)
+
+
+def test_disabled_publishes_nothing() -> None:
+    state = FollowState()
+    for k in range(10):
+        d = step(state, k * DT_S, 1.0, [1.0, 0.0, 1.0])
+        assert d.setpoint_world_m is None and d.stop_reason is None
+        assert not d.state.active and not d.state.enabled
+        state = d.state
+
+
+def test_follow_engages_updates_and_freezes_with_hysteresis() -> None:
+    state = set_enabled(FollowState(), True)
+    t = 0.0
+    # Below threshold: enabled but idle.
+    d = step(state, t, 0.10, [1.0, 0.0, 1.0])
+    assert d.state.enabled and not d.state.active and d.setpoint_world_m is None
+    # Above threshold: the goal is the current position, every step.
+    positions = [[1.0, 0.0, 1.0], [1.001, 0.0, 1.0], [1.002, 0.001, 1.0]]
+    for p in positions:
+        t += DT_S
+        d = step(d.state, t, 0.20, p)
+        assert d.state.active
+        assert d.setpoint_world_m is not None
+        np.testing.assert_allclose(d.setpoint_world_m, p, atol=1e-12)
+    # Between release (0.12 N) and threshold (0.15 N): stays active.
+    t += DT_S
+    d = step(d.state, t, 0.13, [1.003, 0.001, 1.0])
+    assert d.state.active and d.setpoint_world_m is not None
+    frozen = d.state.setpoint_world_m
+    # Below release: the goal freezes; no new setpoints.
+    for p in ([1.1, 0.0, 1.0], [1.2, 0.0, 1.0]):
+        t += DT_S
+        d = step(d.state, t, 0.11, p)
+        assert not d.state.active and d.setpoint_world_m is None
+        assert d.state.setpoint_world_m == frozen
+    # Between release and threshold while released: stays released.
+    t += DT_S
+    d = step(d.state, t, 0.14, [1.2, 0.0, 1.0])
+    assert not d.state.active and d.setpoint_world_m is None
+    assert PARAMS.release_n == pytest.approx(0.12)
+
+
+def test_tug_to_land_issues_exactly_one_stop() -> None:
+    params = replace(PARAMS, land_below_m=0.3, max_speed_mps=100.0)
+    state = set_enabled(FollowState(), True)
+    t = 0.0
+    # Below the landing height before any tug: landing is not armed, no Stop.
+    d = step(state, t, 0.05, [0.5, 0.0, 0.2], params)
+    assert d.stop_reason is None and not d.state.landing_armed
+    # The tug (first activation) arms landing; the drone is pulled down.
+    stops = []
+    z = 1.0
+    for _ in range(400):
+        t += DT_S
+        d = step(d.state, t, 0.3, [0.5, 0.0, z], params)
+        z -= 0.004
+        stops.append(d.stop_reason)
+    # The operator lets go while the drone is already below: nothing more happens.
+    for _ in range(50):
+        t += DT_S
+        d = step(d.state, t, 0.0, [0.5, 0.0, 0.1], params)
+        stops.append(d.stop_reason)
+    issued = [s for s in stops if s is not None]
+    assert len(issued) == 1 and "tug-to-land" in issued[0]
+    assert d.state.stopped and not d.state.active and not d.state.enabled
+    # Re-enabling starts afresh.
+    fresh = set_enabled(d.state, True)
+    assert fresh.enabled and not fresh.stopped and not fresh.landing_armed
+    assert fresh.setpoint_world_m is None
+
+
+def test_landing_armed_after_release_still_lands() -> None:
+    params = replace(PARAMS, land_below_m=0.3)
+    d = step(set_enabled(FollowState(), True), 0.0, 0.3, [0.5, 0.0, 1.0], params)
+    assert d.state.landing_armed
+    d = step(d.state, DT_S, 0.0, [0.5, 0.0, 0.6], params)
+    assert not d.state.active and d.stop_reason is None
+    d = step(d.state, 2 * DT_S, 0.0, [0.5, 0.0, 0.29], params)
+    assert d.stop_reason is not None and d.state.stopped
+
+
+def test_no_landing_without_land_below() -> None:
+    d = step(set_enabled(FollowState(), True), 0.0, 0.3, [0.5, 0.0, 0.01])
+    assert not d.state.landing_armed and d.stop_reason is None
+
+
+def test_repeated_enable_keeps_landing_armed() -> None:
+    params = replace(PARAMS, land_below_m=0.3)
+    d = step(set_enabled(FollowState(), True), 0.0, 0.3, [0.5, 0.0, 1.0], params)
+    again = set_enabled(d.state, True)
+    assert again == d.state
+    off = set_enabled(d.state, False)
+    assert not off.enabled and not off.active and not off.landing_armed
+
+
+def test_setpoint_clamped_within_reach_and_above_floor() -> None:
+    state = set_enabled(FollowState(), True)
+    radius = LENGTH_M - PARAMS.reach_margin_m
+    # Far beyond reach (a bad tether-based estimate): projected onto the sphere.
+    d = step(state, 0.0, 0.5, [5.0, 0.0, 0.754])
+    assert d.setpoint_world_m is not None
+    np.testing.assert_allclose(d.setpoint_world_m, [radius, 0.0, 0.754], atol=1e-12)
+    # Below the floor: lifted to the floor margin.
+    d = step(set_enabled(FollowState(), True), 0.0, 0.5, [0.5, 0.2, -0.3])
+    assert d.setpoint_world_m is not None
+    np.testing.assert_allclose(d.setpoint_world_m, [0.5, 0.2, PARAMS.floor_margin_m])
+
+
+def test_clamp_to_reach_cases() -> None:
+    b = np.array([0.0, 0.0, 0.0])
+    # Inside: unchanged.
+    np.testing.assert_array_equal(clamp_to_reach([0.1, 0.2, 0.3], b, 1.0, -1.0), [0.1, 0.2, 0.3])
+    # Outside the ball and below the plane: on the disc.
+    p = clamp_to_reach([3.0, 0.0, -2.0], b, 1.0, 0.6)
+    assert p is not None
+    np.testing.assert_allclose(p, [0.8, 0.0, 0.6], atol=1e-12)
+    # Plane above the ball: no reachable point.
+    assert clamp_to_reach([0.0, 0.0, 5.0], b, 1.0, 1.5) is None
+    assert clamp_to_reach([0.0, 0.0, 0.0], b, -0.1, -math.inf) is None
+    assert clamp_to_reach([0.0, math.nan, 0.0], b, 1.0, -math.inf) is None
+
+
+def test_setpoints_rate_limited() -> None:
+    params = replace(PARAMS, max_speed_mps=0.5)
+    d = step(set_enabled(FollowState(), True), 0.0, 0.5, [0.5, 0.0, 1.0], params)
+    previous = np.array(d.setpoint_world_m)
+    # The position estimate jumps 20 cm in one step: the setpoint moves 2 mm.
+    for k in range(1, 20):
+        d = step(d.state, k * DT_S, 0.5, [0.7, 0.0, 1.0], params)
+        assert d.setpoint_world_m is not None
+        moved = float(np.linalg.norm(d.setpoint_world_m - previous))
+        assert moved <= params.max_speed_mps * DT_S + 1e-12
+        previous = np.array(d.setpoint_world_m)
+    assert previous[0] == pytest.approx(0.5 + 19 * 0.5 * DT_S)
+
+
+def test_stale_gap_disengages() -> None:
+    params = replace(PARAMS, land_below_m=0.3)
+    d = step(set_enabled(FollowState(), True), 0.0, 0.5, [0.5, 0.0, 1.0], params)
+    assert d.state.active
+    d = step(d.state, 0.0 + 0.6, 0.5, [0.5, 0.0, 1.0], params)
+    assert not d.state.enabled and not d.state.active and not d.state.landing_armed
+    assert d.setpoint_world_m is None and "gap" in d.state.reason
+    # It stays off until enabled again.
+    d = step(d.state, 0.604, 0.5, [0.5, 0.0, 1.0], params)
+    assert d.setpoint_world_m is None
+    d = step(set_enabled(d.state, True), 0.608, 0.5, [0.5, 0.0, 1.0], params)
+    assert d.state.active and d.setpoint_world_m is not None
+
+
+def test_enable_after_silence_is_not_stale() -> None:
+    d = step(FollowState(), 0.0, 0.0, [0.5, 0.0, 1.0])
+    d = step(set_enabled(d.state, True), 100.0, 0.5, [0.5, 0.0, 1.0])
+    assert d.state.active
+
+
+def test_stale_signal_and_mark_stale_and_backwards_stamp() -> None:
+    d = step(set_enabled(FollowState(), True), 0.0, 0.5, [0.5, 0.0, 1.0])
+    stale = step(d.state, DT_S, 0.5, [0.5, 0.0, 1.0], stale=True)
+    assert not stale.state.enabled and stale.setpoint_world_m is None
+    marked = mark_stale(d.state)
+    assert not marked.enabled and not marked.active and "stale" in marked.reason
+    assert mark_stale(d.state, 7.0).last_stamp_s == 7.0
+    back = step(d.state, -1.0, 0.5, [0.5, 0.0, 1.0])
+    assert not back.state.enabled and "backwards" in back.state.reason
+
+
+def test_missing_position_never_acts() -> None:
+    d = step(set_enabled(FollowState(), True), 0.0, 0.5, [0.5, 0.0, 1.0])
+    for bad in (None, [math.nan, 0.0, 1.0], [1.0, 2.0]):
+        out = step(d.state, DT_S, 0.5, bad)
+        assert out.setpoint_world_m is None and not out.state.active
+        assert out.state.enabled and out.state.setpoint_world_m == d.state.setpoint_world_m
+    out = step(d.state, DT_S, None, [0.5, 0.0, 1.0])
+    assert out.setpoint_world_m is None and not out.state.active
+
+
+def test_invalid_stamp_and_params_raise() -> None:
+    with pytest.raises(ValueError, match="stamp_s"):
+        step(FollowState(), math.nan, 0.5, [0.5, 0.0, 1.0])
+    with pytest.raises(ValueError, match="hysteresis_ratio"):
+        FollowParams(hysteresis_ratio=1.0)
+    with pytest.raises(ValueError, match="threshold_n"):
+        FollowParams(threshold_n=0.0)
+    with pytest.raises(ValueError, match="land_below_m"):
+        FollowParams(land_below_m=math.inf)
+
+
+finite = st.floats(-10.0, 10.0, allow_nan=False)
+maybe_bad = st.one_of(finite, st.just(math.nan), st.just(math.inf))
+
+
+@given(
+    steps=st.lists(
+        st.tuples(
+            st.floats(0.0, 0.6),  # dt to the next step, s
+            st.one_of(st.none(), st.floats(0.0, 1.0), st.just(math.nan)),  # |T|, N
+            st.one_of(st.none(), st.tuples(maybe_bad, maybe_bad, maybe_bad)),  # position
+            st.floats(0.0, 3.0),  # length paid out, m
+            st.booleans(),  # an enable/disable command before this step
+        ),
+        min_size=1,
+        max_size=40,
+    ),
+    base=st.tuples(finite, finite, st.floats(-1.0, 2.0)),
+    floor=st.one_of(st.just(-math.inf), st.floats(-1.0, 1.0)),
+    land=st.one_of(st.none(), st.floats(-1.0, 2.0)),
+)
+@settings(max_examples=200, deadline=None)
+def test_property_setpoints_finite_within_reach_and_one_stop(
+    steps: list[tuple[float, float | None, tuple[float, float, float] | None, float, bool]],
+    base: tuple[float, float, float],
+    floor: float,
+    land: float | None,
+) -> None:
+    params = replace(PARAMS, land_below_m=land)
+    state = set_enabled(FollowState(), True)
+    t = 0.0
+    stops_since_enable = 0
+    for dt, tension, position, length, toggle in steps:
+        if toggle:
+            state = set_enabled(state, not state.enabled)
+            if state.enabled:
+                stops_since_enable = 0
+        t += dt
+        d = step(
+            state, t, tension, position, params,
+            base_world_m=np.array(base), length_m=length, floor_z_m=floor,
+        )  # fmt: skip
+        if d.setpoint_world_m is not None:
+            sp = d.setpoint_world_m
+            assert np.all(np.isfinite(sp))
+            assert position is not None and np.all(np.isfinite(position))
+            radius = length - params.reach_margin_m
+            assert np.linalg.norm(sp - np.array(base)) <= radius + 1e-9
+            assert sp[2] >= floor + params.floor_margin_m - 1e-9
+            assert d.state.enabled and d.state.active
+        if d.stop_reason is not None:
+            stops_since_enable += 1
+            assert stops_since_enable == 1
+            assert d.state.stopped
+        state = d.state
