@@ -2,8 +2,11 @@
 
 Usage::
 
-    python tests/integration/router.py --listen tcp/127.0.0.1:7447 [--listen ...]
+    python tests/integration/router.py [ENDPOINT ...] [--listen ENDPOINT ...]
         [--config ROUTER.json5]
+
+e.g. ``router.py tcp/127.0.0.1:7447`` or ``router.py --listen tls/127.0.0.1:7448 --config
+tls.json5`` (positional endpoints and ``--listen`` are the same thing).
 
 It opens the session (multicast scouting off; the optional JSON5 file first, so TLS and
 access control come from it, then the listen endpoints), prints ``ready <zid>`` on stdout
@@ -29,9 +32,13 @@ from groundstation.zenoh_bus import open_session
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--listen", action="append", required=True, metavar="ENDPOINT")
+    parser.add_argument("endpoints", nargs="*", metavar="ENDPOINT", help="listen here")
+    parser.add_argument("--listen", action="append", default=[], metavar="ENDPOINT")
     parser.add_argument("--config", metavar="JSON5", help="zenoh config file (TLS, ACL)")
     args = parser.parse_args(argv)
+    listen = tuple(args.endpoints) + tuple(args.listen)
+    if not listen:
+        parser.error("give at least one endpoint to listen on")
 
     stop = threading.Event()
 
@@ -41,7 +48,7 @@ def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGTERM, on_signal)
     signal.signal(signal.SIGINT, on_signal)
 
-    section = ZenohSection(mode="router", listen=tuple(args.listen), config_file=args.config)
+    section = ZenohSection(mode="router", listen=listen, config_file=args.config)
     session = open_session(section)
     try:
         print(f"ready {session.zid()}", flush=True)
