@@ -505,7 +505,7 @@ class TensionFilter:
         p = self.params
         y = _vector3(tension_obs_world_n, "tension_obs_world_n")
         dt = _check_dt(dt_s)
-        R = observation_cov_n2(quat_wxyz, p.mass_kg, p.accel_noise_mps2, p.thrust_noise_n)
+        R, R_inv = self._observation_cov_and_info(quat_wxyz)
         kf = self._kf
         if not self._initialized:
             # First sample: x = y, P = R (see the class docstring).
@@ -529,7 +529,7 @@ class TensionFilter:
         # Whitened innovation w = L^-1 nu with S = L L' (filterpy kept nu and S).
         innov = np.linalg.solve(np.linalg.cholesky(kf.S), kf.y[:, 0])
         self._update_bias(innov, dt)
-        self._ring.push(y, np.linalg.inv(R), innov)
+        self._ring.push(y, R_inv, innov)
         stat, window = self._change_statistic()
         if stat > p.change_threshold:
             self._reinitialize(window)
@@ -559,6 +559,22 @@ class TensionFilter:
         return self._publish(False, 0.0, 1.0)
 
     # -- internals ---------------------------------------------------------------------
+
+    def _observation_cov_and_info(
+        self, quat_wxyz: ArrayLike | None
+    ) -> tuple[FloatArray, FloatArray]:
+        """R of :func:`observation_cov_n2` and its inverse, by Sherman-Morrison.
+
+        R = s^2 I + f^2 u u' with |u| = 1 gives R^-1 = (I - f^2 / (s^2 + f^2) u u') / s^2.
+        """
+        p = self.params
+        u = np.array([0.0, 0.0, 1.0]) if quat_wxyz is None else rotation_world_body(quat_wxyz)[:, 2]
+        s2 = (p.mass_kg * p.accel_noise_mps2) ** 2
+        f2 = p.thrust_noise_n**2
+        uu = np.outer(u, u)
+        R = np.eye(3) * s2 + f2 * uu
+        R_inv = (np.eye(3) - (f2 / (s2 + f2)) * uu) / s2
+        return R, R_inv
 
     def _update_bias(self, innov: FloatArray, dt: float) -> None:
         # EWMA b = (1 - beta) b + beta w, with beta from the time constant and dt.
