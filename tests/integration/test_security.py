@@ -272,10 +272,21 @@ def test_access_control_only_the_ground_station_commands(pki: Pki, procs: list[P
     router, endpoint = start_router(pki, "router-mtls.json5", acl=True)
     procs.append(router)
 
-    def mtls(cn: str, **kwargs: object) -> Proc:
+    def mtls(
+        cn: str,
+        role: str,
+        keys: tuple[str, ...] = ("tether/**",),
+        puts: tuple[tuple[str, str], ...] = (),
+    ) -> Proc:
         proc = client(
-            endpoint, config="client-mtls.json5", ca=pki.ca[1], cert=pki.clients[cn], **kwargs
-        )  # type: ignore[arg-type]
+            endpoint,
+            role=role,
+            config="client-mtls.json5",
+            ca=pki.ca[1],
+            cert=pki.clients[cn],
+            keys=keys,
+            puts=puts,
+        )
         procs.append(proc)
         return proc
 
