@@ -1,0 +1,99 @@
+"""Fixtures for driving the dashboard in a real Chromium (Debian's, headless, software GL).
+
+The browser tests skip only when ``/usr/bin/chromium`` is missing (CI installs it: ``./dev
+test``). Every request the page makes is recorded so a test can check that nothing leaves
+the machine.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from typing import Any
+from urllib.parse import urlsplit
+
+import pytest
+
+CHROMIUM = "/usr/bin/chromium"
+CHROMIUM_ARGS = [
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--no-first-run",
+    "--disable-quic",
+]
+LOCAL_HOSTS = {"127.0.0.1", "localhost", "[::1]", "::1"}
+FIRST_FRAME_TIMEOUT_MS = 120_000
+"""Software WebGL on a shared 2-core machine: the first frame can take many seconds."""
+
+
+def _needs_chromium() -> None:
+    if not os.access(CHROMIUM, os.X_OK):
+        pytest.skip(f"{CHROMIUM} is missing (apt-get install chromium); ./dev test installs it")
+
+
+@dataclass
+class RequestLog:
+    """Every URL a page asked for (HTTP requests and WebSockets)."""
+
+    urls: list[str] = field(default_factory=list)
+
+    def foreign(self) -> list[str]:
+        """URLs that are not loopback, ``data:`` or ``blob:``."""
+        out = []
+        for url in self.urls:
+            parts = urlsplit(url)
+            if parts.scheme in ("data", "blob"):
+                continue
+            host = parts.hostname or ""
+            if host in LOCAL_HOSTS or f"[{host}]" in LOCAL_HOSTS:
+                continue
+            out.append(url)
+        return out
+
+
+@pytest.fixture(scope="session")
+def browser() -> Iterator[Any]:
+    _needs_chromium()
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as playwright:
+        chromium = playwright.chromium.launch(
+            executable_path=CHROMIUM, headless=True, args=CHROMIUM_ARGS
+        )
+        try:
+            yield chromium
+        finally:
+            chromium.close()
+
+
+def open_page(browser: Any, url: str, log: RequestLog) -> Any:
+    """A fresh page on ``url`` recording every request into ``log``."""
+    context = browser.new_context(viewport={"width": 1400, "height": 1000})
+    context.on("request", lambda request: log.urls.append(request.url))
+    page = context.new_page()
+    page.on("websocket", lambda ws: log.urls.append(ws.url))
+    page.set_default_timeout(FIRST_FRAME_TIMEOUT_MS)
+    page.goto(url)
+    return page
+
+
+def scene_canvas_box(page: Any) -> dict[str, float]:
+    """Bounding box of the largest canvas (the 3D view; uPlot charts are canvases too)."""
+    box = page.evaluate(
+        """() => {
+            let best = null;
+            for (const c of document.querySelectorAll('canvas')) {
+                const r = c.getBoundingClientRect();
+                if (!best || r.width * r.height > best.width * best.height) {
+                    best = {x: r.x, y: r.y, width: r.width, height: r.height};
+                }
+            }
+            return best;
+        }"""
+    )
+    assert box is not None, "no canvas on the page"
+    return dict(box)
