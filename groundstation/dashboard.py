@@ -123,7 +123,7 @@ _FLOOR_RUN_RGB = (150, 110, 60)
 _TENSION_RGB = (224, 49, 49)
 _MOCAP_RGB = (47, 158, 68)
 _TRUTH_RGB = (134, 142, 150)
-_BASE_RGB = (73, 80, 87)
+_BASE_RGB = (134, 142, 150)
 
 _WEB_DIR = Path(__file__).resolve().parent.parent / "web"
 
@@ -698,6 +698,11 @@ class Throttle:
         self._next_s = now_s + self.period_s
         return True
 
+    @property
+    def next_s(self) -> float:
+        """When the next action is due (-inf before the first)."""
+        return self._next_s
+
 
 @dataclass(frozen=True)
 class Pending:
@@ -920,6 +925,7 @@ class _Drone:
         self.telemetry_hz = 0.0
         self.estimate_hz = 0.0
         self.nodes: _DroneNodes | None = None
+        self.drawn_s = -math.inf
 
 
 # --------------------------------------------------------------------------------------------
@@ -1562,8 +1568,8 @@ class Dashboard:
     # ---------------------------------------------------------------- update thread
 
     def _run_updates(self) -> None:
-        period_s = 1.0 / self._scene_rate_hz
-        while not self._stop_event.wait(period_s):
+        # Sleep until the next pass is due, so the pass's own work is inside the period.
+        while not self._stop_event.wait(max(0.001, self._scene_throttle.next_s - time.monotonic())):
             try:
                 self.update()
             except Exception:  # keep drawing; a bug here must not freeze the dashboard
@@ -1598,8 +1604,10 @@ class Dashboard:
                 new_drones = True
         with server.atomic():
             for drone in self._drones.values():
-                self._ingest(drone, now_s)
-                self._draw(server, drone, now_s)
+                # Redraw on new data, and once a second anyway (the stale flag is time).
+                if self._ingest(drone, now_s) or now_s - drone.drawn_s >= 1.0:
+                    self._draw(server, drone, now_s)
+                    drone.drawn_s = now_s
         if new_drones:
             self._on_new_drones(server)
         selected = self._drones.get(self._selected) if self._selected else None
@@ -1646,9 +1654,17 @@ class Dashboard:
             self._log_once(f"invalid-{kind}", "unparsable %s from %s: %s", kind, drone.id, exc)
             return None
 
-    def _ingest(self, drone: _Drone, now_s: float) -> None:
+    def _ingest(self, drone: _Drone, now_s: float) -> bool:
+        """Parse what is new for ``drone``; True when anything was."""
         inbox = drone.inbox
         seen = drone.seen
+        changed = (
+            inbox.n_estimate != seen["estimate"]
+            or inbox.n_telemetry != seen["telemetry"]
+            or inbox.n_truth != seen["truth"]
+            or inbox.n_reel != seen["reel"]
+            or inbox.n_stop != seen["stop"]
+        )
         new_estimate = inbox.n_estimate != seen["estimate"]
         if new_estimate:
             seen["estimate"] = inbox.n_estimate
@@ -1707,6 +1723,7 @@ class Dashboard:
         while drone.trail_t and drone.trail_t[0] < now_s - TRAIL_S:
             drone.trail_t.popleft()
             drone.trail.popleft()
+        return changed
 
     def _notify_stop(self, drone_id: str, reason: str) -> None:
         if self._server is None:
@@ -1847,7 +1864,7 @@ class Dashboard:
         base = self._base_of(drone)
         if nodes.base_drawn != base:
             height_m = max(0.01, base[2] - floor_z_m)
-            nodes.base_column.dimensions = (0.08, 0.08, height_m)
+            nodes.base_column.dimensions = (0.05, 0.05, height_m)
             nodes.base_column.position = (base[0], base[1], floor_z_m + height_m / 2.0)
             nodes.base_exit.position = base
             nodes.base_drawn = base
