@@ -33,7 +33,12 @@ from pathlib import Path
 
 import numpy as np
 
-from groundstation.tension import GRAVITY_MPS2, TensionFilter, TensionFilterParams
+from groundstation.tension import (
+    GRAVITY_MPS2,
+    TensionFilter,
+    TensionFilterParams,
+    observe_tension,
+)
 
 DT_S = 0.004
 MASS_KG = 0.030
@@ -127,7 +132,6 @@ def bench_hover(params: TensionFilterParams, seeds: int, seconds: float) -> dict
     errs = []
     stds = []
     dets = 0
-    cost = []
     for seed in range(seeds):
         rng = np.random.default_rng(1000 + seed)
         tension = HOVER_TENSION_N + rng.uniform(-0.03, 0.03, 3)
@@ -138,7 +142,6 @@ def bench_hover(params: TensionFilterParams, seeds: int, seconds: float) -> dict
         errs.append(err)
         stds.append(r.std_n[start:].mean(axis=0))
         dets += int(r.detections.sum())
-        cost.append(r.seconds_per_update)
     pooled = np.concatenate(errs)
     return {
         "rms_mn": np.sqrt(np.mean(pooled**2, axis=0)) * 1e3,
@@ -146,7 +149,6 @@ def bench_hover(params: TensionFilterParams, seeds: int, seconds: float) -> dict
         "worst_seed_rms_mn": np.max(per_seed_rms, axis=0) * 1e3,
         "reported_std_mn": np.mean(stds, axis=0) * 1e3,
         "detections": dets,
-        "cost_us": float(np.median(cost)) * 1e6,
     }
 
 
@@ -192,6 +194,33 @@ def bench_false_alarms(params: TensionFilterParams, hours: float, chunks: int) -
         "max_statistic": max_stat,
         "samples_over_half_threshold": over_half,
     }
+
+
+def bench_cost(params: TensionFilterParams, repeats: int = 20, n: int = 500) -> float:
+    """Best-of-``repeats`` cost of one ``update``, µs (the machine is shared: take the min)."""
+    rng = np.random.default_rng(1)
+    obs, quats = observations(np.tile(HOVER_TENSION_N, (n, 1)), rng)
+    best = math.inf
+    for _ in range(repeats):
+        filt = TensionFilter(params)
+        t0 = time.perf_counter()
+        for k in range(n):
+            filt.update(obs[k], DT_S, quats[k])
+        best = min(best, (time.perf_counter() - t0) / n)
+    return best * 1e6
+
+
+def bench_observe_cost(repeats: int = 20, n: int = 500) -> float:
+    """Best-of-``repeats`` cost of one ``observe_tension``, µs."""
+    accel = np.array([0.1, -0.2, 9.8])
+    quat = np.array([0.99, 0.05, -0.03, 0.1])
+    best = math.inf
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        for _ in range(n):
+            observe_tension(accel, quat, 0.35, MASS_KG)
+        best = min(best, (time.perf_counter() - t0) / n)
+    return best * 1e6
 
 
 def bench_ramps(params: TensionFilterParams, rates_n_per_s: list[float]) -> list[dict[str, float]]:
@@ -263,7 +292,7 @@ def main(argv: list[str] | None = None) -> int:
         hover = bench_hover(params, hover_seeds, hover_s)
         print(f"[{name}] steps ...", file=sys.stderr)
         steps = bench_steps(params, step_trials if name == "adaptive" else base_steps)
-        results[name] = {"hover": hover, "steps": steps}
+        results[name] = {"hover": hover, "steps": steps, "cost_us": bench_cost(params)}
     adaptive = FILTERS["adaptive"]
     print("[adaptive] false alarms ...", file=sys.stderr)
     fa = bench_false_alarms(adaptive, fa_hours, fa_chunks)
@@ -271,6 +300,7 @@ def main(argv: list[str] | None = None) -> int:
     ramps = bench_ramps(adaptive, [1e-3, 3e-3, 10e-3, 30e-3, 100e-3])
     ramps_fixed = bench_ramps(FILTERS["fixed-hover"], [1e-3, 3e-3, 10e-3, 30e-3, 100e-3])
     irregular = bench_irregular(adaptive, 3 if quick else 10)
+    observe_us = bench_observe_cost()
     wall_s = time.perf_counter() - t_start
 
     lines = [
@@ -298,12 +328,15 @@ def main(argv: list[str] | None = None) -> int:
         lines.append(
             f"| {name} | {fmt3(h['rms_mn'])} | {fmt3(h['err_std_mn'])} |"
             f" {fmt3(h['worst_seed_rms_mn'])} | {fmt3(h['reported_std_mn'])} |"
-            f" {h['detections']} | {h['cost_us']:.0f} µs |"
+            f" {h['detections']} | {res['cost_us']:.0f} µs |"
         )
     lines += [
         "",
         "Target: RMS <= 0.5 mN per axis. The reported std is sqrt(diag P); under the",
         "random-walk model it is sqrt(2) larger than the error of a truly constant tension.",
+        "Worst seed: the RMS of one 25 s window of a slow (2.5 s) average scatters by about",
+        "+-30 %. Cost: best of 20 x 500 updates on a shared 2-core machine;"
+        f" `observe_tension` adds {observe_us:.0f} µs per sample.",
         "",
         "## 30 mN steps in random directions",
         "",
