@@ -902,6 +902,20 @@ class _DroneNodes:
     base_column: viser.BoxHandle
     base_exit: viser.IcosphereHandle
     base_drawn: Vec3 | None = None
+    shown: dict[str, bool] = field(default_factory=dict)
+    texts: dict[str, str] = field(default_factory=dict)
+
+    def show(self, name: str, visible: bool) -> None:
+        """Set a node's visibility, sending only changes (each assignment is a message)."""
+        if self.shown.get(name) != visible:
+            getattr(self, name).visible = visible
+            self.shown[name] = visible
+
+    def text(self, name: str, text: str) -> None:
+        """Set a label's text, sending only changes."""
+        if self.texts.get(name) != text:
+            getattr(self, name).text = text
+            self.texts[name] = text
 
 
 class _Drone:
@@ -1871,7 +1885,7 @@ class Dashboard:
 
         est = drone.estimate
         body = self._body_position(drone)
-        nodes.body.visible = body is not None
+        nodes.show("body", body is not None)
         if body is not None:
             nodes.body.position = body
             if drone.telemetry is not None:
@@ -1887,62 +1901,61 @@ class Dashboard:
             if drone.last_stop is not None or (est is not None and est.follow.stopped):
                 flags.append("STOPPED")
             text = drone.id + (f" ({', '.join(flags)})" if flags else "")
-            if nodes.name_label.text != text:
-                nodes.name_label.text = text
+            nodes.text("name_label", text)
 
             pts = tether_points(base, body, self._length_of(drone), floor_z_m=floor_z_m)
             on_floor = np.abs(pts[:, 2] - floor_z_m) < 1e-3
             nodes.tether.points = polyline_segments(pts)
-            nodes.tether.visible = True
+            nodes.show("tether", True)
             if on_floor.sum() >= 2:
                 nodes.floor_run.points = polyline_segments(pts[on_floor])
-                nodes.floor_run.visible = True
+                nodes.show("floor_run", True)
             else:
-                nodes.floor_run.visible = False
+                nodes.show("floor_run", False)
         else:
-            nodes.tether.visible = False
-            nodes.floor_run.visible = False
+            nodes.show("tether", False)
+            nodes.show("floor_run", False)
 
         show_arrow = est is not None and body is not None and not est.on_ground
-        nodes.arrow.visible = show_arrow
-        nodes.arrow_label.visible = show_arrow
+        nodes.show("arrow", show_arrow)
+        nodes.show("arrow_label", show_arrow)
         if show_arrow and est is not None and body is not None:
             arrow = tension_arrow(body, est.tension_n)
             nodes.arrow.points = arrow
             nodes.arrow_label.position = arrow[0, 1]
-            nodes.arrow_label.text = f"|T| {est.tension_norm_n:.3f} N"
+            nodes.text("arrow_label", f"|T| {est.tension_norm_n:.3f} N")
 
         std = est.position_std_m if est is not None else None
         if std is not None and est is not None and est.position_m is not None:
             nodes.uncertainty.position = est.position_m
             sx, sy, sz = (float(np.clip(2.0 * s, 0.005, 3.0)) for s in std)
             nodes.uncertainty.scale = (sx, sy, sz)
-            nodes.uncertainty.visible = True
+            nodes.show("uncertainty", True)
         else:
-            nodes.uncertainty.visible = False
+            nodes.show("uncertainty", False)
 
         mocap = drone.telemetry.position_m if drone.telemetry is not None else None
-        nodes.mocap.visible = mocap is not None
+        nodes.show("mocap", mocap is not None)
         if mocap is not None:
             nodes.mocap.position = mocap
         has_error = mocap is not None and est is not None and est.position_m is not None
-        nodes.mocap_error.visible = has_error
-        nodes.mocap_label.visible = has_error
+        nodes.show("mocap_error", has_error)
+        nodes.show("mocap_label", has_error)
         if has_error and mocap is not None and est is not None and est.position_m is not None:
             nodes.mocap_error.points = np.array([[est.position_m, mocap]], dtype=np.float32)
             error_m = math.dist(est.position_m, mocap)
             nodes.mocap_label.position = mocap
-            nodes.mocap_label.text = f"mocap Δ {100.0 * error_m:.1f} cm"
+            nodes.text("mocap_label", f"mocap Δ {100.0 * error_m:.1f} cm")
 
-        nodes.truth.visible = drone.truth is not None
+        nodes.show("truth", drone.truth is not None)
         if drone.truth is not None:
             nodes.truth.position = drone.truth.position_m
 
         if len(drone.trail) >= 2:
             nodes.trail.points = polyline_segments(np.asarray(drone.trail))
-            nodes.trail.visible = True
+            nodes.show("trail", True)
         else:
-            nodes.trail.visible = False
+            nodes.show("trail", False)
 
     def _update_panel(self, drone: _Drone, now_s: float) -> None:
         est = drone.estimate
