@@ -125,7 +125,11 @@ _MOCAP_RGB = (47, 158, 68)
 _TRUTH_RGB = (134, 142, 150)
 _BASE_RGB = (134, 142, 150)
 
-_WEB_DIR = Path(__file__).resolve().parent.parent / "web"
+_MESH_PATHS = (
+    # Shipped with the package if package-data carries it, else the repository's web/.
+    Path(__file__).resolve().parent / "assets" / "quadrotor.stl",
+    Path(__file__).resolve().parent.parent / "web" / "quadrotor.stl",
+)
 
 
 # --------------------------------------------------------------------------------------------
@@ -568,9 +572,15 @@ def tension_html(est: EstimateView | None, truth: TruthView | None = None) -> st
         rows.append(("radial r", radial))
     if est.length_m is not None:
         rows.append(("tether length", _fmt(est.length_m, "m")))
-    if truth is not None and truth.tension_n is not None:
-        norm = math.sqrt(sum(c * c for c in truth.tension_n))
-        rows.append(("|T| truth", _fmt(norm, "N")))
+    if truth is not None:
+        if truth.tension_n is not None:
+            norm = math.sqrt(sum(c * c for c in truth.tension_n))
+            rows.append(("|T| truth (sim)", _fmt(norm, "N")))
+        if est.position_m is not None:
+            error_m = math.dist(est.position_m, truth.position_m)
+            rows.append(("position error (sim)", f"{100.0 * error_m:.1f} cm"))
+        if truth.floor_contact is not None:
+            rows.append(("tether on floor (sim)", "yes" if truth.floor_contact else "no"))
     badges = []
     if est.on_ground:
         badges.append(_badge("on ground", "#868e96"))
@@ -787,11 +797,12 @@ def load_quadrotor_mesh(
 ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.uint32]]:
     """Vertices (V, 3) and faces (F, 3) of the quadrotor drawn for each drone, body frame, m.
 
-    Reads the binary STL ``web/quadrotor.stl`` (written by ``web/make_quadrotor.py``) beside
-    the package, or ``path``; without the file (an installed wheel carries no ``web/``) a
-    plain cross of two bars stands in.
+    Reads the binary STL written by ``web/make_quadrotor.py``: ``path``, else
+    ``groundstation/assets/quadrotor.stl`` (if packaged), else the repository's
+    ``web/quadrotor.stl``; without any (a wheel without the asset) a plain cross of two bars
+    stands in.
     """
-    candidates = [path] if path is not None else [_WEB_DIR / "quadrotor.stl"]
+    candidates = [path] if path is not None else list(_MESH_PATHS)
     for candidate in candidates:
         try:
             data = candidate.read_bytes()

@@ -326,6 +326,19 @@ def test_readouts_escape_text_from_the_bus() -> None:
     assert "&lt;script&gt;" in out
 
 
+def test_readouts_compare_with_simulator_truth() -> None:
+    view = parse_estimate(_estimate(position_m=(0.8, 0.1, 1.0)).to_json())
+    truth = dash_mod.TruthView(
+        position_m=(0.8, 0.1, 1.05),
+        tension_n=(0.0, 0.0, -0.3),
+        length_m=1.6,
+        base_m=None,
+        floor_contact=True,
+    )
+    text = tension_html(view, truth)
+    assert "0.300 N" in text and "5.0 cm" in text and "tether on floor (sim)" in text
+
+
 def test_health_html_with_and_without_status() -> None:
     local = LinkStats(telemetry_hz=250.0, estimate_hz=249.0, telemetry_age_s=0.01)
     assert "no reply" in health_html(None, local, 0.5)
