@@ -19,9 +19,9 @@ RUN groupadd --system --gid 10001 groundstation \
 WORKDIR /opt/groundstation
 
 # Dependencies first (cached while only the code changes): every one pinned with its hash.
-COPY requirements.lock ./
+COPY requirements-runtime.lock ./
 RUN python -m venv /opt/venv \
-    && pip install --require-hashes -r requirements.lock
+    && pip install --require-hashes -r requirements-runtime.lock
 
 # Then the package itself, without touching the pinned dependencies.
 COPY pyproject.toml README.md ./

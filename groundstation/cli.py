@@ -369,9 +369,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ConfigError as exc:
         print(f"groundstation: {exc}", file=sys.stderr)
         return 2
-    except FileNotFoundError as exc:
+    except (FileNotFoundError, IsADirectoryError, PermissionError) as exc:
         print(f"groundstation: {exc}", file=sys.stderr)
         return 2
+    except Exception as exc:
+        from groundstation.recording import RecordingError
+
+        if isinstance(exc, RecordingError):  # names the file and the cause
+            print(f"groundstation: {exc}", file=sys.stderr)
+            return 2
+        raise
 
 
 if __name__ == "__main__":

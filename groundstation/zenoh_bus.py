@@ -41,6 +41,11 @@ def make_zenoh_config(section: ZenohSection) -> zenoh.Config:
         conf.insert_json5("connect/endpoints", json.dumps(list(section.connect)))
     if section.listen:
         conf.insert_json5("listen/endpoints", json.dumps(list(section.listen)))
+    elif not section.config_file:
+        # zenoh's defaults listen on every interface (a peer on a random port, a router on
+        # 7447): nothing listens beyond loopback unless configured.
+        default = ["tcp/127.0.0.1:7447"] if section.mode == "router" else []
+        conf.insert_json5("listen/endpoints", json.dumps(default))
     conf.insert_json5("scouting/multicast/enabled", json.dumps(section.multicast_scouting))
     # A session waits scouting/delay for peers before returning; we know our endpoints.
     conf.insert_json5("scouting/delay", "0")

@@ -169,7 +169,7 @@ def test_dockerfile_slim_python_311_non_root_hash_pinned() -> None:
     froms = [rest for op, rest in ins if op == "FROM"]
     assert froms and re.fullmatch(r"python:3\.11(\.\d+)?-slim(-\w+)?", froms[-1])
     runs = " ".join(rest for op, rest in ins if op == "RUN")
-    assert "--require-hashes -r requirements.lock" in runs
+    assert "--require-hashes -r requirements-runtime.lock" in runs
     assert re.search(r"pip install --no-deps[^&]* \.", runs)
     users = [(i, rest) for i, (op, rest) in enumerate(ins) if op == "USER"]
     assert users, "the image must not run as root"
@@ -184,7 +184,7 @@ def test_dockerignore_keeps_keys_out_of_the_image() -> None:
     lines = (REPO / ".dockerignore").read_text().splitlines()
     assert "*" in lines  # allow-list: only what is re-included below reaches the build
     assert "config/tls/*.key" in lines
-    assert "!groundstation/" in lines and "!requirements.lock" in lines
+    assert "!groundstation/" in lines and "!requirements-runtime.lock" in lines
 
 
 # --------------------------------------------------------------------------- configs
