@@ -72,7 +72,7 @@ def browser() -> Iterator[Any]:
 
 def open_page(browser: Any, url: str, log: RequestLog) -> Any:
     """A fresh page on ``url`` recording every request into ``log``."""
-    context = browser.new_context(viewport={"width": 1400, "height": 1000})
+    context = browser.new_context(viewport={"width": 1100, "height": 800})
     context.on("request", lambda request: log.urls.append(request.url))
     page = context.new_page()
     page.on("websocket", lambda ws: log.urls.append(ws.url))
