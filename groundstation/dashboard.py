@@ -1025,7 +1025,6 @@ class Dashboard:
         self._gui_lock = threading.RLock()
         self._selected: str | None = None
         self._selection_changed = False
-        self._frame_request = False
 
         self._server: viser.ViserServer | None = None
         self._subs: list[Subscription] = []
@@ -1373,7 +1372,6 @@ class Dashboard:
                     )
                 )
                 self._follow_apply = gui.add_button("Apply follow settings", disabled=True)
-            self._follow_form = follow_form
             self._follow_apply.on_click(lambda _event: follow_form.submit())
             follow_form.on_submit(self._on_follow_submit)
             for synced in (self._threshold, self._land_height):
@@ -1402,7 +1400,6 @@ class Dashboard:
                     )
                 )
                 self._tether_apply = gui.add_button("Apply tether parameters", disabled=True)
-            self._tether_form = tether_form
             self._tether_apply.on_click(lambda _event: tether_form.submit())
             tether_form.on_submit(self._on_tether_submit)
             for synced in (self._weight, self._length):
