@@ -373,7 +373,7 @@ def main(argv: list[str] | None = None) -> int:
         "near or above 0.3 s are that limit, not filter lag. The fixed-fast filter does",
         "reach the new tension in 0.3 s on average, but its 1.1 mN hover noise keeps",
         'crossing the 3 mN band, so it never "settles" by this measure; the fixed-hover',
-        "filter is still 80 % of the step away after 0.3 s.",
+        "filter is still about 90 % of the step away after 0.3 s.",
         "",
         "## False change detections at hover (adaptive)",
         "",

@@ -426,13 +426,13 @@ class TensionFilter:
     (D / 9)^``drift_exponent`` (cubed), capped at ``drift_max_scale`` = 600 (tau down to
     0.1 s), which shortens tau until the lag falls back to the threshold (about 2 mN).
     The scale then decays back to 1 with ``drift_memory_s`` = 1 s rather than at once,
-    so a re-initialisation (which clears b) does not forget the motion. Measured on
-    ramps (x component 6.7 mN/s of a 10 mN/s ramp): RMS error 2.1 mN and one
-    re-initialisation in 15 s, against 3.0 mN and 17 re-initialisations without the
-    adaptation; at 1 mN/s, 1.0 mN against 1.1 mN. Ramps much faster than 10 mN/s are
-    in effect steps, and the tug detector takes them over (RMS 4 mN at 30 mN/s, 7 mN at
-    100 mN/s). At hover D exceeds 9 about 3 % of the time, briefly, and the effect on
-    the hover RMS is within the Monte-Carlo scatter (see docs/filter_benchmark.md).
+    so a re-initialisation (which clears b) does not forget the motion. Measured
+    (docs/filter_benchmark.md, error pooled over axes): at 10 mN/s RMS 2.0 mN, max
+    4.6 mN, 3 re-initialisations in 15 s, against 13.9 mN for the same filter without
+    adaptation; at 1 mN/s 0.9 mN against 1.5 mN. Ramps well above 10 mN/s are in
+    effect steps and the tug detector takes them over with repeated re-initialisations
+    (RMS 3.8 mN at 30 mN/s, 5.9 mN at 100 mN/s). At hover D exceeds 9 about 3 % of the
+    time, briefly; the hover RMS rises by about 4 % against the fixed filter.
 
     **Initialisation.** The first observation initialises the state (x = y, P = R),
     unlike the paper, whose filter started from T = 0: with H = 0 and s2 = 0 the
