@@ -404,8 +404,8 @@ class TensionFilter:
     and 900 000 samples per hour gives at most ~0.02 false detections per hour at
     hover (chi2_3 tail at 50 is 8e-11; the windows are strongly correlated, so the
     real rate is far lower; the benchmark counts them). A 30 mN step is 3.2 sigma per
-    sample, i.e. a non-centrality of ~10 per sample, so it is detected after 5 to 8
-    samples (20-32 ms). The shortest window of 4 samples keeps a single outlier (a
+    sample, i.e. a non-centrality of ~10 per sample, so it is detected a few samples
+    after the step (median 16 ms, at most 40 ms in the benchmark). The shortest window of 4 samples keeps a single outlier (a
     vibration spike) from triggering.
 
     **Re-initialisation by replay.** On detection the window with the largest
