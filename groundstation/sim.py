@@ -511,7 +511,6 @@ class Simulator:
 
     def step(self) -> list[Sample]:
         """Advance every drone by one period; return the samples to publish."""
-        self._apply_commands()
         out: list[Sample] = []
         sim_cfg = self.settings.sim
         for i, (at_s, payload) in enumerate(self.scenario.operator):
@@ -520,8 +519,11 @@ class Simulator:
                 for drone_id in self.drones:
                     out.append(Sample(f"tether/{drone_id}/follow", json.dumps(payload).encode()))
         publish_reel = self.seq % max(1, round(sim_cfg.rate_hz / 10.0)) == 0
+        # The script first, then the service's commands, which override its waypoints.
+        externals = {drone_id: self._scripted(drone) for drone_id, drone in self.drones.items()}
+        self._apply_commands()
         for drone_id, drone in self.drones.items():
-            external = self._scripted(drone)
+            external = externals[drone_id]
             drone.step(self.dt_s, external)
             out.extend(self._messages(drone_id, drone, external, publish_reel))
         self.seq += 1

@@ -119,7 +119,9 @@ def test_taut_stop_keeps_the_drone_within_reach() -> None:
         drone.step(0.004, np.zeros(3))
         assert np.linalg.norm(drone.position_world_m - drone.base_world_m) <= 1.0
         assert np.all(np.isfinite(drone.tension_world_n))
-    assert drone.taut
+    # It ends up hanging on a nearly straight tether that holds its full tilt thrust.
+    assert np.linalg.norm(drone.position_world_m - drone.base_world_m) > 0.98
+    assert math.hypot(*drone.tension_world_n[:2]) > 0.15
 
 
 def test_reel_in_shortens_the_tether() -> None:
