@@ -1,0 +1,211 @@
+"""Tests of groundstation.localization against catenary truth."""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from numpy.typing import ArrayLike
+
+from groundstation.catenary import tether_force
+from groundstation.localization import (
+    PLUMB_K,
+    LocalizationFailure,
+    PositionEstimate,
+    localize,
+    try_localize,
+)
+
+OMEGA_N_PER_M = 0.05
+LENGTH_M = 1.6
+BASE_M = np.array([0.0, 0.0, 0.754])
+FLOOR_M = 0.0
+# The paper's hovering flights (sec. Position estimation), m.
+PAPER_SPOTS = [
+    (1.2, 0.0, 1.0),
+    (1.0, -0.3, 1.0),
+    (1.0, 0.0, 1.2),
+    (1.0, -0.3, 0.5),
+    (0.5, -0.6, 1.0),
+    (0.9, 0.6, 1.0),
+]
+FILTER_COV_N2 = np.eye(3) * (0.5e-3) ** 2  # a converged tension filter, about 0.5 mN/axis
+
+
+def truth_tension(
+    drone_m: np.ndarray | tuple[float, float, float],
+    base_m: np.ndarray = BASE_M,
+    length_m: float = LENGTH_M,
+    floor_z_m: float = FLOOR_M,
+) -> tuple[np.ndarray, bool]:
+    tf = tether_force(np.asarray(base_m), np.asarray(drone_m), length_m, OMEGA_N_PER_M, floor_z_m)
+    return np.asarray(tf.force_world_n, dtype=float), bool(tf.floor_contact)
+
+
+def estimate(*args: object, **kwargs: object) -> PositionEstimate:
+    out = try_localize(*args, **kwargs)  # type: ignore[arg-type]
+    assert isinstance(out, PositionEstimate), out
+    return out
+
+
+def test_import_does_not_pull_io_libraries() -> None:
+    code = (
+        "import sys, groundstation.localization\n"
+        "bad = [m for m in ('zenoh', 'viser') if m in sys.modules]\n"
+        "assert not bad, bad\n"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True)
+
+
+@pytest.mark.parametrize("spot", PAPER_SPOTS)
+@pytest.mark.parametrize("cov", [np.zeros((3, 3)), FILTER_COV_N2], ids=["exact", "noisy-cov"])
+def test_paper_hover_spots_recovered(spot: tuple[float, float, float], cov: np.ndarray) -> None:
+    drone = np.array(spot)
+    T, contact = truth_tension(drone)
+    est = estimate(T, cov, OMEGA_N_PER_M, LENGTH_M, BASE_M, FLOOR_M)
+    assert est.azimuth_determined and est.azimuth_rad is not None
+    assert est.azimuth_rad == pytest.approx(math.atan2(drone[1], drone[0]), abs=1e-9)
+    assert est.floor_contact == contact
+    r_true = math.hypot(drone[0] - BASE_M[0], drone[1] - BASE_M[1])
+    lo, hi = est.radial_interval_m
+    assert lo - 1e-9 <= r_true <= hi + 1e-9
+    if not contact:
+        np.testing.assert_allclose(est.position_world_m, drone, rtol=0, atol=1e-6)
+        assert est.radial_m == pytest.approx(r_true, abs=1e-6)
+        assert est.case == "free"
+    else:
+        assert est.position_world_m[2] == pytest.approx(drone[2], abs=1e-6)
+    assert np.all(np.isfinite(est.std_world_m)) and np.all(est.std_world_m >= 0.0)
+    if not cov.any():
+        np.testing.assert_allclose(est.std_world_m, 0.0, atol=1e-12)
+    # Same spot without a floor: the free-hanging formula.
+    if not contact:
+        free = estimate(T, cov, OMEGA_N_PER_M, LENGTH_M, BASE_M)
+        np.testing.assert_allclose(free.position_world_m, drone, rtol=0, atol=1e-6)
+
+
+@pytest.mark.parametrize("spot", [PAPER_SPOTS[0], PAPER_SPOTS[3], PAPER_SPOTS[4]])
+def test_std_is_calibrated_monte_carlo(spot: tuple[float, float, float]) -> None:
+    """Tension noise of the reported covariance gives positions within 1 sigma ~68 %."""
+    rng = np.random.default_rng(7)
+    drone = np.array(spot)
+    T, _ = truth_tension(drone)
+    cov = np.diag([0.8e-3, 0.5e-3, 0.6e-3]) ** 2
+    ref = estimate(T, cov, OMEGA_N_PER_M, LENGTH_M, BASE_M, FLOOR_M)
+    samples = rng.multivariate_normal(T, cov, size=600)
+    pos = []
+    for s in samples:
+        e = localize(s, cov, OMEGA_N_PER_M, LENGTH_M, BASE_M, FLOOR_M)
+        assert e is not None and e.azimuth_determined
+        pos.append(e.position_world_m)
+    err = np.array(pos) - drone
+    within = np.mean(np.abs(err) <= ref.std_world_m, axis=0)
+    assert np.all((within > 0.55) & (within < 0.80)), within
+    # The spread itself matches the reported std within 20 %.
+    np.testing.assert_allclose(err.std(axis=0), ref.std_world_m, rtol=0.2)
+
+
+@pytest.mark.parametrize("height_m", [0.3, 1.3])
+def test_plumb_tether_leaves_azimuth_undetermined(height_m: float) -> None:
+    base = np.array([0.0, 0.0, 0.0])
+    drone = np.array([0.0, 0.0, height_m])
+    T, _ = truth_tension(drone, base_m=base)
+    assert T[2] == pytest.approx(-OMEGA_N_PER_M * height_m, rel=1e-6)  # T_v = omega z
+    est = estimate(T, FILTER_COV_N2, OMEGA_N_PER_M, LENGTH_M, base, FLOOR_M)
+    assert not est.azimuth_determined and est.azimuth_rad is None
+    assert est.case == "plumb" and est.radial_m == 0.0
+    np.testing.assert_allclose(est.position_world_m, drone, atol=1e-6)
+    lo, hi = est.radial_interval_m
+    assert lo == 0.0
+    # The horizontal std at least covers the radius reachable at H = k sigma_H
+    # (which includes the tether lying on the floor: L - z of it).
+    assert hi >= LENGTH_M - height_m - 1e-6
+    assert est.std_world_m[0] >= hi and est.std_world_m[1] >= hi
+    assert est.std_world_m[2] < 0.05
+
+
+def test_plumb_threshold_uses_k_sigma() -> None:
+    sigma_h = 1e-3
+    cov = np.diag([sigma_h**2, sigma_h**2, 1e-6])
+    below = estimate([PLUMB_K * sigma_h * 0.9, 0.0, -0.05], cov, OMEGA_N_PER_M, LENGTH_M, BASE_M)
+    above = estimate([PLUMB_K * sigma_h * 1.001, 0.0, -0.05], cov, OMEGA_N_PER_M, LENGTH_M, BASE_M)
+    assert not below.azimuth_determined
+    assert above.azimuth_determined
+    assert above.azimuth_rad == pytest.approx(math.pi)  # pull +x: drone on the -x side
+    # The plumb std covers the radius reachable at H = k sigma_H, which is where an
+    # estimate just above the threshold puts the drone.
+    assert below.std_world_m[0] == pytest.approx(above.radial_m, rel=2e-3)
+    assert below.radial_interval_m[1] == below.std_world_m[0]
+
+
+def test_floor_contact_interval_contains_truth() -> None:
+    base = np.array([0.0, 0.0, 0.2])
+    for drone in ([0.5, 0.0, 0.3], [0.3, 0.4, 0.25], [-0.6, 0.2, 0.5]):
+        d = np.array(drone)
+        T, contact = truth_tension(d, base_m=base)
+        assert contact
+        est = estimate(T, FILTER_COV_N2, OMEGA_N_PER_M, LENGTH_M, base, FLOOR_M)
+        assert est.floor_contact and est.floor_run_m > 0.0
+        r_true = math.hypot(d[0] - base[0], d[1] - base[1])
+        lo, hi = est.radial_interval_m
+        assert lo - 1e-6 <= r_true <= hi + 1e-6, (lo, r_true, hi)
+        assert est.position_world_m[2] == pytest.approx(d[2], abs=1e-6)
+        # The horizontal 1-sigma extent covers the interval around the best value.
+        u = (d[:2] - base[:2]) / r_true
+        radial_std = math.sqrt(float(u @ est.cov_world_m2[:2, :2] @ u))
+        assert radial_std >= max(est.radial_m - lo, hi - est.radial_m) - 1e-9
+
+
+def test_no_estimate_and_bad_inputs() -> None:
+    assert localize(None, FILTER_COV_N2, OMEGA_N_PER_M, LENGTH_M, BASE_M) is None
+    cases: list[tuple[list[float], np.ndarray, float, float, ArrayLike, str]] = [
+        ([math.nan, 0.0, -0.05], FILTER_COV_N2, OMEGA_N_PER_M, LENGTH_M, BASE_M, "tension"),
+        ([0.01, 0.0, -0.05], np.full((3, 3), math.inf), OMEGA_N_PER_M, LENGTH_M, BASE_M, "cov"),
+        ([0.01, 0.0, -0.05], FILTER_COV_N2, 0.0, LENGTH_M, BASE_M, "weight"),
+        ([0.01, 0.0, -0.05], FILTER_COV_N2, OMEGA_N_PER_M, -1.0, BASE_M, "length"),
+        ([0.01, 0.0, -0.05], FILTER_COV_N2, OMEGA_N_PER_M, LENGTH_M, [0, math.nan, 0], "base"),
+    ]
+    for T, cov, w, L, b, word in cases:
+        out = try_localize(T, cov, w, L, b)
+        assert isinstance(out, LocalizationFailure) and word in out.reason
+        assert localize(T, cov, w, L, b) is None
+    below = try_localize([0.01, 0.0, -0.05], FILTER_COV_N2, 0.05, 1.6, [0, 0, -1.0], 0.0)
+    assert isinstance(below, LocalizationFailure) and "floor" in below.reason
+
+
+finite_n = st.floats(-2.0, 2.0, allow_nan=False)
+
+
+@given(
+    T=st.tuples(finite_n, finite_n, finite_n),
+    sig=st.tuples(*[st.floats(0.0, 0.1)] * 3),
+    length=st.floats(0.01, 10.0),
+    omega=st.floats(1e-4, 1.0),
+    base_z=st.floats(-1.0, 2.0),
+    floor=st.one_of(st.just(-math.inf), st.floats(-2.0, 2.0)),
+)
+@settings(max_examples=300, deadline=None)
+def test_property_never_nan(
+    T: tuple[float, float, float],
+    sig: tuple[float, float, float],
+    length: float,
+    omega: float,
+    base_z: float,
+    floor: float,
+) -> None:
+    out = try_localize(np.array(T), np.diag(sig) ** 2, omega, length, [0.3, -0.2, base_z], floor)
+    if isinstance(out, LocalizationFailure):
+        assert out.reason
+        return
+    assert np.all(np.isfinite(out.position_world_m))
+    assert np.all(np.isfinite(out.std_world_m)) and np.all(out.std_world_m >= 0.0)
+    assert np.all(np.isfinite(out.cov_world_m2))
+    assert math.isfinite(out.radial_m) and out.radial_m >= 0.0
+    lo, hi = out.radial_interval_m
+    assert math.isfinite(lo) and math.isfinite(hi) and lo <= hi + 1e-9
+    assert out.azimuth_determined == (out.azimuth_rad is not None)
