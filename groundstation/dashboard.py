@@ -468,6 +468,10 @@ def tether_points(
     """
     base = np.asarray(base_world_m, dtype=np.float64)
     drone = np.asarray(drone_world_m, dtype=np.float64)
+    if math.isfinite(floor_z_m):
+        # An estimate a little below the floor (noise) is drawn on it, not rejected.
+        base = np.array([base[0], base[1], max(base[2], floor_z_m)])
+        drone = np.array([drone[0], drone[1], max(drone[2], floor_z_m)])
     fn = _catenary_tether_points()
     if fn is not None:
         try:

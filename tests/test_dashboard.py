@@ -269,6 +269,14 @@ def test_tether_points_end_at_base_and_drone() -> None:
     assert np.all(pts[:, 2] >= -1e-9)  # never below the floor
 
 
+def test_tether_points_draw_the_floor_run_and_clamp_to_the_floor() -> None:
+    # A slack tether from a raised base to a drone near the floor: part lies on the floor.
+    pts = tether_points((0.0, 0.0, 0.754), (0.6, 0.0, 0.1), 1.6, floor_z_m=0.0)
+    assert np.count_nonzero(np.abs(pts[:, 2]) < 1e-3) >= 2
+    below = tether_points((0.0, 0.0, 0.754), (0.6, 0.0, -0.01), 1.6, floor_z_m=0.0)
+    assert below[-1, 2] == pytest.approx(0.0) and np.all(below[:, 2] >= -1e-9)
+
+
 def test_tether_points_fall_back_to_a_straight_line(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(dash_mod, "_catenary_checked", True)
     monkeypatch.setattr(dash_mod, "_catenary_points", None)

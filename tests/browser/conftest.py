@@ -58,8 +58,10 @@ class RequestLog:
 @pytest.fixture(scope="session")
 def browser() -> Iterator[Any]:
     _needs_chromium()
-    from playwright.sync_api import sync_playwright
+    from playwright.sync_api import expect, sync_playwright
 
+    # expect() has its own 5 s default, separate from the page's: software GL needs more.
+    expect.set_options(timeout=FIRST_FRAME_TIMEOUT_MS)
     with sync_playwright() as playwright:
         chromium = playwright.chromium.launch(
             executable_path=CHROMIUM, headless=True, args=CHROMIUM_ARGS
