@@ -405,8 +405,8 @@ class TensionFilter:
     hover (chi2_3 tail at 50 is 8e-11; the windows are strongly correlated, so the
     real rate is far lower; the benchmark counts them). A 30 mN step is 3.2 sigma per
     sample, i.e. a non-centrality of ~10 per sample, so it is detected a few samples
-    after the step (median 16 ms, at most 40 ms in the benchmark). The shortest window of 4 samples keeps a single outlier (a
-    vibration spike) from triggering.
+    after the step (median 16 ms, at most 40 ms in the benchmark). The shortest window
+    of 4 samples keeps a single outlier (a vibration spike) from triggering.
 
     **Re-initialisation by replay.** On detection the window with the largest
     statistic is the maximum-likelihood change point. The filter restarts from the
