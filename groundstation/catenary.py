@@ -1,0 +1,1162 @@
+"""Catenary model of the tether: shape, solve, locate, floor contact, points for drawing.
+
+Pure physics: numpy and the standard library only; no I/O, clock or logging.
+
+Frames and symbols
+------------------
+In the vertical plane through base and drone, ``x`` is horizontal and ``y`` points up (the
+paper's sec. t_shape); in 3D the plane is spanned by world ``z`` and the horizontal unit vector
+``û`` from base to drone, and ``x`` becomes the radial distance ``r`` (sec. pos_est). Lengths
+are metres, forces newtons, ``omega`` (``weight_n_per_m``) is the tether's weight per length.
+
+The curve is ``y = a·cosh((x − x0)/a) + c`` (eq:cat_expression): ``a`` > 0 [m] is the
+catenary parameter (H = ω·a, eq:cat_T0), ``x0`` [m] the abscissa of the lowest point and ``c``
+[m] the offset (eq:Cparam). The signed arc length from the lowest point is
+``σ(x) = a·sinh((x − x0)/a)`` and the vertical tension there is ω·σ (eq:cat_Tv, eq:cat_s2).
+
+Regimes and their documented results
+------------------------------------
+* Slack (L ≫ chord), nearly taut (L/chord − 1 down to 1e-9 and below, ``a`` up to 1e5·L and
+  beyond), equal heights, leftward spans (x2 < x1): ordinary solutions.
+* Drone straight above the base (h = |x2 − x1| = 0): the degenerate plumb line, ``a = 0``,
+  ``x0 = x1`` and ``c`` the height of the lowest point, ``(y1 + y2 − L)/2`` (the a → 0 limit).
+* Exactly taut (L equal to the chord): the straight line, ``a = inf``, ``c = −inf``, ``x0`` the
+  midpoint for a level chord and ``∓inf`` otherwise; :meth:`Catenary.y` draws the line.
+* L shorter than the chord: :class:`TetherTooShortError`.
+
+Numerics
+--------
+``solve`` reduces eq:cat7 to one equation ``sinh(ξ)/ξ = q`` with ``ξ = h/(2a)`` and
+``q = sqrt(L² − v²)/h`` (see NOTES.md). Its hard regime is q → 1 (nearly taut): there the
+answer depends on ``L² − h² − v²``, a difference of nearly equal squares, and on the
+differences ``x2 − x1``, ``y2 − y1`` of the inputs. That quantity is evaluated with
+error-free transformations (Dekker's split and Knuth's two-sum), so ``a`` keeps full relative
+precision even when ``a`` is 1e5 times the span, and ``x0 = x̄ − a·atanh(v/L)`` (which can be
+1e5 m away) is right to ~1e-12 m. ``d = q − 1`` is then inverted by its exact power series for
+small ``d`` and by two Halley steps on ``ln(sinh ξ / ξ) = ln q`` otherwise. The curve is
+evaluated from an anchor point on it (NOTES):
+``y(x) − y1 = 2a·sinh((x + x1 − 2x0)/(2a))·sinh((x − x1)/(2a))``, which never forms the huge,
+cancelling ``c``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Final, TypeAlias
+
+import numpy as np
+import numpy.typing as npt
+
+__all__ = [
+    "Catenary",
+    "CatenaryError",
+    "FloorLocation",
+    "TetherForce",
+    "TetherTooShortError",
+    "locate",
+    "locate_with_floor",
+    "solve",
+    "tether_force",
+    "tether_points",
+]
+
+FloatArray: TypeAlias = npt.NDArray[np.float64]
+FloatOrArray: TypeAlias = float | FloatArray
+BoolOrArray: TypeAlias = bool | npt.NDArray[np.bool_]
+
+# Veltkamp/Dekker split constant 2**27 + 1: x = hi + lo with hi, lo of 26 bits each, so that
+# products of parts are exact in float64.
+_SPLIT: Final = 134217729.0
+# Exact reversion of d = sinh(ξ)/ξ − 1 = Σ t^k/(2k+1)! (t = ξ²): t = Σ _T_OF_D[k]·d^(k+1).
+# Radius of convergence 1.217 (the branch point where tanh ξ = ξ); with 8 terms the truncation
+# error at d = _SERIES_MAX_D is below 1e-18 relative.
+_T_OF_D: Final = (
+    6.0,
+    -9 / 5,
+    144 / 175,
+    -78 / 175,
+    89226 / 336875,
+    -522063 / 3128125,
+    83924688 / 766390625,
+    -438337548 / 5922109375,
+)
+_SERIES_MAX_D: Final = 0.01
+# Above this ln q (h/L below 1e-299) sinh(ξ) would overflow; there e^(−2ξ) < 1e-600 and the
+# equation is exactly ξ − ln(2ξ) = ln q, solved by its own Newton iteration.
+_MAX_LN_Q: Final = 690.0
+# Above this fraction of L² the plain L² − v² − h² is accurate enough (relative error below
+# 1e-13): the scalar path skips the error-free evaluation there.
+_NAIVE_D_MIN: Final = 2.0**-7
+_LN2: Final = math.log(2.0)
+_TINY: Final = np.finfo(np.float64).tiny
+_EPS: Final = np.finfo(np.float64).eps
+# Elements per pass of the vectorised solver: the ~150 temporaries of a pass stay in cache.
+_CHUNK: Final = 16384
+# Series of asinh(S) − S and of asinh(S) − 2S/(1 + sqrt(1 + S²)) in S² (after S³), used for
+# a hanging part much shorter than a (S = s/a < 0.1) where the closed forms cancel.
+_ASINH_MINUS_S: Final = (-1 / 6, 3 / 40, -5 / 112, 35 / 1152, -63 / 2816, 231 / 13312)
+_D_ASINH_MINUS_S: Final = (1 / 12, -1 / 20, 15 / 448, -7 / 288, 105 / 5632, -99 / 6656)
+# A tether within this fraction of being taut is drawn as a straight line.
+_DRAW_TAUT: Final = 1e-12
+
+
+class CatenaryError(ValueError):
+    """Input outside the domain of the catenary model; the message names the values."""
+
+
+class TetherTooShortError(CatenaryError):
+    """The tether is shorter than the straight distance between its ends.
+
+    Attributes:
+        length_m: The tether length [m] (the first offending one for arrays).
+        chord_m: The straight distance between the end points [m].
+    """
+
+    def __init__(self, length_m: float, chord_m: float, detail: str = "") -> None:
+        self.length_m = length_m
+        self.chord_m = chord_m
+        super().__init__(
+            f"tether length {length_m!r} m is shorter than the chord {chord_m!r} m between "
+            f"its end points{detail}: no catenary exists (a real tether is taut there)"
+        )
+
+
+# ---------------------------------------------------------------------------------------------
+# The curve
+
+
+@dataclass(frozen=True, slots=True)
+class Catenary:
+    """The curve ``y = a·cosh((x − x0)/a) + c`` (eq:cat_expression), floats or arrays.
+
+    ``solve`` also records a point of the curve, the anchor ``(x1, y1)`` with the curve's
+    parameter there, ``u1 = (x1 − x0)/a`` (``sinh(u1)`` is the slope dy/dx at ``x1``), so that
+    :meth:`y` stays exact when ``a`` and ``x0`` are huge (nearly taut) and works in the
+    straight-line limit ``a = inf``. Built by hand from ``a, x0, c`` only, the anchor is the
+    lowest point (``x0``, ``a + c``) with ``u1 = 0``.
+
+    Attributes:
+        a: Catenary parameter [m], ``H/ω`` (eq:cat_T0); 0 for the plumb line, inf when taut.
+        x0: Abscissa of the lowest point [m] (eq:cat6).
+        c: Offset [m] (eq:Cparam); huge and imprecise in absolute terms when ``a`` is.
+        x1: Abscissa of the anchor point [m], or None for the lowest point.
+        y1: Height of the anchor point [m], or None for the lowest point.
+        u1: ``(x1 − x0)/a`` [-], or None for the lowest point (0).
+    """
+
+    a: FloatOrArray
+    x0: FloatOrArray
+    c: FloatOrArray
+    x1: FloatOrArray | None = None
+    y1: FloatOrArray | None = None
+    u1: FloatOrArray | None = None
+
+    def y(self, x: npt.ArrayLike) -> FloatOrArray:
+        """Height of the curve at ``x``, without cancellation.
+
+        ``y(x) = y1 + 2a·sinh(u1 + (x − x1)/(2a))·sinh((x − x1)/(2a))`` (NOTES: the difference
+        of eq:sys2_eq1 at x and x1 written as a product). For ``a = inf`` it is the straight
+        line ``y1 + (x − x1)·sinh(u1)``; for the plumb line ``a = 0`` it is the a → 0 limit:
+        the lowest point ``c`` at ``x == x0`` (the vertical segment above it is not a
+        function of x) and ``+inf`` elsewhere.
+
+        Args:
+            x: Abscissa [m], float or array broadcastable with the parameters.
+
+        Returns:
+            Height [m]: a float for float parameters and ``x``, else an array.
+        """
+        a, x0, c = self.a, self.x0, self.c
+        x1 = x0 if self.x1 is None else self.x1
+        y1 = a + c if self.y1 is None else self.y1
+        u1 = 0.0 if self.u1 is None else self.u1
+        if _all_scalars(a, x0, c, x1, y1, u1, x):
+            fx = float(x)  # type: ignore[arg-type]
+            return _y_scalar(float(a), float(x0), float(c), float(x1), float(y1), float(u1), fx)
+        xa = np.asarray(x, dtype=np.float64)
+        aa = np.asarray(a, dtype=np.float64)
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            w = (xa - x1) / (2.0 * aa)
+            out = y1 + 2.0 * aa * np.sinh(u1 + w) * np.sinh(w)
+            if not np.all((aa > 0.0) & (aa < np.inf)):
+                line = y1 + (xa - x1) * np.sinh(u1)
+                out = np.where(aa == np.inf, line, out)
+                out = np.where(aa == 0.0, np.where(xa == x0, c, np.inf), out)
+        return np.asarray(out, dtype=np.float64)
+
+
+def _y_scalar(a: float, x0: float, c: float, x1: float, y1: float, u1: float, x: float) -> float:
+    if a == 0.0:
+        return c if x == x0 else math.inf
+    if a == math.inf:
+        return y1 + (x - x1) * math.sinh(u1)
+    w = (x - x1) / (2.0 * a)
+    try:
+        return y1 + 2.0 * a * math.sinh(u1 + w) * math.sinh(w)
+    except OverflowError:
+        # Both factors have the sign of w far out: the curve goes up on both sides.
+        return math.inf
+
+
+def _all_scalars(*values: object) -> bool:
+    return all(isinstance(v, (float, int, np.floating, np.integer)) for v in values)
+
+
+# The dataclass-generated __init__ of a frozen class sets each field through
+# object.__setattr__, about 0.1 µs per field: a third of a scalar solve. solve() fills the
+# slots through their descriptors instead; the result is an ordinary, equal instance.
+_SET_A = Catenary.__dict__["a"].__set__
+_SET_X0 = Catenary.__dict__["x0"].__set__
+_SET_C = Catenary.__dict__["c"].__set__
+_SET_X1 = Catenary.__dict__["x1"].__set__
+_SET_Y1 = Catenary.__dict__["y1"].__set__
+_SET_U1 = Catenary.__dict__["u1"].__set__
+_new_object = object.__new__
+
+
+def _make_catenary(a: Any, x0: Any, c: Any, x1: Any, y1: Any, u1: Any) -> Catenary:
+    obj: Catenary = _new_object(Catenary)
+    _SET_A(obj, a)
+    _SET_X0(obj, x0)
+    _SET_C(obj, c)
+    _SET_X1(obj, x1)
+    _SET_Y1(obj, y1)
+    _SET_U1(obj, u1)
+    return obj
+
+
+# ---------------------------------------------------------------------------------------------
+# solve: the catenary through two points with a given length
+
+
+def solve(
+    x1: npt.ArrayLike,
+    y1: npt.ArrayLike,
+    x2: npt.ArrayLike,
+    y2: npt.ArrayLike,
+    length: npt.ArrayLike,
+) -> Catenary:
+    """The catenary through (x1, y1) and (x2, y2) with arc length ``length`` (sec. t_shape).
+
+    The paper's system eq:sys2_eq1–eq:sys2_eq5 reduces (eq:cat4–eq:cat7, NOTES) to
+    ``sqrt(L² − v²) = 2a·sinh(h/(2a))`` with h = |x2 − x1|, v = y2 − y1, i.e.
+    ``sinh(ξ)/ξ = q = sqrt(L² − v²)/h`` with ξ = h/(2a), monotone in ξ > 0; then
+    ``x0 = x̄ − a·atanh(v/L)·sign(x2 − x1)`` (eq:cat6, with the sign that makes leftward spans
+    work) and ``c = y1 − a·cosh((x1 − x0)/a)`` (eq:sys2_eq1).
+
+    Departures from the paper's recipe: no Taylor start (eq:tayl4) and no Newton on eq:cat7
+    (which cancels catastrophically when nearly taut and divides by Δx); instead the
+    cancellation-free ``q − 1`` is inverted by its power series or by Halley steps in log form
+    (module docstring). Leftward spans, equal heights (where eq:cat7 is void) and the plumb
+    line are handled. All regimes are documented in the module docstring.
+
+    Args:
+        x1: Abscissa of the first point [m] (the base).
+        y1: Height of the first point [m].
+        x2: Abscissa of the second point [m] (the drone).
+        y2: Height of the second point [m].
+        length: Arc length between the points [m], at least the chord.
+
+    Returns:
+        The curve, anchored at (x1, y1). Python floats when all inputs are scalars, else
+        arrays of the broadcast shape.
+
+    Raises:
+        TetherTooShortError: ``length`` is shorter than the chord (names both).
+        CatenaryError: An input is not finite or ``length`` is negative.
+    """
+    if _all_scalars(x1, y1, x2, y2, length):
+        fx1, fy1 = float(x1), float(y1)  # type: ignore[arg-type]
+        a, x0, c, u1, _ = _solve_scalar(fx1, fy1, float(x2), float(y2), float(length))  # type: ignore[arg-type]
+        return _make_catenary(a, x0, c, fx1, fy1, u1)
+    return _solve_arrays(x1, y1, x2, y2, length)
+
+
+def _solve_scalar(
+    x1: float, y1: float, x2: float, y2: float, length: float
+) -> tuple[float, float, float, float, float]:
+    """Scalar solve with the math module. Returns (a, x0, c, u1, xi)."""
+    big_l = length
+    dx = x2 - x1
+    dy = y2 - y1
+    v = abs(dy)
+    # D = L² − h² − v² = 2a·sinh(ξ)·... > 0 measures the slack; see _solve_chunk for the
+    # error-free version, used here only when D is small enough for rounding to matter.
+    d_big = (big_l - v) * (big_l + v) - dx * dx
+    if d_big >= _NAIVE_D_MIN * big_l * big_l:
+        l_minus_v = big_l - v
+    else:
+        bb = dx - x2
+        dx_err = (x2 - (dx - bb)) - (x1 + bb)  # dx + dx_err == x2 − x1 exactly (two-sum)
+        bb = dy - y2
+        dy_err = (y2 - (dy - bb)) - (y1 + bb)
+        p = _SPLIT * big_l
+        l_hi = p - (p - big_l)
+        l_lo = big_l - l_hi
+        p = _SPLIT * dx
+        x_hi = p - (p - dx)
+        x_lo = dx - x_hi
+        p = _SPLIT * dy
+        y_hi = p - (p - dy)
+        y_lo = dy - y_hi
+        x_hi2 = x_hi * x_hi
+        y_hi2 = y_hi * y_hi
+        s_hi = x_hi2 + y_hi2
+        bb = s_hi - x_hi2
+        s_err = (x_hi2 - (s_hi - bb)) + (y_hi2 - bb)
+        d_big = (
+            ((l_hi * l_hi - s_hi) - s_err)
+            + 2.0 * (l_hi * l_lo - x_hi * x_lo - y_hi * y_lo)
+            + (l_lo * l_lo - x_lo * x_lo - y_lo * y_lo)
+            - 2.0 * (dx * dx_err + dy * dy_err)
+        )
+        l_minus_v = (big_l - v) - (dy_err if dy > 0.0 else -dy_err)
+    if not (0.0 <= d_big < math.inf) or big_l < 0.0:
+        raise _domain_error(x1, y1, x2, y2, big_l)
+    h = abs(dx)
+    if h == 0.0:
+        # Plumb line: both ends on one vertical, the lowest point (L − |v|)/2 below the lower.
+        return 0.0, x1, 0.5 * (y1 + y2 - big_l), 0.0, math.inf
+    # atanh(|v|/L) = ½·ln((L + |v|)/(L − |v|)), with L − |v| from the exact v (eq:cat6).
+    t_abs = 0.5 * math.log1p(2.0 * v / max(l_minus_v, _TINY))
+    t = math.copysign(t_abs, dy) if dx > 0.0 else -math.copysign(t_abs, dy)
+    x_mid = 0.5 * (x1 + x2)
+    if d_big == 0.0:
+        # Exactly taut: the straight line, a = inf (vertex infinitely far on the low side).
+        x0 = x_mid if t == 0.0 else -math.copysign(math.inf, t)
+        return math.inf, x0, -math.inf, t, 0.0
+    s = math.sqrt(dx * dx + d_big)  # sqrt(L² − v²)
+    den = h * (s + h)
+    d = d_big / den if den > 0.0 else math.inf  # q − 1 = (s − h)/h, cancellation-free
+    xi = _xi_scalar(d)
+    if xi == math.inf:  # h/L below ~1e-308: the plumb line to every digit
+        return 0.0, x1, 0.5 * (y1 + y2 - big_l), 0.0, math.inf
+    a = h / (2.0 * xi)
+    x0 = x_mid - a * t  # eq:cat6, t carries sign(x2 − x1)
+    u1 = t - xi if dx > 0.0 else t + xi  # (x1 − x0)/a = sign(x2 − x1)·(atanh(v/L) − ξ)
+    return a, x0, y1 - _a_cosh(a, u1), u1, xi
+
+
+def _xi_scalar(d: float) -> float:
+    """Root ξ > 0 of sinh(ξ)/ξ − 1 = d."""
+    if d <= _SERIES_MAX_D:
+        p = _T_OF_D
+        return math.sqrt(
+            d
+            * (
+                p[0]
+                + d
+                * (p[1] + d * (p[2] + d * (p[3] + d * (p[4] + d * (p[5] + d * (p[6] + d * p[7]))))))
+            )
+        )
+    y = math.log1p(d)
+    if y > _MAX_LN_Q:
+        return _xi_asymptotic_scalar(y)
+    xi = _xi_guess_scalar(y)
+    for _ in range(2):
+        # Halley on ψ(ξ) = ln(sinh ξ/ξ) − ln q: ψ' = coth ξ − 1/ξ, ψ'' = 1/ξ² − 1/sinh² ξ.
+        e = math.exp(xi)
+        ei = 1.0 / e
+        sh = 0.5 * (e - ei)
+        rx = 1.0 / xi
+        rs = 1.0 / sh
+        f = math.log(sh * rx) - y
+        p1 = 0.5 * (e + ei) * rs - rx
+        xi -= 2.0 * f * p1 / (2.0 * p1 * p1 - f * (rx * rx - rs * rs))
+    return xi
+
+
+def _xi_asymptotic_scalar(y: float) -> float:
+    """Root of ξ − ln(2ξ) = y (sinh ξ/ξ = e^y for y > 690); inf for y = inf."""
+    if y == math.inf:
+        return math.inf
+    xi = y + math.log(2.0 * y)
+    for _ in range(3):
+        xi -= (xi - math.log(2.0 * xi) - y) / (1.0 - 1.0 / xi)
+    return xi
+
+
+def _xi_asymptotic(y: FloatArray) -> FloatArray:
+    """Vectorised _xi_asymptotic_scalar."""
+    xi = y + np.log(2.0 * y)
+    for _ in range(3):
+        xi -= (xi - np.log(2.0 * xi) - y) / (1.0 - 1.0 / xi)
+    return np.where(y == np.inf, np.inf, xi)
+
+
+def _xi_guess_scalar(y: float) -> float:
+    # Two starts, both within 4 % of ξ where each is the larger: ξ² ≈ 6y + 1.2y² from the
+    # series of ψ, and ξ ≈ ln(2qξ) iterated from ln(2q) + ln ln(2q) for large q.
+    yc = min(y, 30.0)
+    l1 = y + _LN2
+    return max(math.sqrt(yc * (6.0 + 1.2 * yc)), l1 + math.log(l1 + math.log(l1)))
+
+
+def _a_cosh(a: float, u: float) -> float:
+    """a·cosh(u) without overflow of cosh when a is tiny (near plumb)."""
+    if abs(u) < 700.0:
+        return a * math.cosh(u)
+    lg = abs(u) + math.log(a) - _LN2
+    return math.exp(lg) if lg < 709.0 else math.inf
+
+
+def _a_sinh(a: float, u: float) -> float:
+    """a·sinh(u) without overflow of sinh when a is tiny (near plumb)."""
+    if abs(u) < 700.0:
+        return a * math.sinh(u)
+    lg = abs(u) + math.log(a) - _LN2
+    return math.copysign(math.exp(lg) if lg < 709.0 else math.inf, u)
+
+
+def _domain_error(x1: float, y1: float, x2: float, y2: float, length: float) -> CatenaryError:
+    values = f"(x1={x1!r}, y1={y1!r}, x2={x2!r}, y2={y2!r}, length={length!r})"
+    if not all(math.isfinite(v) for v in (x1, y1, x2, y2, length)):
+        return CatenaryError(f"catenary inputs must be finite, got {values}")
+    if length < 0.0:
+        return CatenaryError(f"tether length must be >= 0, got {length!r} m {values}")
+    chord = math.hypot(x2 - x1, y2 - y1)
+    if chord == math.inf:
+        return CatenaryError(f"catenary inputs too large for float64: {values}")
+    return TetherTooShortError(length, chord, f" {values}")
+
+
+def _solve_arrays(
+    x1: npt.ArrayLike,
+    y1: npt.ArrayLike,
+    x2: npt.ArrayLike,
+    y2: npt.ArrayLike,
+    length: npt.ArrayLike,
+) -> Catenary:
+    arrays = np.broadcast_arrays(
+        *(np.asarray(v, dtype=np.float64) for v in (x1, y1, x2, y2, length))
+    )
+    shape = arrays[0].shape
+    flat = [np.ravel(v) for v in arrays]
+    n = flat[0].size
+    a, x0, c, u1, x1_out, y1_out = (np.empty(n) for _ in range(6))
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        for start in range(0, n, _CHUNK):
+            sl = slice(start, start + _CHUNK)
+            chunk = [v[sl] for v in flat]
+            a[sl], x0[sl], c[sl], u1[sl] = _solve_chunk(*chunk, offset=start)
+            x1_out[sl] = chunk[0]
+            y1_out[sl] = chunk[1]
+    return _make_catenary(
+        a.reshape(shape),
+        x0.reshape(shape),
+        c.reshape(shape),
+        x1_out.reshape(shape),
+        y1_out.reshape(shape),
+        u1.reshape(shape),
+    )
+
+
+def _solve_chunk(
+    x1: FloatArray,
+    y1: FloatArray,
+    x2: FloatArray,
+    y2: FloatArray,
+    big_l: FloatArray,
+    *,
+    offset: int,
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Vectorised solve of one chunk. Returns (a, x0, c, u1). Runs under np.errstate(ignore)."""
+    # Differences with their exact rounding errors (two-sum): dx + dx_err == x2 − x1.
+    dx = x2 - x1
+    bb = dx - x2
+    dx_err = (x2 - (dx - bb)) - (x1 + bb)
+    dy = y2 - y1
+    bb = dy - y2
+    dy_err = (y2 - (dy - bb)) - (y1 + bb)
+    # Dekker split: every product of two parts below is exact.
+    p = _SPLIT * big_l
+    l_hi = p - (p - big_l)
+    l_lo = big_l - l_hi
+    p = _SPLIT * dx
+    x_hi = p - (p - dx)
+    x_lo = dx - x_hi
+    p = _SPLIT * dy
+    y_hi = p - (p - dy)
+    y_lo = dy - y_hi
+    x_hi2 = x_hi * x_hi
+    y_hi2 = y_hi * y_hi
+    s_hi = x_hi2 + y_hi2
+    bb = s_hi - x_hi2
+    s_err = (x_hi2 - (s_hi - bb)) + (y_hi2 - bb)
+    # D = L² − (x2 − x1)² − (y2 − y1)² to ~2^-100·L²: l_hi² − s_hi is exact when nearly taut
+    # (Sterbenz), the other brackets are small.
+    d_big = (
+        ((l_hi * l_hi - s_hi) - s_err)
+        + 2.0 * (l_hi * l_lo - x_hi * x_lo - y_hi * y_lo)
+        + (l_lo * l_lo - x_lo * x_lo - y_lo * y_lo)
+        - 2.0 * (dx * dx_err + dy * dy_err)
+    )
+    d_min = d_big.min()
+    if not (d_min >= 0.0 and d_big.max() < np.inf and big_l.min() >= 0.0):
+        raise _first_domain_error(x1, y1, x2, y2, big_l, d_big, offset)
+    h = np.abs(dx)
+    s = np.sqrt(dx * dx + d_big)  # sqrt(L² − v²)
+    d = d_big / (h * (s + h))  # q − 1, cancellation-free
+
+    # Small d: the reverted series gives ξ² directly.
+    ds = np.minimum(d, _SERIES_MAX_D)
+    t = _T_OF_D[7] * ds
+    for coef in _T_OF_D[6:0:-1]:
+        t += coef
+        t *= ds
+    xi_series = np.sqrt((t + _T_OF_D[0]) * ds)
+    # Larger d: two Halley steps on ln(sinh ξ/ξ) = ln q from the better of two starts.
+    y_full = np.log1p(np.maximum(d, _SERIES_MAX_D))
+    y = np.minimum(y_full, _MAX_LN_Q)
+    yc = np.minimum(y, 30.0)
+    l1 = y + _LN2
+    xi = np.maximum(np.sqrt(yc * (6.0 + 1.2 * yc)), l1 + np.log(l1 + np.log(l1)))
+    for _ in range(2):
+        e = np.exp(xi)
+        ei = 1.0 / e
+        sh = 0.5 * (e - ei)
+        rx = 1.0 / xi
+        rs = 1.0 / sh
+        f = np.log(sh * rx) - y
+        p1 = 0.5 * (e + ei) * rs - rx  # ψ'
+        xi -= 2.0 * f * p1 / (2.0 * p1 * p1 - f * (rx * rx - rs * rs))  # Halley
+    # Exact 0/1 selector without a boolean mask (np.where costs 10 arithmetic passes here):
+    # (d − dmax)·1e300 is 0 or negative below the switch, at least 1 above it.
+    pick = np.minimum(np.maximum((d - _SERIES_MAX_D) * 1e300, 0.0), 1.0)
+    xi = xi_series + pick * (xi - xi_series)
+    if y_full.max() > _MAX_LN_Q:
+        huge = y_full > _MAX_LN_Q
+        xi[huge] = _xi_asymptotic(y_full[huge])
+
+    a = h / (2.0 * xi)
+    v = np.abs(dy)
+    # atanh(|v|/L) = ½·ln(1 + 2|v|/(L − |v|)), with L − |v| from the exact difference.
+    l_minus_v = np.maximum((big_l - v) - np.sign(dy) * dy_err, _TINY)
+    t = np.copysign(0.5 * np.log1p(2.0 * v / l_minus_v), dy)
+    sgn = np.sign(dx)
+    x0 = 0.5 * (x1 + x2) - sgn * a * t  # eq:cat6 with sign(x2 − x1)
+    u1 = sgn * (t - xi)  # (x1 − x0)/a
+    c = y1 - a * np.cosh(u1)  # eq:sys2_eq1
+
+    if d_min == 0.0 or a.min() == 0.0 or not np.isfinite(c).all():
+        a, x0, c, u1 = _patch_degenerate(x1, y1, y2, big_l, h, d_big, sgn, t, a, x0, c, u1)
+    return a, x0, c, u1
+
+
+def _patch_degenerate(
+    x1: FloatArray,
+    y1: FloatArray,
+    y2: FloatArray,
+    big_l: FloatArray,
+    h: FloatArray,
+    d_big: FloatArray,
+    sgn: FloatArray,
+    t: FloatArray,
+    a: FloatArray,
+    x0: FloatArray,
+    c: FloatArray,
+    u1: FloatArray,
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Documented values for the exactly taut, plumb and absurdly-near-plumb elements."""
+    x_mid = x1 + 0.5 * sgn * h
+    taut = (d_big == 0.0) & (h > 0.0)
+    x0 = np.where(taut, np.where(t == 0.0, x_mid, -np.copysign(np.inf, sgn * t)), x0)
+    # a tiny, |u1| > 710: a·cosh(u1) through logs.
+    far = ~np.isfinite(c) & (a > 0.0) & (a < np.inf)
+    c = np.where(far, y1 - np.exp(np.abs(u1) + np.log(a) - _LN2), c)
+    plumb = a == 0.0  # h == 0, or h/L so small that a underflows
+    a = np.where(plumb, 0.0, a)
+    x0 = np.where(plumb, x1, x0)
+    c = np.where(plumb, 0.5 * (y1 + y2 - big_l), c)
+    u1 = np.where(plumb, 0.0, u1)
+    return a, x0, c, u1
+
+
+def _first_domain_error(
+    x1: FloatArray,
+    y1: FloatArray,
+    x2: FloatArray,
+    y2: FloatArray,
+    big_l: FloatArray,
+    d_big: FloatArray,
+    offset: int,
+) -> CatenaryError:
+    bad = ~((d_big >= 0.0) & (d_big < np.inf) & (big_l >= 0.0))
+    i = int(np.argmax(bad))
+    err = _domain_error(float(x1[i]), float(y1[i]), float(x2[i]), float(y2[i]), float(big_l[i]))
+    detail = f" at flat index {offset + i} ({int(bad.sum())} bad in its chunk of {bad.size})"
+    if isinstance(err, TetherTooShortError):
+        return TetherTooShortError(err.length_m, err.chord_m, detail)
+    return CatenaryError(f"{err}{detail}")
+
+
+# ---------------------------------------------------------------------------------------------
+# locate: drone position from the tension at the drone end
+
+
+def locate(
+    horizontal_n: npt.ArrayLike,
+    vertical_n: npt.ArrayLike,
+    weight_n_per_m: npt.ArrayLike,
+    length_m: npt.ArrayLike,
+    base_z_m: npt.ArrayLike = 0.0,
+) -> tuple[FloatOrArray, FloatOrArray]:
+    """Drone end of a freely hanging tether from the tension on the drone (sec. pos_est).
+
+    With ``a = H/ω`` (eq:a_param) and ``s2 = T_v/ω`` (eq:s2_param) the signed arc length from
+    the lowest point to the drone (negative when the tether pulls the drone up, i.e. the drone
+    hangs below the lowest point's level on the base side), the base is at ``s2 − L``
+    (eq:posfull_stot) and eqs. posfull_r_0 … posfull_C collapse to (NOTES):
+
+        r = a·[asinh(s2/a) + asinh((L − s2)/a)]
+        z = z_i + sqrt(a² + s2²) − sqrt(a² + (L − s2)²) = z_i + (2·s2 − L)·L / (sum of roots)
+
+    The second form has no cancellation, and ``a·asinh(s/a)`` is evaluated so that a → 0 gives
+    the exact limits r → 0, z → z_i + |s2| − |L − s2| (eq:posfull_limr, eq:posfull_limz):
+    H = 0 is an ordinary input.
+
+    Args:
+        horizontal_n: Horizontal tension H on the drone [N], >= 0.
+        vertical_n: Downward pull T_v of the tether on the drone [N], any sign.
+        weight_n_per_m: Tether weight per length ω [N/m], > 0.
+        length_m: Tether length L from the base exit to the drone [m], > 0.
+        base_z_m: Height of the base exit z_i [m].
+
+    Returns:
+        ``(r_m, z_m)``: horizontal distance from the base [m] and drone height [m]. Floats for
+        scalar inputs, else arrays of the broadcast shape.
+
+    Raises:
+        CatenaryError: Negative or non-finite H, non-positive ω or L, non-finite T_v or z_i.
+    """
+    scalar = _all_scalars(horizontal_n, vertical_n, weight_n_per_m, length_m, base_z_m)
+    h_n, tv_n, omega, big_l, z_i = _checked_tension_inputs(
+        horizontal_n, vertical_n, weight_n_per_m, length_m, base_z_m
+    )
+    a = h_n / omega
+    s2 = tv_n / omega
+    r, z = _locate_free(a, s2, big_l, z_i)
+    return _out(r, scalar), _out(z, scalar)
+
+
+def _locate_free(
+    a: FloatArray, s2: FloatArray, big_l: FloatArray, z_i: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    t = big_l - s2
+    r = _a_asinh(a, s2) + _a_asinh(a, t)  # eq:posfull_r_0 + eq:posfull_radial
+    with np.errstate(over="ignore"):
+        z = z_i + (2.0 * s2 - big_l) * big_l / (np.hypot(a, s2) + np.hypot(a, t))  # eq:posfull_z
+    return r, z
+
+
+def _a_asinh(a: FloatArray, s: FloatArray) -> FloatArray:
+    """a·asinh(s/a), horizontal reach of a hanging arc s; 0 in the limit a → 0."""
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        v = a * np.arcsinh(s / a)
+    # a == 0 gives 0·inf or 0/0; a subnormal overflows s/a while the true value is < 1e-305.
+    return np.where(np.isfinite(v), v, 0.0)
+
+
+def _out(v: FloatArray, scalar: bool) -> FloatOrArray:
+    return float(v) if scalar else v
+
+
+def _checked_tension_inputs(
+    horizontal_n: npt.ArrayLike,
+    vertical_n: npt.ArrayLike,
+    weight_n_per_m: npt.ArrayLike,
+    length_m: npt.ArrayLike,
+    base_z_m: npt.ArrayLike,
+) -> list[FloatArray]:
+    arrays = np.broadcast_arrays(
+        *(
+            np.asarray(v, dtype=np.float64)
+            for v in (horizontal_n, vertical_n, weight_n_per_m, length_m, base_z_m)
+        )
+    )
+    h_n, tv_n, omega, big_l, z_i = arrays
+    _require(h_n, (h_n >= 0.0) & (h_n < np.inf), "horizontal_n", "finite and >= 0 N")
+    _require(tv_n, np.isfinite(tv_n), "vertical_n", "finite")
+    _require(omega, (omega > 0.0) & (omega < np.inf), "weight_n_per_m", "finite and > 0 N/m")
+    _require(big_l, (big_l > 0.0) & (big_l < np.inf), "length_m", "finite and > 0 m")
+    _require(z_i, np.isfinite(z_i), "base_z_m", "finite")
+    return list(arrays)
+
+
+def _require(values: FloatArray, ok: npt.NDArray[np.bool_], name: str, what: str) -> None:
+    if ok.all():
+        return
+    bad = ~ok
+    if values.ndim == 0:
+        raise CatenaryError(f"{name} must be {what}, got {float(values)!r}")
+    i = np.unravel_index(int(np.argmax(bad)), bad.shape)
+    raise CatenaryError(
+        f"{name} must be {what}; {int(bad.sum())} of {bad.size} values are not, "
+        f"first {float(values[i])!r} at index {tuple(int(k) for k in i)}"
+    )
+
+
+# ---------------------------------------------------------------------------------------------
+# Floor contact: inverse
+
+
+@dataclass(frozen=True, slots=True)
+class FloorLocation:
+    """Drone position from the tension when part of the tether may rest on the floor.
+
+    Attributes:
+        r_m: Best horizontal distance from the base [m]: the floor run lying straight (see
+            :func:`locate_with_floor`); equals the free solution without contact.
+        z_m: Drone height [m], world z.
+        r_min_m: Smallest r consistent with the tension [m] (the run folded back).
+        r_max_m: Largest r consistent with the tension [m] (the run straight).
+        floor_contact: Part of the tether rests on the floor.
+        floor_run_m: Length of tether lying on the floor [m]; 0 without contact.
+    """
+
+    r_m: FloatOrArray
+    z_m: FloatOrArray
+    r_min_m: FloatOrArray
+    r_max_m: FloatOrArray
+    floor_contact: BoolOrArray
+    floor_run_m: FloatOrArray
+
+
+def locate_with_floor(
+    horizontal_n: npt.ArrayLike,
+    vertical_n: npt.ArrayLike,
+    weight_n_per_m: npt.ArrayLike,
+    length_m: npt.ArrayLike,
+    base_z_m: npt.ArrayLike,
+    floor_z_m: npt.ArrayLike,
+) -> FloorLocation:
+    """Drone position from the tension, with a floor the slack tether can rest on (NOTES).
+
+    Contact is decided by the free-hanging solution of :func:`locate`: if its lowest point
+    lies below the floor, the tether touches down. The drone side then hangs from a touchdown
+    point with zero slope, ``z − z_f = sqrt(a² + s2²) − a`` with horizontal reach
+    ``a·asinh(s2/a)``; the base side hangs to the floor with length ``s_b`` from
+    ``z_i − z_f = sqrt(a² + s_b²) − a``, i.e. ``s_b = sqrt(h_b² + 2a·h_b)``, reach
+    ``a·asinh(s_b/a)``; the rest, ``L − s2 − s_b``, lies on the floor.
+
+    Under any tension H > 0 a frictionless floor keeps that run straight and in line, so
+    ``r = reach_d + run + reach_b``; the interval ``[max(0, reach_d + reach_b − run),
+    reach_d + reach_b + run]`` covers a run folded on itself. At H = 0 exactly the run can lie
+    anywhere in ``[0, run]``; the best value reported there is still the straight run (the
+    interval's top), which keeps ``r_m`` continuous as H → 0 and matches the forward model at
+    the boundary where the pile starts. Consumers that need to know should use the interval.
+
+    Contact needs the free solution's lowest point between the ends (0 <= s2 <= L). A free
+    solution whose lowest point is the drone itself (s2 < 0, the tether pulls the drone up)
+    below the floor is inconsistent with a floor that holds the drone: z is clamped to the
+    floor and r kept.
+
+    Args:
+        horizontal_n: Horizontal tension H on the drone [N], >= 0.
+        vertical_n: Downward pull T_v of the tether on the drone [N].
+        weight_n_per_m: Tether weight per length ω [N/m], > 0.
+        length_m: Tether length L [m], > 0.
+        base_z_m: Height of the base exit z_i [m], >= floor_z_m.
+        floor_z_m: Height of the floor z_f [m].
+
+    Returns:
+        A :class:`FloorLocation`; floats for scalar inputs, else arrays of the broadcast shape.
+
+    Raises:
+        CatenaryError: As :func:`locate`, or a base below the floor.
+    """
+    scalar = _all_scalars(horizontal_n, vertical_n, weight_n_per_m, length_m, base_z_m, floor_z_m)
+    h_n, tv_n, omega, big_l, z_i = _checked_tension_inputs(
+        horizontal_n, vertical_n, weight_n_per_m, length_m, base_z_m
+    )
+    z_f = np.broadcast_to(np.asarray(floor_z_m, dtype=np.float64), h_n.shape)
+    _require(z_f, np.isfinite(z_f), "floor_z_m", "finite")
+    _require(z_i, z_i >= z_f, "base_z_m", f"at or above floor_z_m ({floor_z_m!r})")
+    a = h_n / omega
+    s2 = tv_n / omega
+    r_free, z_free = _locate_free(a, s2, big_l, z_i)
+
+    # The tether can only rest on the floor if its lowest point lies between the ends
+    # (0 <= s2 <= L) and below the floor. Otherwise the lowest point is an end: the base (at
+    # or above the floor), or the drone, which the floor holds up (its z is clamped below).
+    t = big_l - s2
+    with np.errstate(invalid="ignore", divide="ignore"):
+        sag = t * t / (np.hypot(a, t) + a)  # sqrt(a² + t²) − a: vertex depth below the base
+    sag = np.where(np.isfinite(sag), sag, 0.0)
+    contact = (s2 >= 0.0) & (t >= 0.0) & (z_i - sag < z_f)
+    z_free = np.maximum(z_free, z_f)
+
+    s2c = np.maximum(s2, 0.0)
+    h_b = z_i - z_f
+    s_b = np.sqrt(h_b * (h_b + 2.0 * a))
+    run = np.maximum(big_l - s2c - s_b, 0.0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        lift = s2c * s2c / (np.hypot(a, s2c) + a)  # sqrt(a² + s2²) − a
+    lift = np.where(np.isfinite(lift), lift, 0.0)
+    reach = _a_asinh(a, s2c) + _a_asinh(a, s_b)
+    r_max = reach + run
+    r_min = np.maximum(reach - run, 0.0)
+
+    r_m = np.where(contact, r_max, r_free)
+    z_m = np.where(contact, z_f + lift, z_free)
+    lo = np.where(contact, r_min, r_free)
+    run_m = np.where(contact, run, 0.0)
+    if scalar:
+        return FloorLocation(
+            float(r_m), float(z_m), float(lo), float(r_m), bool(contact), float(run_m)
+        )
+    return FloorLocation(r_m, z_m, lo, r_m, contact, run_m)
+
+
+# ---------------------------------------------------------------------------------------------
+# Forward model: the force of the tether on the drone
+
+
+@dataclass(frozen=True, slots=True)
+class TetherForce:
+    """Force of the tether on the drone (forward model).
+
+    Attributes:
+        force_world_n: (3,) force on the drone, world frame [N] (read-only array).
+        horizontal_n: H >= 0 [N], the magnitude of the horizontal part (eq:cat_T0).
+        vertical_n: Downward pull on the drone T_v = −force_world_n[2] [N] (eq:cat_Tv).
+        floor_contact: Part of the tether rests on the floor.
+        floor_run_m: Length lying on the floor [m]; 0 without contact.
+    """
+
+    force_world_n: FloatArray
+    horizontal_n: float
+    vertical_n: float
+    floor_contact: bool
+    floor_run_m: float
+
+
+def tether_force(
+    base_world_m: npt.ArrayLike,
+    drone_world_m: npt.ArrayLike,
+    length_m: float,
+    weight_n_per_m: float,
+    floor_z_m: float = -math.inf,
+) -> TetherForce:
+    """Static force of an inextensible tether of given length on the drone.
+
+    The free catenary through base and drone comes from :func:`solve` in the vertical plane
+    through both. Its tension at the drone end has horizontal part ``H = ω·a`` (eq:cat_T0)
+    and vertical part ``ω·σ_d``, ``σ_d = a·sinh((r − x0)/a)`` the signed arc length from the
+    lowest point (eq:cat_Tv); the force on the drone is ``−ω·(a·û, σ_d)`` with ``û`` the
+    horizontal unit vector from base to drone (NOTES "Tension along the tether"): it pulls
+    toward the base, and down when σ_d > 0. With the drone straight above the base it is
+    purely vertical.
+
+    Floor contact (NOTES): if the free solution's lowest point is below the floor, the
+    tether touches down and each side hangs from a zero-slope touchdown point; with a straight
+    run on the floor ``a`` solves ``r = a·acosh(1 + h_d/a) + (L − s_d − s_b) + a·acosh(1 +
+    h_b/a)``, ``s = sqrt(h² + 2a·h)``, found by a bracketed Newton iteration (monotone from the
+    left, the function being concave in a). If even a → 0 leaves slack
+    (``L − h_d − h_b >= r``), the tether piles up: H = 0 and T_v = ω·h_d.
+
+    Args:
+        base_world_m: (3,) base exit point, world frame [m].
+        drone_world_m: (3,) drone tether attachment, world frame [m].
+        length_m: Tether length [m], > 0.
+        weight_n_per_m: Weight per length ω [N/m], > 0.
+        floor_z_m: Floor height [m]; -inf for no floor. Both ends must be at or above it.
+
+    Returns:
+        The :class:`TetherForce`. An exactly taut tether (chord == length) carries unbounded
+        tension: H = inf and the force is infinite along the chord (0 in the components the
+        chord lacks, never NaN).
+
+    Raises:
+        TetherTooShortError: ``|drone − base| > length`` (the simulator's taut stop).
+        CatenaryError: Non-finite positions, non-positive length or weight, an end below the
+            floor.
+    """
+    bx, by, bz = _xyz(base_world_m, "base_world_m")
+    px, py, pz = _xyz(drone_world_m, "drone_world_m")
+    big_l, omega, floor = float(length_m), float(weight_n_per_m), float(floor_z_m)
+    if not (0.0 < big_l < math.inf):
+        raise CatenaryError(f"length_m must be finite and > 0, got {length_m!r}")
+    if not (0.0 < omega < math.inf):
+        raise CatenaryError(f"weight_n_per_m must be finite and > 0, got {weight_n_per_m!r}")
+    if math.isnan(floor) or floor == math.inf or bz < floor or pz < floor:
+        raise CatenaryError(
+            f"base z {bz!r} m and drone z {pz!r} m must be at or above the floor {floor_z_m!r} m"
+        )
+    ex, ey = px - bx, py - by
+    r = math.hypot(ex, ey)
+    geom = _hang(r, bz, pz, big_l, floor)
+    if r > 0.0:
+        ux, uy = ex / r, ey / r
+    else:
+        ux = uy = 0.0
+    h_n = omega * geom.a
+    tv_n = omega * geom.sigma_drone
+    force = np.array([_times(-h_n, ux), _times(-h_n, uy), -tv_n])
+    force.flags.writeable = False
+    return TetherForce(force, h_n, tv_n, geom.floor_contact, geom.floor_run_m)
+
+
+def _times(magnitude: float, component: float) -> float:
+    # inf·0 is NaN; an infinite tension has no component where the chord has none.
+    return magnitude * component if component != 0.0 else 0.0
+
+
+def _xyz(point: npt.ArrayLike, name: str) -> tuple[float, float, float]:
+    try:
+        arr = np.asarray(point, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise CatenaryError(f"{name} must be 3 numbers, got {point!r}") from exc
+    if arr.shape != (3,):
+        raise CatenaryError(f"{name} must have shape (3,), got {point!r}")
+    x, y, z = arr.tolist()
+    if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
+        raise CatenaryError(f"{name} must be finite, got {point!r}")
+    return x, y, z
+
+
+@dataclass(frozen=True, slots=True)
+class _Hang:
+    """Shape of the tether in the vertical plane, base at x = 0 (internal)."""
+
+    kind: str  # "free", "plumb", "touchdown", "pile", "taut"
+    a: float  # catenary parameter [m]
+    sigma_drone: float  # arc length from the (hanging) lowest point to the drone [m]
+    floor_contact: bool
+    floor_run_m: float
+    u1: float = 0.0  # free: (0 − x0)/a
+    s_base: float = 0.0  # touchdown/pile: hanging length on the base side [m]
+    low_z: float = 0.0  # plumb: height of the lowest point [m]
+
+
+def _hang(r: float, bz: float, pz: float, big_l: float, floor: float) -> _Hang:
+    """Static shape of the tether from base (0, bz) to drone (r, pz), r >= 0."""
+    if r == 0.0:
+        low = 0.5 * (bz + pz - big_l)
+        if big_l < abs(pz - bz):
+            raise TetherTooShortError(
+                big_l, abs(pz - bz), f" (vertical, base z {bz!r} m, drone z {pz!r} m)"
+            )
+        if low >= floor:
+            return _Hang("plumb", 0.0, pz - low, False, 0.0, low_z=low)
+        h_d, h_b = pz - floor, bz - floor
+        return _Hang("pile", 0.0, h_d, True, max(big_l - h_d - h_b, 0.0), s_base=h_b)
+    a, _, _, u1, xi = _solve_scalar(0.0, bz, r, pz, big_l)
+    if a == math.inf:
+        # Exactly taut: tension unbounded along the chord.
+        return _Hang(
+            "taut",
+            math.inf,
+            math.copysign(math.inf, pz - bz) if pz != bz else 0.0,
+            False,
+            0.0,
+            u1=u1,
+        )
+    u2 = u1 + 2.0 * xi  # (r − x0)/a
+    low = bz - 2.0 * _a_sinh_sq_half(a, u1) if u1 < 0.0 < u2 else min(bz, pz)
+    if low >= floor:
+        return _Hang("free", a, _a_sinh(a, u2), False, 0.0, u1=u1)
+    h_d, h_b = pz - floor, bz - floor
+    if big_l - h_d - h_b >= r:
+        return _Hang("pile", 0.0, h_d, True, big_l - h_d - h_b, s_base=h_b)
+    a = _touchdown_a(r, big_l, h_d, h_b)
+    s_d = math.sqrt(h_d * (h_d + 2.0 * a))
+    s_b = math.sqrt(h_b * (h_b + 2.0 * a))
+    return _Hang("touchdown", a, s_d, True, max(big_l - s_d - s_b, 0.0), s_base=s_b)
+
+
+def _a_sinh_sq_half(a: float, u: float) -> float:
+    """a·sinh²(u/2) = (a·cosh(u) − a)/2: depth of the vertex below the point at parameter u."""
+    if abs(u) < 1400.0:
+        sh = math.sinh(0.5 * u)
+        return a * sh * sh
+    return math.inf
+
+
+def _hang_terms(a: float, h: float) -> tuple[float, float, float]:
+    """One side hanging height h from a zero-slope touchdown: (s, reach − s, d(reach − s)/da).
+
+    reach − s = a·asinh(S) − a·S with S = s/a = sqrt(ε(2 + ε)), ε = h/a; its derivative in a
+    is asinh(S) − 2S/(1 + sqrt(1 + S²)) > 0, decreasing in a.
+    """
+    if h == 0.0:
+        return 0.0, 0.0, 0.0
+    s = math.sqrt(h * (h + 2.0 * a))
+    big_s = s / a
+    if big_s < 0.1:
+        s2 = big_s * big_s
+        c, dc = _ASINH_MINUS_S, _D_ASINH_MINUS_S
+        phi = c[5]
+        dphi = dc[5]
+        for k in (4, 3, 2, 1, 0):
+            phi = phi * s2 + c[k]
+            dphi = dphi * s2 + dc[k]
+        return s, s * s2 * phi, big_s * s2 * dphi
+    # For a near underflow asinh(s/a) = ln(2s) − ln(a) to 1e-300, without overflowing s/a.
+    asinh_s = math.asinh(big_s) if big_s < 1e150 else math.log(2.0 * s) - math.log(a)
+    return s, a * asinh_s - s, asinh_s - 2.0 * big_s / (1.0 + math.hypot(1.0, big_s))
+
+
+def _touchdown_a(r: float, big_l: float, h_d: float, h_b: float) -> float:
+    """a > 0 with L − r + Σ (reach_i − s_i)(a) = 0, given L − h_d − h_b < r < L."""
+    slack = big_l - r
+    if slack <= 0.0:
+        return math.inf
+    f0 = slack - h_d - h_b  # value at a → 0, < 0
+    # Two upper bounds on the root: the large-a asymptote reach − s ≈ −(h/3)·sqrt(2h/a)
+    # and the small-a one reach − s ≈ −h + a·(ln(2h/a) − 1); both under-estimate F.
+    k = math.sqrt(2.0) / 3.0 * (h_d * math.sqrt(h_d) + h_b * math.sqrt(h_b))
+    a = (k / slack) ** 2
+    a_small = -f0
+    for _ in range(2):
+        logs = sum(math.log(2.0 * h / a_small) - 1.0 for h in (h_d, h_b) if h > 0.0)
+        if logs <= 0.0:  # the small-a form does not apply: keep the other bound
+            a_small = math.inf
+            break
+        a_small = -f0 / logs
+    a = min(a, a_small)
+    # F is concave increasing in a: Newton from the right lands left of the root (or below
+    # zero, then shrink), and from the left it climbs monotonically.
+    for _ in range(100):
+        s_d, phi_d, dphi_d = _hang_terms(a, h_d)
+        s_b, phi_b, dphi_b = _hang_terms(a, h_b)
+        f = slack + phi_d + phi_b
+        if abs(f) <= 8.0 * _EPS * (big_l + s_d + s_b):
+            break
+        step = -f / (dphi_d + dphi_b)
+        if step <= -a:
+            a *= 0.01
+            continue
+        a += step
+        if abs(step) <= 4.0 * _EPS * a:
+            break
+    return a
+
+
+# ---------------------------------------------------------------------------------------------
+# Points for drawing
+
+
+def tether_points(
+    base_world_m: npt.ArrayLike,
+    drone_world_m: npt.ArrayLike,
+    length_m: float,
+    floor_z_m: float = -math.inf,
+    n: int = 64,
+) -> FloatArray:
+    """World points along the tether from base to drone, evenly spaced in arc length.
+
+    Every regime is drawn: free catenary, plumb line, touchdown with a straight floor run, a
+    slack pile (drawn as a flat triangular detour on the floor, sideways to the base–drone
+    direction, so its length shows), and a nearly taut or over-stretched tether as the straight
+    segment (chord >= length·(1 − 1e-12); no exception here, this is for display).
+
+    Args:
+        base_world_m: (3,) base exit point, world frame [m].
+        drone_world_m: (3,) drone end, world frame [m].
+        length_m: Tether length [m], > 0.
+        floor_z_m: Floor height [m]; -inf for no floor.
+        n: Number of points, >= 2.
+
+    Returns:
+        (n, 3) float array, first row the base, last row the drone, never NaN.
+
+    Raises:
+        CatenaryError: Non-finite positions, non-positive length, n < 2, an end below the
+            floor.
+    """
+    bx, by, bz = _xyz(base_world_m, "base_world_m")
+    px, py, pz = _xyz(drone_world_m, "drone_world_m")
+    big_l, floor = float(length_m), float(floor_z_m)
+    if not (0.0 < big_l < math.inf):
+        raise CatenaryError(f"length_m must be finite and > 0, got {length_m!r}")
+    if n < 2:
+        raise CatenaryError(f"n must be >= 2, got {n!r}")
+    if math.isnan(floor) or floor == math.inf or bz < floor or pz < floor:
+        raise CatenaryError(
+            f"base z {bz!r} m and drone z {pz!r} m must be at or above the floor {floor_z_m!r} m"
+        )
+    base = np.array([bx, by, bz])
+    drone = np.array([px, py, pz])
+    ex, ey = px - bx, py - by
+    r = math.hypot(ex, ey)
+    frac = np.linspace(0.0, 1.0, n)
+    if math.hypot(r, pz - bz) >= big_l * (1.0 - _DRAW_TAUT):
+        return base + frac[:, None] * (drone - base)
+    ux, uy = (ex / r, ey / r) if r > 0.0 else (1.0, 0.0)
+    geom = _hang(r, bz, pz, big_l, floor)
+    s = frac * big_l
+    if geom.kind == "free":
+        x, z = _free_profile(geom.a, geom.u1, bz, s)
+        pts = _plane_to_world(base, ux, uy, x, z)
+    elif geom.kind == "plumb":
+        pts = _plane_to_world(base, ux, uy, np.zeros(n), _plumb_profile(bz, geom.low_z, s))
+    elif geom.kind == "touchdown":
+        x, z = _touchdown_profile(geom.a, geom.s_base, geom.floor_run_m, bz, floor, s)
+        pts = _plane_to_world(base, ux, uy, x, z)
+    else:  # pile
+        pts = _pile_points(base, drone, ux, uy, r, geom.s_base, geom.floor_run_m, floor, s)
+    pts[0] = base
+    pts[-1] = drone
+    return pts
+
+
+def _plane_to_world(
+    base: FloatArray, ux: float, uy: float, x: FloatArray, z: FloatArray
+) -> FloatArray:
+    return np.column_stack((base[0] + x * ux, base[1] + x * uy, z))
+
+
+def _free_profile(a: float, u1: float, bz: float, s: FloatArray) -> tuple[FloatArray, FloatArray]:
+    # σ = σ1 + s from the lowest point; x − x1 = a·(asinh(σ/a) − u1);
+    # z − z1 = sqrt(a² + σ²) − sqrt(a² + σ1²) = s·(σ + σ1)/(sum of roots).
+    sigma1 = _a_sinh(a, u1)
+    sigma = sigma1 + s
+    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+        x = a * (np.arcsinh(sigma / a) - u1)
+        z = bz + s * (sigma + sigma1) / (np.hypot(a, sigma) + math.hypot(a, sigma1))
+    return np.where(np.isfinite(x), x, 0.0), np.where(np.isfinite(z), z, bz)
+
+
+def _plumb_profile(bz: float, low: float, s: FloatArray) -> FloatArray:
+    return np.where(s <= bz - low, bz - s, low + (s - (bz - low)))
+
+
+def _touchdown_profile(
+    a: float, s_b: float, run: float, bz: float, floor: float, s: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    reach_b = float(_a_asinh(np.asarray(a), np.asarray(s_b)))
+    sigma = np.where(s < s_b, s - s_b, np.maximum(s - s_b - run, 0.0))  # from the touchdowns
+    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+        hang_x = a * np.arcsinh(sigma / a)
+        lift = sigma * sigma / (np.hypot(a, sigma) + a)
+    hang_x = np.where(np.isfinite(hang_x), hang_x, 0.0)
+    lift = np.where(np.isfinite(lift), lift, np.abs(sigma))
+    flat = np.clip(s - s_b, 0.0, run)
+    return reach_b + flat + hang_x, floor + lift
+
+
+def _pile_points(
+    base: FloatArray,
+    drone: FloatArray,
+    ux: float,
+    uy: float,
+    r: float,
+    h_b: float,
+    run: float,
+    floor: float,
+    s: FloatArray,
+) -> FloatArray:
+    # Plumb down h_b, a run of length `run` >= r on the floor from below the base to below the
+    # drone (a triangle bulging sideways when longer than r), plumb up to the drone.
+    half = 0.5 * run
+    bulge = math.sqrt(max(half * half - 0.25 * r * r, 0.0))
+    nx, ny = -uy, ux
+    f = np.clip(s - h_b, 0.0, run)  # distance along the floor run
+    first = f <= half
+    leg = np.where(first, f, run - f) / half if half > 0.0 else np.zeros_like(f)
+    along = np.where(first, 0.5 * r * leg, r - 0.5 * r * leg)
+    side = bulge * leg
+    z = np.where(s < h_b, base[2] - s, np.where(s > h_b + run, floor + (s - h_b - run), floor))
+    return np.column_stack((base[0] + along * ux + side * nx, base[1] + along * uy + side * ny, z))
