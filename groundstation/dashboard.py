@@ -99,7 +99,7 @@ PENDING_HOLD_S = 2.0
 still says otherwise; then the report wins again."""
 EDIT_HOLD_S = 30.0
 """A number being edited (not yet applied) is not overwritten by reports for this long."""
-ARROW_M_PER_N = 2.0
+ARROW_M_PER_N = 4.0
 """Drawn length of the tension arrow per newton."""
 QUAD_DRAW_SCALE = 2.0
 """The 92 mm quadrotor is drawn this much larger than life so that it reads at room scale."""
@@ -564,7 +564,7 @@ def tension_html(est: EstimateView | None, truth: TruthView | None = None) -> st
         ("H", _fmt(est.horizontal_n, "N")),
         ("T_v", _fmt(est.vertical_n, "N")),
         ("T (world)", _fmt_vec(est.tension_n) + " N"),
-        ("σ_T", _fmt_vec(est.tension_std_n) + " N"),
+        ("σ_T", "(" + ", ".join(f"{1e3 * v:.1f}" for v in est.tension_std_n) + ") mN"),
         ("position", _fmt_vec(est.position_m) + (" m" if est.position_m else " (undetermined)")),
         ("σ_position", _fmt_vec(est.position_std_m) + (" m" if est.position_std_m else "")),
     ]
@@ -1621,7 +1621,7 @@ class Dashboard:
         server = self._server
         assert server is not None
         with self._inbox_lock:
-            inboxes = list(self._inboxes.items())
+            inboxes = sorted(self._inboxes.items())  # colours follow the ids, not arrival
         new_drones = False
         for drone_id, inbox in inboxes:
             if drone_id not in self._drones:
@@ -1867,7 +1867,7 @@ class Dashboard:
                 f"{root}/mocap_error", empty, _MOCAP_RGB, thickness=0.004, visible=False
             ),
             mocap_label=scene.add_label(
-                f"{root}/mocap_label", "", anchor="top-left", visible=False
+                f"{root}/mocap_label", "", anchor="top-right", visible=False
             ),
             truth=scene.add_icosphere(
                 f"{root}/truth", radius=0.012, color=_TRUTH_RGB, visible=False
