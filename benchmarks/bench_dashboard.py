@@ -189,6 +189,7 @@ def main() -> int:
     parser.add_argument("--out", type=Path, default=REPO / "docs" / "dashboard_cost.md")
     args = parser.parse_args()
 
+    load_1min = os.getloadavg()[0]
     per_cb_us = callback_cost_us()
     print(f"telemetry callback: {per_cb_us:.2f} µs per sample")
     rows: list[tuple[Run, Run, Run | None]] = []
@@ -228,7 +229,9 @@ def main() -> int:
         "",
         f"`python -m benchmarks.bench_dashboard --drones {' '.join(map(str, args.drones))} "
         f"--seconds {args.seconds:g}` on {platform.machine()}, {os.cpu_count()} cores, "
-        f"Python {platform.python_version()}, {time.strftime('%Y-%m-%d')}.",
+        f"Python {platform.python_version()}, {time.strftime('%Y-%m-%d')}; load average "
+        f"{load_1min:.1f} at the start (the machine is shared: other work on the two cores "
+        "makes these numbers noisy, by some tens of percent between runs).",
         "",
         f"Per drone: telemetry and an Estimate at {RATE_HZ:.0f} Hz each on an in-memory bus; "
         f"scene rate {settings.web.scene_rate_hz:g} Hz (readouts ≤ 10 Hz, charts 4 Hz, "
