@@ -55,8 +55,10 @@ class RequestLog:
         return out
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="module")
 def browser() -> Iterator[Any]:
+    # Module scope on purpose: while Playwright's sync API is alive its event loop counts
+    # as running in this thread, and asyncio.run() in a later test module would fail.
     _needs_chromium()
     from playwright.sync_api import expect, sync_playwright
 
