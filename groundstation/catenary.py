@@ -69,19 +69,12 @@ BoolOrArray: TypeAlias = bool | npt.NDArray[np.bool_]
 # products of parts are exact in float64.
 _SPLIT: Final = 134217729.0
 # Exact reversion of d = sinh(ξ)/ξ − 1 = Σ t^k/(2k+1)! (t = ξ²): t = Σ _T_OF_D[k]·d^(k+1).
-# Radius of convergence 1.217 (the branch point where tanh ξ = ξ); with 8 terms the truncation
-# error at d = _SERIES_MAX_D is below 1e-18 relative.
-_T_OF_D: Final = (
-    6.0,
-    -9 / 5,
-    144 / 175,
-    -78 / 175,
-    89226 / 336875,
-    -522063 / 3128125,
-    83924688 / 766390625,
-    -438337548 / 5922109375,
-)
-_SERIES_MAX_D: Final = 0.01
+# Radius of convergence 1.217 (the branch point where tanh ξ = ξ); with 6 terms the truncation
+# error at d = _SERIES_MAX_D is below 1e-19 relative. Above it the direct ln(sinh ξ/ξ) loses
+# at most 3 digits to cancellation, which the iteration's 1e-13 accounts for.
+_T_OF_D: Final = (6.0, -9 / 5, 144 / 175, -78 / 175, 89226 / 336875, -522063 / 3128125)
+_T0, _T1, _T2, _T3, _T4, _T5 = _T_OF_D
+_SERIES_MAX_D: Final = 1e-3
 # Above this ln q (h/L below 1e-299) sinh(ξ) would overflow; there e^(−2ξ) < 1e-600 and the
 # equation is exactly ξ − ln(2ξ) = ln q, solved by its own Newton iteration.
 _MAX_LN_Q: Final = 690.0
@@ -89,6 +82,7 @@ _MAX_LN_Q: Final = 690.0
 # 1e-13): the scalar path skips the error-free evaluation there.
 _NAIVE_D_MIN: Final = 2.0**-7
 _LN2: Final = math.log(2.0)
+_sqrt, _log, _log1p, _exp, _cosh = math.sqrt, math.log, math.log1p, math.exp, math.cosh
 _TINY: Final = np.finfo(np.float64).tiny
 _EPS: Final = np.finfo(np.float64).eps
 # Elements per pass of the vectorised solver: the ~150 temporaries of a pass stay in cache.
@@ -266,6 +260,15 @@ def solve(
         TetherTooShortError: ``length`` is shorter than the chord (names both).
         CatenaryError: An input is not finite or ``length`` is negative.
     """
+    if (
+        type(x1) is float
+        and type(y1) is float
+        and type(x2) is float
+        and type(y2) is float
+        and type(length) is float
+    ):
+        a, x0, c, u1, _ = _solve_scalar(x1, y1, x2, y2, length)
+        return _make_catenary(a, x0, c, x1, y1, u1)
     if _all_scalars(x1, y1, x2, y2, length):
         fx1, fy1 = float(x1), float(y1)  # type: ignore[arg-type]
         a, x0, c, u1, _ = _solve_scalar(fx1, fy1, float(x2), float(y2), float(length))  # type: ignore[arg-type]
@@ -319,52 +322,51 @@ def _solve_scalar(
         # Plumb line: both ends on one vertical, the lowest point (L − |v|)/2 below the lower.
         return 0.0, x1, 0.5 * (y1 + y2 - big_l), 0.0, math.inf
     # atanh(|v|/L) = ½·ln((L + |v|)/(L − |v|)), with L − |v| from the exact v (eq:cat6).
-    t_abs = 0.5 * math.log1p(2.0 * v / max(l_minus_v, _TINY))
+    t_abs = 0.5 * _log1p(2.0 * v / (l_minus_v if l_minus_v > _TINY else _TINY))
     t = math.copysign(t_abs, dy) if dx > 0.0 else -math.copysign(t_abs, dy)
     x_mid = 0.5 * (x1 + x2)
     if d_big == 0.0:
         # Exactly taut: the straight line, a = inf (vertex infinitely far on the low side).
         x0 = x_mid if t == 0.0 else -math.copysign(math.inf, t)
         return math.inf, x0, -math.inf, t, 0.0
-    s = math.sqrt(dx * dx + d_big)  # sqrt(L² − v²)
+    s = _sqrt(dx * dx + d_big)  # sqrt(L² − v²)
     den = h * (s + h)
     d = d_big / den if den > 0.0 else math.inf  # q − 1 = (s − h)/h, cancellation-free
-    xi = _xi_scalar(d)
-    if xi == math.inf:  # h/L below ~1e-308: the plumb line to every digit
-        return 0.0, x1, 0.5 * (y1 + y2 - big_l), 0.0, math.inf
+    if d <= _SERIES_MAX_D:
+        xi = _sqrt(d * (_T0 + d * (_T1 + d * (_T2 + d * (_T3 + d * (_T4 + d * _T5))))))
+    else:
+        y = _log1p(d)
+        if y > _MAX_LN_Q:
+            xi = _xi_asymptotic_scalar(y)
+            if xi == math.inf:  # h/L below ~1e-308: the plumb line to every digit
+                return 0.0, x1, 0.5 * (y1 + y2 - big_l), 0.0, math.inf
+        else:
+            # Start: the larger of two forms, each within 4 % where it is the larger:
+            # ξ² ≈ 6y + 1.2y² (series of ψ) and ξ ≈ ln(2qξ) iterated once from ln 2q.
+            yc = y if y < 30.0 else 30.0
+            y_2q = y + _LN2  # ln 2q
+            xi = _sqrt(yc * (6.0 + 1.2 * yc))
+            g = y_2q + _log(y_2q + _log(y_2q))
+            if g > xi:
+                xi = g
+            # One Halley and one Newton step on ψ(ξ) = ln(sinh ξ/ξ) − ln q (error 4e-2 →
+            # 5e-7 → 1e-13), with ψ' = coth ξ − 1/ξ and ψ'' = 1/ξ² − 1/sinh² ξ.
+            e = _exp(xi)
+            ei = 1.0 / e
+            sh2 = e - ei  # 2·sinh ξ
+            rx = 1.0 / xi
+            f = _log(sh2 * rx) - y_2q
+            p1 = (e + ei) / sh2 - rx
+            xi -= 2.0 * f * p1 / (2.0 * p1 * p1 - f * (rx * rx - 4.0 / (sh2 * sh2)))
+            e = _exp(xi)
+            ei = 1.0 / e
+            sh2 = e - ei
+            xi -= (_log(sh2 / xi) - y_2q) / ((e + ei) / sh2 - 1.0 / xi)
     a = h / (2.0 * xi)
     x0 = x_mid - a * t  # eq:cat6, t carries sign(x2 − x1)
     u1 = t - xi if dx > 0.0 else t + xi  # (x1 − x0)/a = sign(x2 − x1)·(atanh(v/L) − ξ)
-    return a, x0, y1 - _a_cosh(a, u1), u1, xi
-
-
-def _xi_scalar(d: float) -> float:
-    """Root ξ > 0 of sinh(ξ)/ξ − 1 = d."""
-    if d <= _SERIES_MAX_D:
-        p = _T_OF_D
-        return math.sqrt(
-            d
-            * (
-                p[0]
-                + d
-                * (p[1] + d * (p[2] + d * (p[3] + d * (p[4] + d * (p[5] + d * (p[6] + d * p[7]))))))
-            )
-        )
-    y = math.log1p(d)
-    if y > _MAX_LN_Q:
-        return _xi_asymptotic_scalar(y)
-    xi = _xi_guess_scalar(y)
-    for _ in range(2):
-        # Halley on ψ(ξ) = ln(sinh ξ/ξ) − ln q: ψ' = coth ξ − 1/ξ, ψ'' = 1/ξ² − 1/sinh² ξ.
-        e = math.exp(xi)
-        ei = 1.0 / e
-        sh = 0.5 * (e - ei)
-        rx = 1.0 / xi
-        rs = 1.0 / sh
-        f = math.log(sh * rx) - y
-        p1 = 0.5 * (e + ei) * rs - rx
-        xi -= 2.0 * f * p1 / (2.0 * p1 * p1 - f * (rx * rx - rs * rs))
-    return xi
+    c = y1 - (a * _cosh(u1) if -700.0 < u1 < 700.0 else _a_cosh(a, u1))  # eq:sys2_eq1
+    return a, x0, c, u1, xi
 
 
 def _xi_asymptotic_scalar(y: float) -> float:
@@ -383,14 +385,6 @@ def _xi_asymptotic(y: FloatArray) -> FloatArray:
     for _ in range(3):
         xi -= (xi - np.log(2.0 * xi) - y) / (1.0 - 1.0 / xi)
     return np.where(y == np.inf, np.inf, xi)
-
-
-def _xi_guess_scalar(y: float) -> float:
-    # Two starts, both within 4 % of ξ where each is the larger: ξ² ≈ 6y + 1.2y² from the
-    # series of ψ, and ξ ≈ ln(2qξ) iterated from ln(2q) + ln ln(2q) for large q.
-    yc = min(y, 30.0)
-    l1 = y + _LN2
-    return max(math.sqrt(yc * (6.0 + 1.2 * yc)), l1 + math.log(l1 + math.log(l1)))
 
 
 def _a_cosh(a: float, u: float) -> float:
@@ -501,26 +495,28 @@ def _solve_chunk(
 
     # Small d: the reverted series gives ξ² directly.
     ds = np.minimum(d, _SERIES_MAX_D)
-    t = _T_OF_D[7] * ds
-    for coef in _T_OF_D[6:0:-1]:
+    t = _T5 * ds
+    for coef in (_T4, _T3, _T2, _T1):
         t += coef
         t *= ds
-    xi_series = np.sqrt((t + _T_OF_D[0]) * ds)
-    # Larger d: two Halley steps on ln(sinh ξ/ξ) = ln q from the better of two starts.
+    xi_series = np.sqrt((t + _T0) * ds)
+    # Larger d: one Halley and one Newton step on ψ = ln(sinh ξ/ξ) − ln q (see _solve_scalar).
     y_full = np.log1p(np.maximum(d, _SERIES_MAX_D))
     y = np.minimum(y_full, _MAX_LN_Q)
     yc = np.minimum(y, 30.0)
-    l1 = y + _LN2
-    xi = np.maximum(np.sqrt(yc * (6.0 + 1.2 * yc)), l1 + np.log(l1 + np.log(l1)))
-    for _ in range(2):
-        e = np.exp(xi)
-        ei = 1.0 / e
-        sh = 0.5 * (e - ei)
-        rx = 1.0 / xi
-        rs = 1.0 / sh
-        f = np.log(sh * rx) - y
-        p1 = 0.5 * (e + ei) * rs - rx  # ψ'
-        xi -= 2.0 * f * p1 / (2.0 * p1 * p1 - f * (rx * rx - rs * rs))  # Halley
+    y_2q = y + _LN2  # ln 2q
+    xi = np.maximum(np.sqrt(yc * (6.0 + 1.2 * yc)), y_2q + np.log(y_2q + np.log(y_2q)))
+    e = np.exp(xi)
+    ei = 1.0 / e
+    sh2 = e - ei  # 2·sinh ξ
+    rx = 1.0 / xi
+    f = np.log(sh2 * rx) - y_2q
+    p1 = (e + ei) / sh2 - rx  # ψ'
+    xi -= 2.0 * f * p1 / (2.0 * p1 * p1 - f * (rx * rx - 4.0 / (sh2 * sh2)))  # Halley
+    e = np.exp(xi)
+    ei = 1.0 / e
+    sh2 = e - ei
+    xi -= (np.log(sh2 / xi) - y_2q) / ((e + ei) / sh2 - 1.0 / xi)  # Newton
     # Exact 0/1 selector without a boolean mask (np.where costs 10 arithmetic passes here):
     # (d − dmax)·1e300 is 0 or negative below the switch, at least 1 above it.
     pick = np.minimum(np.maximum((d - _SERIES_MAX_D) * 1e300, 0.0), 1.0)

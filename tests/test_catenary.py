@@ -64,7 +64,7 @@ def mp_curve(ref: dict[str, mp.mpf], x: float) -> mp.mpf:
 
 
 def assert_matches_reference(cat: Catenary, case: tuple[float, ...], index: object = None) -> None:
-    x1, y1, x2, y2, length = case
+    x1, _, x2, _, length = case
     ref = mp_reference(*case)
     a = float(cat.a if index is None else cat.a[index])  # type: ignore[index]
     x0 = float(cat.x0 if index is None else cat.x0[index])  # type: ignore[index]
@@ -113,7 +113,6 @@ def _case(x1: float, y1: float, h: float, v: float, ratio: float) -> tuple[float
 )
 def test_reference_satisfies_the_paper_system(case: tuple[float, ...]) -> None:
     """The reference (a, x0, c) satisfies eq:sys2_eq1–5: this pins the sign of eq:cat6."""
-    x1, y1, x2, y2, length = case
     ref = mp_reference(*case)
     with mp.workdps(REF_DPS):
         a, x0, c = ref["a"], ref["x0"], ref["c"]
@@ -135,7 +134,8 @@ def _grid_cases() -> list[tuple[float, ...]]:
     cases: list[tuple[float, ...]] = []
     for excess in (1e-9, 3e-9, 1e-8, 1e-7, 1e-6, 1e-5, 1e-4, 1e-3, 1e-2):  # nearly taut
         for h, v in ((1.0, 0.0), (1.0, 0.7), (15.0, 4.0), (0.05, 1.0), (-3.0, -2.0)):
-            cases.append(_case(float(rng.uniform(-3, 3)), float(rng.uniform(-3, 3)), h, v, 1 + excess))
+            x1, y1 = (float(u) for u in rng.uniform(-3, 3, 2))
+            cases.append(_case(x1, y1, h, v, 1 + excess))
     for ratio in (1.5, 3.0, 10.0, 100.0, 1e3, 1e4):  # slack
         for h, v in ((1.0, 0.3), (0.2, -1.0), (-2.0, 0.5), (1e-3, 0.0)):
             cases.append(_case(float(rng.uniform(-3, 3)), float(rng.uniform(-3, 3)), h, v, ratio))
@@ -322,6 +322,12 @@ def test_near_plumb_tends_to_plumb() -> None:
         assert 0.0 < cat.a < 10 * h  # type: ignore[operator]
         assert cat.a + cat.c == pytest.approx(plumb.c, abs=2 * h + 1e-12)  # type: ignore[operator]
         assert math.isfinite(cat.x0) and math.isfinite(cat.u1)  # type: ignore[arg-type]
+        many = solve(np.array([0.0, 0.0]), 0.754, np.array([h, 0.7]), 1.0, 1.6)
+        assert many.a[0] == pytest.approx(cat.a, rel=1e-12)  # type: ignore[index]
+        assert many.c[0] == pytest.approx(cat.c, abs=1e-12)  # type: ignore[index]
+    tiniest = solve(np.array([0.0, 0.0]), 0.754, np.array([5e-324, 0.7]), 1.0, 1.6)
+    assert tiniest.a[0] == 0.0 and tiniest.c[0] == pytest.approx(plumb.c)  # type: ignore[index]
+    assert solve(0.0, 0.754, 5e-324, 1.0, 1.6).c == pytest.approx(plumb.c)
 
 
 def test_exactly_taut_is_the_straight_line() -> None:
@@ -654,7 +660,7 @@ def test_locate_with_floor_without_contact_matches_locate() -> None:
 
 
 def test_locate_with_floor_paper_initial_instant() -> None:
-    """eq:in_instants with the floor: the drone at rest on the floor, the rest of the tether on it."""
+    """eq:in_instants with the floor: the drone rests on the floor, so does part of the tether."""
     loc = locate_with_floor(0.0, 0.0, OMEGA_N_PER_M, 1.6, 0.754, 0.0)
     assert loc.floor_contact is True
     assert loc.z_m == 0.0
