@@ -80,14 +80,14 @@ class Procs:
 
     def start(self, name: str, args: list[str], env: dict[str, str] | None = None) -> Proc:
         log_path = self.tmp_path / f"{name}.log"
-        fh = log_path.open("wb")
         full_env = dict(os.environ)
         full_env.pop("GROUNDSTATION_ZENOH__CONNECT", None)
         full_env["PYTHONUNBUFFERED"] = "1"
         full_env.update(env or {})
-        popen = subprocess.Popen(
-            args, stdout=fh, stderr=subprocess.STDOUT, env=full_env, cwd=self.tmp_path
-        )
+        with log_path.open("wb") as fh:  # the child keeps its own descriptor
+            popen = subprocess.Popen(
+                args, stdout=fh, stderr=subprocess.STDOUT, env=full_env, cwd=self.tmp_path
+            )
         proc = Proc(name, popen, log_path)
         self.procs.append(proc)
         return proc
@@ -121,36 +121,40 @@ class Probe:
     """A test's own zenoh client: collects samples and waits on conditions."""
 
     bus: ZenohBus
-    samples: dict[str, list[tuple[float, Sample]]] = field(default_factory=dict)
+    samples: dict[str, list[Sample]] = field(default_factory=dict)
+    parsed: dict[str, list[dict[str, Any]]] = field(default_factory=dict)
     lock: threading.Lock = field(default_factory=threading.Lock)
-    cond: threading.Condition = field(init=False)
-
-    def __post_init__(self) -> None:
-        self.cond = threading.Condition(self.lock)
+    arrived: threading.Event = field(default_factory=threading.Event)
 
     def collect(self, keyexpr: str) -> None:
         def handler(sample: Sample) -> None:
-            with self.cond:
-                self.samples.setdefault(keyexpr, []).append((time.monotonic(), sample))
-                self.cond.notify_all()
+            with self.lock:
+                self.samples.setdefault(keyexpr, []).append(sample)
+            self.arrived.set()
 
         self.bus.subscribe(keyexpr, handler)
 
     def got(self, keyexpr: str) -> list[Sample]:
         with self.lock:
-            return [s for _, s in self.samples.get(keyexpr, [])]
+            return list(self.samples.get(keyexpr, []))
 
     def json(self, keyexpr: str) -> list[dict[str, Any]]:
-        return [json.loads(s.payload) for s in self.got(keyexpr)]
+        """Parsed payloads (each parsed once, cached)."""
+        raw = self.got(keyexpr)
+        cache = self.parsed.setdefault(keyexpr, [])
+        cache.extend(json.loads(s.payload) for s in raw[len(cache) :])
+        return list(cache)
 
     def wait_for(self, predicate: Callable[[], bool], timeout_s: float, what: str) -> None:
+        """Re-check ``predicate`` as samples arrive (at most every 0.2 s) until ``timeout_s``."""
         deadline = time.monotonic() + timeout_s
-        with self.cond:
-            while not predicate():
-                remaining = deadline - time.monotonic()
-                if remaining <= 0:
-                    raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
-                self.cond.wait(min(remaining, 0.2))
+        while not predicate():
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
+            self.arrived.wait(min(remaining, 0.2))
+            self.arrived.clear()
+            time.sleep(min(0.2, max(0.0, deadline - time.monotonic())))  # batch re-checks
 
     def publish_json(self, key: str, payload: dict[str, Any]) -> None:
         self.bus.publish(key, json.dumps(payload).encode())
