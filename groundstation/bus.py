@@ -13,7 +13,7 @@ import queue
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Any, Protocol
 
 __all__ = [
     "Bus",
@@ -182,7 +182,7 @@ class InMemoryBus:
         self._queue.put(None)
         self._thread.join(timeout=2.0)
 
-    def _drop(self, table: dict[int, tuple[str, object]], ident: int) -> None:
+    def _drop(self, table: dict[int, Any], ident: int) -> None:
         with self._lock:
             table.pop(ident, None)
 

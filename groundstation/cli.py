@@ -53,6 +53,8 @@ def _setup_logging(level: str, as_json: bool) -> None:
     root = logging.getLogger()
     root.handlers[:] = [handler]
     root.setLevel(level)
+    # viser's websocket server logs every browser connection at INFO.
+    logging.getLogger("websockets").setLevel(max(logging.WARNING, root.level))
 
 
 def _stop_on_signals() -> threading.Event:

@@ -164,7 +164,7 @@ class Pipeline:
         except InvalidMessage as exc:
             self.count_drop(drone, exc.kind, exc.detail)
             return None
-        return Parsed(drone, kind, message, now_s)  # type: ignore[arg-type]
+        return Parsed(drone, kind, message, now_s)
 
     def count_drop(self, drone: str | None, kind: str, detail: str) -> None:
         """Count a rejected input per drone and kind (thread-safe) and report it."""

@@ -70,7 +70,7 @@ def test_bad_config_names_key_and_value(tmp_path: Path, text: str, needle: str) 
 
 def test_bad_env_value(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("GROUNDSTATION_DRONE__MASS_KG", "heavy")
-    with pytest.raises(ConfigError, match="drone.mass_kg = 'heavy'"):
+    with pytest.raises(ConfigError, match=r"drone\.mass_kg = 'heavy'"):
         load_settings(None)
 
 

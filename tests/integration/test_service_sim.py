@@ -119,8 +119,10 @@ def test_tug_landing_issues_one_stop_below_land_height(procs: Procs, make_probe:
         what="a Stop",
     )
     probe.wait_for(
-        lambda: any(e["stamp_s"] > 14.0 for e in probe.json("tether/*/estimate"))
-        or any(t["stamp_s"] > 14.0 for t in probe.json("tether/*/truth")),
+        lambda: (
+            any(e["stamp_s"] > 14.0 for e in probe.json("tether/*/estimate"))
+            or any(t["stamp_s"] > 14.0 for t in probe.json("tether/*/truth"))
+        ),
         timeout_s=30,
         what="the scenario to run on after the Stop",
     )
