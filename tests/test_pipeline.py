@@ -9,7 +9,7 @@ import pytest
 
 from groundstation.bus import Sample
 from groundstation.pipeline import Pipeline
-from tests.closed_loop import closed_loop, settings_for
+from groundstation.evaluation import closed_loop, settings_for
 
 GOOD = {
     "seq": 0,

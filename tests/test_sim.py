@@ -17,7 +17,7 @@ from groundstation.sim import (
     rotation_from_quat,
 )
 from groundstation.tension import observe_tension
-from tests.closed_loop import settings_for
+from groundstation.evaluation import settings_for
 
 
 class _Bus:
