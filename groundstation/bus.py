@@ -64,9 +64,9 @@ class Bus(Protocol):
 def keyexpr_matches(keyexpr: str, key: str) -> bool:
     """Whether concrete ``key`` is matched by ``keyexpr`` (``*``: one chunk, ``**``: any).
 
-    Chunks may also carry ``*`` inside them (``lab-a-*``), as in zenoh.
+    Chunks may also carry ``$*`` (or ``*``) inside them (``lab-a-$*``), as in zenoh.
     """
-    return _match(keyexpr.split("/"), key.split("/"))
+    return _match(keyexpr.replace("$*", "*").split("/"), key.split("/"))
 
 
 def _chunk_matches(pattern: str, chunk: str) -> bool:

@@ -68,25 +68,91 @@ BoolOrArray: TypeAlias = bool | npt.NDArray[np.bool_]
 # Veltkamp/Dekker split constant 2**27 + 1: x = hi + lo with hi, lo of 26 bits each, so that
 # products of parts are exact in float64.
 _SPLIT: Final = 134217729.0
-# Exact reversion of d = sinh(ξ)/ξ − 1 = Σ t^k/(2k+1)! (t = ξ²): t = Σ _T_OF_D[k]·d^(k+1).
-# Radius of convergence 1.217 (the branch point where tanh ξ = ξ); with 6 terms the truncation
-# error at d = _SERIES_MAX_D is below 1e-19 relative. Above it the direct ln(sinh ξ/ξ) loses
-# at most 3 digits to cancellation, which the iteration's 1e-13 accounts for.
-_T_OF_D: Final = (6.0, -9 / 5, 144 / 175, -78 / 175, 89226 / 336875, -522063 / 3128125)
-_T0, _T1, _T2, _T3, _T4, _T5 = _T_OF_D
-_SERIES_MAX_D: Final = 1e-3
+# With w = q² − 1 = D/h² (D = L² − v² − h², no square root needed), ξ² = t(w) is the exact
+# reversion of sinh(ξ)/ξ = sqrt(1 + w): t = Σ _T_OF_W[k]·w^(k+1) (from the series
+# sinh(ξ)/ξ − 1 = Σ ξ^2k/(2k+1)!, in exact rational arithmetic). Radius of convergence 0.95
+# (the branch point where tanh ξ = ξ); with 6 terms the truncation error at w = _SERIES_MAX_W
+# is below 1e-17 relative. Above it ln(sinh ξ/ξ) is formed directly and loses at most three
+# digits to cancellation, which the iteration's 1e-13 accounts for.
+_T_OF_W: Final = (3.0, -6 / 5, 123 / 175, -12 / 25, 120093 / 336875, -6113694 / 21896875)
+_T0, _T1, _T2, _T3, _T4, _T5 = _T_OF_W
+_SERIES_MAX_W: Final = 2e-3
 # Above this ln q (h/L below 1e-299) sinh(ξ) would overflow; there e^(−2ξ) < 1e-600 and the
 # equation is exactly ξ − ln(2ξ) = ln q, solved by its own Newton iteration.
 _MAX_LN_Q: Final = 690.0
 # Above this fraction of L² the plain L² − v² − h² is accurate enough (relative error below
-# 1e-13): the scalar path skips the error-free evaluation there.
-_NAIVE_D_MIN: Final = 2.0**-7
+# 4e-12, so a to 2e-12 and x0 to 4e-11·L): the error-free evaluation is skipped there.
+_NAIVE_D_MIN: Final = 2.0**-12
+# Start for the scalar iteration, ln q = y in [1e-3, 40]: ξ/z as a degree-8 polynomial in
+# s = (z − mid)·inv_half on four segments of z = sqrt(y), each row (z_max, mid, inv_half,
+# c0 … c8). Chebyshev interpolation of the 40-digit root (mpmath) at 9 nodes per segment,
+# converted to powers of s; relative error below 6e-7 (checked in tests/test_catenary.py), so
+# one Newton step leaves 2e-13.
+_XI_START: Final = (
+    (
+        0.11842897541618509,
+        0.07493876287440118,
+        22.99367930288302,
+        2.450865092299136,
+        0.0015960717095184858,
+        0.00046281155109291684,
+        -1.8802786169363686e-07,
+        -2.7593027193591934e-08,
+        -1.0813007277113539e-10,
+        -1.006803798488215e-11,
+        1.0283124296592053e-13,
+        8.699293528894794e-15,
+    ),
+    (
+        0.44597992816160803,
+        0.2822044517888966,
+        6.10592026442502,
+        2.4689484605833503,
+        0.02252789184589749,
+        0.0064691375325726065,
+        -4.0464883562110884e-05,
+        -6.6349429199101345e-06,
+        -2.3485627286921354e-07,
+        -8.00873504502517e-09,
+        3.401663706093759e-09,
+        1.6416583196788878e-10,
+    ),
+    (
+        1.6794715619556961,
+        1.062725745058652,
+        1.6214135104007266,
+        2.714977982924537,
+        0.29424663331754347,
+        0.06885650799748458,
+        -0.009391229065466532,
+        -0.0006619641516980653,
+        0.0004900028979490963,
+        3.3572303444332205e-05,
+        -3.900938662214861e-05,
+        -1.5338055431611782e-06,
+    ),
+    (
+        6.324555320336759,
+        4.002013441146228,
+        0.43056274203698197,
+        4.919857521476569,
+        2.0384259248573424,
+        0.1067892696821451,
+        -0.04436026901701293,
+        0.019524921092658555,
+        -0.008595824357706025,
+        0.004280211411542815,
+        -0.0026109328131060233,
+        0.0009196998378642006,
+    ),
+)
+_XI_START_Y_MAX: Final = 40.0
 _LN2: Final = math.log(2.0)
 _sqrt, _log, _log1p, _exp, _cosh = math.sqrt, math.log, math.log1p, math.exp, math.cosh
 _TINY: Final = np.finfo(np.float64).tiny
 _EPS: Final = np.finfo(np.float64).eps
 # Elements per pass of the vectorised solver: the ~150 temporaries of a pass stay in cache.
-_CHUNK: Final = 16384
+_CHUNK: Final = 32768
 # Series of asinh(S) − S and of asinh(S) − 2S/(1 + sqrt(1 + S²)) in S² (after S³), used for
 # a hanging part much shorter than a (S = s/a < 0.1) where the closed forms cancel.
 _ASINH_MINUS_S: Final = (-1 / 6, 3 / 40, -5 / 112, 35 / 1152, -63 / 2816, 231 / 13312)
@@ -329,48 +395,46 @@ def _solve_scalar(
         # Exactly taut: the straight line, a = inf (vertex infinitely far on the low side).
         x0 = x_mid if t == 0.0 else -math.copysign(math.inf, t)
         return math.inf, x0, -math.inf, t, 0.0
-    s = _sqrt(dx * dx + d_big)  # sqrt(L² − v²)
-    den = h * (s + h)
-    d = d_big / den if den > 0.0 else math.inf  # q − 1 = (s − h)/h, cancellation-free
-    if d <= _SERIES_MAX_D:
-        xi = _sqrt(d * (_T0 + d * (_T1 + d * (_T2 + d * (_T3 + d * (_T4 + d * _T5))))))
+    hh = h * h
+    w = d_big / hh if hh > 0.0 else math.inf  # q² − 1 = (L² − v²)/h² − 1
+    if w <= _SERIES_MAX_W:
+        xi = _sqrt(w * (_T0 + w * (_T1 + w * (_T2 + w * (_T3 + w * (_T4 + w * _T5))))))
     else:
-        y = _log1p(d)
-        if y > _MAX_LN_Q:
+        # ln q = ½·ln(1 + w); for h below ~1e-154·L, w overflows: ln q = ½·ln D − ln h.
+        y = 0.5 * _log1p(w) if w < math.inf else 0.5 * _log(d_big) - _log(h)
+        if y > _XI_START_Y_MAX:
             xi = _xi_asymptotic_scalar(y)
-            if xi == math.inf:  # h/L below ~1e-308: the plumb line to every digit
-                return 0.0, x1, 0.5 * (y1 + y2 - big_l), 0.0, math.inf
         else:
-            # Start: the larger of two forms, each within 4 % where it is the larger:
-            # ξ² ≈ 6y + 1.2y² (series of ψ) and ξ ≈ ln(2qξ) iterated once from ln 2q.
-            yc = y if y < 30.0 else 30.0
-            y_2q = y + _LN2  # ln 2q
-            xi = _sqrt(yc * (6.0 + 1.2 * yc))
-            g = y_2q + _log(y_2q + _log(y_2q))
-            if g > xi:
-                xi = g
-            # One Halley and one Newton step on ψ(ξ) = ln(sinh ξ/ξ) − ln q (error 4e-2 →
-            # 5e-7 → 1e-13), with ψ' = coth ξ − 1/ξ and ψ'' = 1/ξ² − 1/sinh² ξ.
+            xi = _xi_start_scalar(y)
+            # One Newton step on ψ(ξ) = ln(sinh ξ/ξ) − ln q, ψ' = coth ξ − 1/ξ.
             e = _exp(xi)
             ei = 1.0 / e
             sh2 = e - ei  # 2·sinh ξ
-            rx = 1.0 / xi
-            f = _log(sh2 * rx) - y_2q
-            p1 = (e + ei) / sh2 - rx
-            xi -= 2.0 * f * p1 / (2.0 * p1 * p1 - f * (rx * rx - 4.0 / (sh2 * sh2)))
-            e = _exp(xi)
-            ei = 1.0 / e
-            sh2 = e - ei
-            xi -= (_log(sh2 / xi) - y_2q) / ((e + ei) / sh2 - 1.0 / xi)
+            xi -= (_log(sh2 / xi) - (y + _LN2)) / ((e + ei) / sh2 - 1.0 / xi)
     a = h / (2.0 * xi)
+    if a == 0.0:  # h/L below ~1e-300: underflow, the plumb line to every digit
+        return 0.0, x1, 0.5 * (y1 + y2 - big_l), 0.0, math.inf
     x0 = x_mid - a * t  # eq:cat6, t carries sign(x2 − x1)
     u1 = t - xi if dx > 0.0 else t + xi  # (x1 − x0)/a = sign(x2 − x1)·(atanh(v/L) − ξ)
     c = y1 - (a * _cosh(u1) if -700.0 < u1 < 700.0 else _a_cosh(a, u1))  # eq:sys2_eq1
     return a, x0, c, u1, xi
 
 
+def _xi_start_scalar(y: float) -> float:
+    """ξ to 6e-7 from y = ln q in [1e-3, 40] (the table _XI_START)."""
+    z = _sqrt(y)
+    for seg in _XI_START:  # the last segment also takes a rounding overshoot
+        if z <= seg[0]:
+            break
+    _, mid, inv_half, c0, c1, c2, c3, c4, c5, c6, c7, c8 = seg
+    s = (z - mid) * inv_half
+    return z * (
+        c0 + s * (c1 + s * (c2 + s * (c3 + s * (c4 + s * (c5 + s * (c6 + s * (c7 + s * c8)))))))
+    )
+
+
 def _xi_asymptotic_scalar(y: float) -> float:
-    """Root of ξ − ln(2ξ) = y (sinh ξ/ξ = e^y for y > 690); inf for y = inf."""
+    """Root of ξ − ln(2ξ) = y, which is sinh ξ/ξ = e^y to 1e-38 once y > 40; inf for inf."""
     if y == math.inf:
         return math.inf
     xi = y + math.log(2.0 * y)
@@ -428,22 +492,13 @@ def _solve_arrays(
     shape = arrays[0].shape
     flat = [np.ravel(v) for v in arrays]
     n = flat[0].size
-    a, x0, c, u1, x1_out, y1_out = (np.empty(n) for _ in range(6))
+    out = np.empty((6, n))  # rows: a, x0, c, u1 and the anchor x1, y1 (copies of the inputs)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         for start in range(0, n, _CHUNK):
             sl = slice(start, start + _CHUNK)
-            chunk = [v[sl] for v in flat]
-            a[sl], x0[sl], c[sl], u1[sl] = _solve_chunk(*chunk, offset=start)
-            x1_out[sl] = chunk[0]
-            y1_out[sl] = chunk[1]
-    return _make_catenary(
-        a.reshape(shape),
-        x0.reshape(shape),
-        c.reshape(shape),
-        x1_out.reshape(shape),
-        y1_out.reshape(shape),
-        u1.reshape(shape),
-    )
+            _solve_chunk(*(v[sl] for v in flat), out=out[:, sl], offset=start)
+    a, x0, c, u1, x1_out, y1_out = (row.reshape(shape) for row in out)
+    return _make_catenary(a, x0, c, x1_out, y1_out, u1)
 
 
 def _solve_chunk(
@@ -453,17 +508,86 @@ def _solve_chunk(
     y2: FloatArray,
     big_l: FloatArray,
     *,
+    out: FloatArray,
     offset: int,
-) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-    """Vectorised solve of one chunk. Returns (a, x0, c, u1). Runs under np.errstate(ignore)."""
-    # Differences with their exact rounding errors (two-sum): dx + dx_err == x2 − x1.
+) -> None:
+    """Vectorised solve of one chunk into ``out`` rows (a, x0, c, u1, x1, y1).
+
+    Runs under np.errstate(ignore). Each regime takes only its own path (index subsets,
+    cheaper than computing every path for every element and selecting), with the formulas
+    of :func:`_solve_scalar`.
+    """
+    a, x0, c, u1, x1_out, y1_out = out
+    dx = x2 - x1
+    dy = y2 - y1
+    v = np.abs(dy)
+    l_minus_v = big_l - v
+    l_plus_v = big_l + v
+    d_big = l_minus_v * l_plus_v - dx * dx  # D = L² − v² − h², plain
+    # Where D is small against L² (nearly taut) rounding in the plain form would dominate:
+    # redo those elements without it.
+    tight = np.flatnonzero(~(d_big >= _NAIVE_D_MIN * big_l * big_l))
+    if tight.size == d_big.size:
+        d_big, l_minus_v = _exact_slack(x1, y1, x2, y2, big_l)
+    elif tight.size:
+        d_big[tight], l_minus_v[tight] = _exact_slack(
+            x1[tight], y1[tight], x2[tight], y2[tight], big_l[tight]
+        )
+    d_min = d_big.min()
+    if not (d_min >= 0.0 and d_big.max() < np.inf and big_l.min() >= 0.0):
+        raise _first_domain_error(x1, y1, x2, y2, big_l, d_big, offset)
+    h = np.abs(dx)
+    w = d_big / (h * h)  # q² − 1
+    y = 0.5 * np.log1p(w)  # ln q
+    if y.max() == np.inf:  # h below ~1e-154·L: w overflows, ln q = ½·ln D − ln h
+        y = np.where(y == np.inf, 0.5 * np.log(d_big) - np.log(h), y)
+
+    small = w <= _SERIES_MAX_W
+    n_small = int(np.count_nonzero(small))
+    if n_small == w.size:
+        xi = _xi_series(w)
+    elif n_small == 0:
+        xi = _xi_iterated(y)
+    else:
+        xi = np.empty_like(w)
+        i_small = np.flatnonzero(small)
+        i_large = np.flatnonzero(~small)
+        xi[i_small] = _xi_series(w[i_small])
+        xi[i_large] = _xi_iterated(y[i_large])
+
+    np.divide(h, 2.0 * xi, out=a)
+    # atanh(|v|/L) = ½·ln((L + |v|)/(L − |v|)) (eq:cat6), with the sign of v·(x2 − x1);
+    # its absolute error, not its relative one, is what reaches x0 and the curve.
+    t = np.copysign(0.5 * np.log(l_plus_v / np.maximum(l_minus_v, _TINY)), dy * dx)
+    np.subtract(t, np.copysign(xi, dx), out=u1)  # (x1 − x0)/a = t − sign(x2 − x1)·ξ
+    np.subtract(0.5 * (x1 + x2), a * t, out=x0)  # eq:cat6
+    np.cosh(u1, out=c)
+    c *= a
+    np.subtract(y1, c, out=c)  # eq:sys2_eq1
+    x1_out[...] = x1
+    y1_out[...] = y1
+
+    if d_min == 0.0 or a.min() == 0.0 or not np.isfinite(c).all():
+        a[...], x0[...], c[...], u1[...] = _patch_degenerate(
+            x1, y1, y2, big_l, dx, d_big, t, a, x0, c, u1
+        )
+
+
+def _exact_slack(
+    x1: FloatArray, y1: FloatArray, x2: FloatArray, y2: FloatArray, big_l: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """D = L² − (x2 − x1)² − (y2 − y1)² and L − |y2 − y1| to ~2^-100·L², error-free.
+
+    Knuth's two-sum gives each difference with its exact rounding error, Dekker's split
+    makes every product of parts exact, and l_hi² − (x_hi² + y_hi²) is exact when nearly
+    taut (Sterbenz); what is left is below 2^-80·L². :func:`_solve_scalar` inlines the same.
+    """
     dx = x2 - x1
     bb = dx - x2
-    dx_err = (x2 - (dx - bb)) - (x1 + bb)
+    dx_err = (x2 - (dx - bb)) - (x1 + bb)  # dx + dx_err == x2 − x1 exactly
     dy = y2 - y1
     bb = dy - y2
     dy_err = (y2 - (dy - bb)) - (y1 + bb)
-    # Dekker split: every product of two parts below is exact.
     p = _SPLIT * big_l
     l_hi = p - (p - big_l)
     l_lo = big_l - l_hi
@@ -478,66 +602,45 @@ def _solve_chunk(
     s_hi = x_hi2 + y_hi2
     bb = s_hi - x_hi2
     s_err = (x_hi2 - (s_hi - bb)) + (y_hi2 - bb)
-    # D = L² − (x2 − x1)² − (y2 − y1)² to ~2^-100·L²: l_hi² − s_hi is exact when nearly taut
-    # (Sterbenz), the other brackets are small.
     d_big = (
         ((l_hi * l_hi - s_hi) - s_err)
         + 2.0 * (l_hi * l_lo - x_hi * x_lo - y_hi * y_lo)
         + (l_lo * l_lo - x_lo * x_lo - y_lo * y_lo)
         - 2.0 * (dx * dx_err + dy * dy_err)
     )
-    d_min = d_big.min()
-    if not (d_min >= 0.0 and d_big.max() < np.inf and big_l.min() >= 0.0):
-        raise _first_domain_error(x1, y1, x2, y2, big_l, d_big, offset)
-    h = np.abs(dx)
-    s = np.sqrt(dx * dx + d_big)  # sqrt(L² − v²)
-    d = d_big / (h * (s + h))  # q − 1, cancellation-free
+    return d_big, (big_l - np.abs(dy)) - np.sign(dy) * dy_err
 
-    # Small d: the reverted series gives ξ² directly.
-    ds = np.minimum(d, _SERIES_MAX_D)
-    t = _T5 * ds
+
+def _xi_series(w: FloatArray) -> FloatArray:
+    """ξ for w <= _SERIES_MAX_W from the reverted series t(w) = ξ²."""
+    t = _T5 * w
     for coef in (_T4, _T3, _T2, _T1):
         t += coef
-        t *= ds
-    xi_series = np.sqrt((t + _T0) * ds)
-    # Larger d: one Halley and one Newton step on ψ = ln(sinh ξ/ξ) − ln q (see _solve_scalar).
-    y_full = np.log1p(np.maximum(d, _SERIES_MAX_D))
-    y = np.minimum(y_full, _MAX_LN_Q)
-    yc = np.minimum(y, 30.0)
-    y_2q = y + _LN2  # ln 2q
+        t *= w
+    return np.sqrt((t + _T0) * w)
+
+
+def _xi_iterated(y: FloatArray) -> FloatArray:
+    """ξ from y = ln q > ½·ln(1 + _SERIES_MAX_W): start, Halley, Newton (see _solve_scalar)."""
+    y_capped = np.minimum(y, _MAX_LN_Q)
+    yc = np.minimum(y_capped, 30.0)
+    y_2q = y_capped + _LN2  # ln 2q
     xi = np.maximum(np.sqrt(yc * (6.0 + 1.2 * yc)), y_2q + np.log(y_2q + np.log(y_2q)))
     e = np.exp(xi)
     ei = 1.0 / e
     sh2 = e - ei  # 2·sinh ξ
     rx = 1.0 / xi
-    f = np.log(sh2 * rx) - y_2q
+    f = np.log(sh2 * rx) - y_2q  # ψ
     p1 = (e + ei) / sh2 - rx  # ψ'
     xi -= 2.0 * f * p1 / (2.0 * p1 * p1 - f * (rx * rx - 4.0 / (sh2 * sh2)))  # Halley
     e = np.exp(xi)
     ei = 1.0 / e
     sh2 = e - ei
     xi -= (np.log(sh2 / xi) - y_2q) / ((e + ei) / sh2 - 1.0 / xi)  # Newton
-    # Exact 0/1 selector without a boolean mask (np.where costs 10 arithmetic passes here):
-    # (d − dmax)·1e300 is 0 or negative below the switch, at least 1 above it.
-    pick = np.minimum(np.maximum((d - _SERIES_MAX_D) * 1e300, 0.0), 1.0)
-    xi = xi_series + pick * (xi - xi_series)
-    if y_full.max() > _MAX_LN_Q:
-        huge = y_full > _MAX_LN_Q
-        xi[huge] = _xi_asymptotic(y_full[huge])
-
-    a = h / (2.0 * xi)
-    v = np.abs(dy)
-    # atanh(|v|/L) = ½·ln(1 + 2|v|/(L − |v|)), with L − |v| from the exact difference.
-    l_minus_v = np.maximum((big_l - v) - np.sign(dy) * dy_err, _TINY)
-    t = np.copysign(0.5 * np.log1p(2.0 * v / l_minus_v), dy)
-    sgn = np.sign(dx)
-    x0 = 0.5 * (x1 + x2) - sgn * a * t  # eq:cat6 with sign(x2 − x1)
-    u1 = sgn * (t - xi)  # (x1 − x0)/a
-    c = y1 - a * np.cosh(u1)  # eq:sys2_eq1
-
-    if d_min == 0.0 or a.min() == 0.0 or not np.isfinite(c).all():
-        a, x0, c, u1 = _patch_degenerate(x1, y1, y2, big_l, h, d_big, sgn, t, a, x0, c, u1)
-    return a, x0, c, u1
+    if y.max() > _MAX_LN_Q:
+        huge = y > _MAX_LN_Q
+        xi[huge] = _xi_asymptotic(y[huge])
+    return xi
 
 
 def _patch_degenerate(
@@ -545,9 +648,8 @@ def _patch_degenerate(
     y1: FloatArray,
     y2: FloatArray,
     big_l: FloatArray,
-    h: FloatArray,
+    dx: FloatArray,
     d_big: FloatArray,
-    sgn: FloatArray,
     t: FloatArray,
     a: FloatArray,
     x0: FloatArray,
@@ -555,13 +657,13 @@ def _patch_degenerate(
     u1: FloatArray,
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
     """Documented values for the exactly taut, plumb and absurdly-near-plumb elements."""
-    x_mid = x1 + 0.5 * sgn * h
-    taut = (d_big == 0.0) & (h > 0.0)
-    x0 = np.where(taut, np.where(t == 0.0, x_mid, -np.copysign(np.inf, sgn * t)), x0)
+    x_mid = x1 + 0.5 * dx
+    taut = (d_big == 0.0) & (dx != 0.0)
+    x0 = np.where(taut, np.where(t == 0.0, x_mid, -np.copysign(np.inf, t)), x0)
     # a tiny, |u1| > 710: a·cosh(u1) through logs.
     far = ~np.isfinite(c) & (a > 0.0) & (a < np.inf)
     c = np.where(far, y1 - np.exp(np.abs(u1) + np.log(a) - _LN2), c)
-    plumb = a == 0.0  # h == 0, or h/L so small that a underflows
+    plumb = (dx == 0.0) | (a == 0.0)  # or h/L so small that a underflows
     a = np.where(plumb, 0.0, a)
     x0 = np.where(plumb, x1, x0)
     c = np.where(plumb, 0.5 * (y1 + y2 - big_l), c)

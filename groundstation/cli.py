@@ -16,6 +16,7 @@ import socket
 import sys
 import threading
 import time
+import tomllib
 from collections.abc import Sequence
 from types import FrameType
 from typing import Any
@@ -94,8 +95,6 @@ def _cli_overrides(args: argparse.Namespace) -> dict[str, Any]:
     zenoh: dict[str, Any] = {}
     if getattr(args, "connect", None):
         zenoh["connect"] = list(args.connect)
-        # Given an endpoint to connect to and no mode, act as a client of it.
-        zenoh.setdefault("mode", "client" if not getattr(args, "listen", None) else "peer")
     if getattr(args, "listen", None):
         zenoh["listen"] = list(args.listen)
     if getattr(args, "mode", None):
@@ -123,8 +122,29 @@ def _cli_overrides(args: argparse.Namespace) -> dict[str, Any]:
     return over
 
 
+def _mode_in_file(path: str | None) -> bool:
+    if path is None:
+        return False
+    try:
+        with open(path, "rb") as fh:
+            return "mode" in tomllib.load(fh).get("zenoh", {})
+    except (OSError, tomllib.TOMLDecodeError):
+        return False  # load_settings reports it
+
+
 def _load(args: argparse.Namespace, base: dict[str, Any] | None = None) -> Settings:
     overrides = _cli_overrides(args)
+    zenoh = overrides.get("zenoh", {})
+    # Told where to connect and nothing else: be a client of it (a router), unless the
+    # file or the environment chose a mode.
+    if (
+        "connect" in zenoh
+        and "listen" not in zenoh
+        and "mode" not in zenoh
+        and not _mode_in_file(args.config)
+        and "GROUNDSTATION_ZENOH__MODE" not in os.environ
+    ):
+        zenoh["mode"] = "client"
     extra = getattr(args, "sim_overrides", None)
     if extra:
         overrides["sim"] = extra

@@ -130,7 +130,8 @@ class ServiceSection(_Section):
     """``[service]``: the estimation service."""
 
     drones: str = "*"
-    """Key-expression chunk selecting the drones this instance owns (``tether/{drones}/...``)."""
+    """Drones this instance owns: one key-expression chunk such as ``lab-a-*`` (``tether/``
+    in front is accepted); ``*`` inside a chunk is zenoh's ``$*``."""
     queue_size: int = Field(8192, ge=16)
     max_payload_bytes: int = Field(65536, ge=256)
     stale_after_s: float = Field(0.5, gt=0.0)
@@ -139,6 +140,24 @@ class ServiceSection(_Section):
     log_json: bool = False
     record: str | None = None
     """Record every bus sample to this MCAP file while serving."""
+
+    @field_validator("drones")
+    @classmethod
+    def _drones_chunk(cls, value: str) -> str:
+        chunk = value.removeprefix("tether/").removesuffix("/**").removesuffix("/*")
+        chunk = chunk.replace("$*", "*")
+        if not chunk or "/" in chunk or not re.fullmatch(r"[A-Za-z0-9_*-]{1,64}", chunk):
+            raise ValueError(
+                f"{value!r} is not one drone-id pattern like 'lab-a-*' ([A-Za-z0-9_-] and *)"
+            )
+        return chunk
+
+    @property
+    def drones_keyexpr_chunk(self) -> str:
+        """``drones`` as a zenoh chunk: ``*`` alone, or ``$*`` inside a chunk."""
+        if self.drones in ("*", "**"):
+            return "*"
+        return re.sub(r"\*+", "$*", self.drones)
 
 
 class SimSection(_Section):

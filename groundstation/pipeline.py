@@ -276,6 +276,21 @@ class Pipeline:
 
     def _telemetry(self, runtime: DroneRuntime, msg: Telemetry, now_s: float) -> list[Sample]:
         runtime.received += 1
+        # Malformed content first (whatever its seq), then the stream's order.
+        try:
+            obs = observe_tension(
+                msg.accel_mps2,
+                msg.quat_wxyz,
+                msg.thrust_n,
+                runtime.params.drone.mass_kg,
+                armed=msg.armed,
+            )
+        except DegenerateQuaternionError as exc:
+            self.count_drop(runtime.drone, "bad_quaternion", str(exc))
+            return []
+        except TensionError as exc:
+            self.count_drop(runtime.drone, "bad_observation", str(exc))
+            return []
         resumed = runtime.stale or (
             runtime.last_seen_s is not None and now_s - runtime.last_seen_s > _MAX_GAP_S
         )
@@ -291,20 +306,6 @@ class Pipeline:
                 "stamp_backwards",
                 f"stamp_s {msg.stamp_s} after {runtime.last_stamp_s} on {runtime.drone}",
             )
-            return []
-        try:
-            obs = observe_tension(
-                msg.accel_mps2,
-                msg.quat_wxyz,
-                msg.thrust_n,
-                runtime.params.drone.mass_kg,
-                armed=msg.armed,
-            )
-        except DegenerateQuaternionError as exc:
-            self.count_drop(runtime.drone, "bad_quaternion", str(exc))
-            return []
-        except TensionError as exc:
-            self.count_drop(runtime.drone, "bad_observation", str(exc))
             return []
 
         if runtime.last_seq is not None and msg.seq > runtime.last_seq + 1 and not resumed:

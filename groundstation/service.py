@@ -64,7 +64,7 @@ class Service:
         """Subscribe, declare the status queryable and the liveliness token, start the worker."""
         if self._worker is not None:
             return
-        drones = self.settings.service.drones
+        drones = self.settings.service.drones_keyexpr_chunk
         if self.settings.service.record:
             from groundstation.recording import Recorder
 

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from groundstation.bus import Sample
-from groundstation.pipeline import Pipeline
 from groundstation.evaluation import closed_loop, settings_for
+from groundstation.pipeline import Pipeline
 
 GOOD = {
     "seq": 0,

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from groundstation.bus import Sample
+from groundstation.evaluation import settings_for
 from groundstation.sim import (
     SCENARIOS,
     DroneSim,
@@ -17,7 +18,6 @@ from groundstation.sim import (
     rotation_from_quat,
 )
 from groundstation.tension import observe_tension
-from groundstation.evaluation import settings_for
 
 
 class _Bus:
