@@ -13,7 +13,7 @@ Methods compared:
 
 * ``ours, vectorised``: ``solve`` on arrays of all cases.
 * ``plain Newton, vectorised``: a fixed-iteration numpy Newton on sinh(ξ) − q·ξ = 0 from the
-  textbook starts (sqrt(6(q − 1)) below q = 3, ln 2q + ln ln 2q above), 8 iterations, with
+  textbook starts (sqrt(6(q − 1)) below q = 3, ln 2q + ln ln 2q above), 5 iterations, with
   x0 and c from eq:cat6 and eq:sys2_eq1 as the paper writes them.
 * ``ours, scalar``: ``solve`` on Python floats, one call per case.
 * ``paper recipe``: :func:`paper_recipe_solve`, Newton on eq:cat7 from the Taylor start of
@@ -49,7 +49,9 @@ DOC_PATH = Path(__file__).resolve().parent.parent / "docs" / "catenary_benchmark
 CATEGORIES = ("nearly taut", "slack", "equal heights", "leftward", "near plumb")
 TOL = 1e-9
 REF_DPS = 50
-NEWTON_ITERATIONS = 8
+# The smallest count at which the plain Newton's accuracy stops improving on this case set
+# (5, 6, 8, 20 iterations give the same worst error): a fair, not a handicapped, baseline.
+NEWTON_ITERATIONS = 5
 
 
 # ---------------------------------------------------------------------------------------------
@@ -335,7 +337,7 @@ def machine() -> str:
 
 def run(quick: bool) -> str:
     t_start = time.perf_counter()
-    n_vec = 200_000 if quick else 1_000_000
+    n_vec = 1_000_000
     n_scalar = 5_000 if quick else 20_000
     n_fsolve = 300 if quick else 2_000
     n_ref = 150 if quick else 1_000
@@ -343,8 +345,10 @@ def run(quick: bool) -> str:
     cols = (cases.x1, cases.y1, cases.x2, cases.y2, cases.length)
 
     # Vectorised.
-    t_ours = best_of(lambda: solve(*cols), 3 if quick else 7)
-    t_newton = best_of(lambda: newton_baseline(*cols), 3 if quick else 7)
+    t_ours = t_newton = math.inf
+    for _ in range(3 if quick else 10):  # interleaved: the machine is shared
+        t_ours = min(t_ours, best_of(lambda: solve(*cols), 1))
+        t_newton = min(t_newton, best_of(lambda: newton_baseline(*cols), 1))
     ours_vec = solve(*cols)
     base_a, base_x0, base_c = newton_baseline(*cols)
 

@@ -139,10 +139,10 @@ def _grid_cases() -> list[tuple[float, ...]]:
     for ratio in (1.5, 3.0, 10.0, 100.0, 1e3, 1e4):  # slack
         for h, v in ((1.0, 0.3), (0.2, -1.0), (-2.0, 0.5), (1e-3, 0.0)):
             cases.append(_case(float(rng.uniform(-3, 3)), float(rng.uniform(-3, 3)), h, v, ratio))
-    for h in (1e-9, 1e-6, 1e-3):  # near plumb
+    for h in (1e-100, 1e-50, 1e-20, 1e-12, 1e-9, 1e-6, 1e-3):  # near plumb
         for ratio in (1.0 + 1e-6, 1.01, 2.0):
-            cases.append(_case(0.25, 0.754, h, 0.4, ratio))
-            cases.append(_case(0.25, 0.754, -h, -0.4, ratio))
+            cases.append(_case(0.0, 0.754, h, 0.4, ratio))
+            cases.append(_case(0.0, 0.754, -h, -0.4, ratio))
     cases += [
         (0.0, 0.754, 1.2, 1.0, 1.6),  # the paper's setup
         (0.0, 0.754, 0.5, 0.5, 1.6),
@@ -170,12 +170,13 @@ def test_solve_grid_matches_mpmath_vectorised() -> None:
 
 
 def test_scalar_and_vectorised_paths_agree() -> None:
+    # Both are within ~1e-12 of the reference; they iterate differently (see the module).
     cols = [np.array(col) for col in zip(*GRID, strict=True)]
     cat = solve(*cols)
     for i, case in enumerate(GRID):
         one = solve(*case)
-        assert one.a == pytest.approx(cat.a[i], rel=1e-13)  # type: ignore[index]
-        assert one.x0 == pytest.approx(cat.x0[i], rel=1e-13, abs=1e-12 * max(1.0, case[4]))  # type: ignore[index]
+        assert one.a == pytest.approx(cat.a[i], rel=1e-11)  # type: ignore[index]
+        assert one.x0 == pytest.approx(cat.x0[i], rel=1e-11, abs=1e-11 * max(1.0, case[4]))  # type: ignore[index]
 
 
 finite = {"allow_nan": False, "allow_infinity": False}
@@ -212,6 +213,17 @@ def test_vectorised_solve_matches_mpmath_everywhere(cases: list[tuple[float, ...
     cat = solve(*cols)
     for i, case in enumerate(cases):
         assert_matches_reference(cat, case, i)
+
+
+def test_scalar_start_table_is_within_its_stated_error() -> None:
+    """The scalar path's polynomial start for ξ(ln q) (catenary._XI_START) is within 6e-7."""
+    with mp.workdps(30):
+        for y in np.geomspace(1e-3, catenary._XI_START_Y_MAX, 300):
+            ref = mp.findroot(
+                lambda t, y=y: mp.log(mp.sinh(t) / t) - mp.mpf(float(y)),
+                math.sqrt(6 * y) if y < 1 else y + math.log(2 * y) + 1,
+            )
+            assert abs(catenary._xi_start_scalar(float(y)) / ref - 1) < 6e-7, y
 
 
 def test_curve_passes_through_both_points_with_length() -> None:
@@ -252,7 +264,7 @@ def test_arrays_broadcast() -> None:
     for i in range(3):
         for j in range(4):
             one = solve(0.0, 0.754, float(x2[i, 0]), 1.0, float(length[j]))
-            assert cat.a[i, j] == pytest.approx(one.a, rel=1e-14)  # type: ignore[index]
+            assert cat.a[i, j] == pytest.approx(one.a, rel=1e-11)  # type: ignore[index]
     y = cat.y(np.zeros((3, 4)))
     assert isinstance(y, np.ndarray)
     np.testing.assert_allclose(y, 0.754, atol=1e-12)
@@ -272,7 +284,7 @@ def test_arrays_longer_than_a_chunk() -> None:
     assert np.all(np.isfinite(cat.a)) and np.all(cat.a > 0)  # type: ignore[operator]
     for i in rng.choice(n, 20, replace=False):
         one = solve(float(x1[i]), float(y1[i]), float(x2[i]), float(y2[i]), float(length[i]))
-        assert cat.a[i] == pytest.approx(one.a, rel=1e-13)  # type: ignore[index]
+        assert cat.a[i] == pytest.approx(one.a, rel=1e-11)  # type: ignore[index]
     assert np.all(np.abs(cat.y(x2) - y2) <= 1e-9 * np.maximum(1.0, length))
 
 
