@@ -351,8 +351,6 @@ def test_offline_replay_writes_inputs_and_new_outputs(tmp_path: Path) -> None:
 
 def test_offline_replay_with_the_real_pipeline(tmp_path: Path) -> None:
     """One estimate per accepted telemetry (the contract), on the service's own Pipeline."""
-    # TODO(recording): drop this guard once the physics modules have all landed.
-    pytest.importorskip("groundstation.pipeline", exc_type=ImportError)
     t0 = 1_700_000_000 * 10**9
     msgs = [
         ("tether/cf1/telemetry", telemetry(i, thrust_n=0.2943 + 0.05), t0 + i * 4_000_000)
@@ -370,7 +368,6 @@ def test_offline_replay_with_the_real_pipeline(tmp_path: Path) -> None:
 
 def test_figures_from_a_replayed_recording(tmp_path: Path) -> None:
     """PNG files per drone (Agg backend; nothing is shown)."""
-    pytest.importorskip("matplotlib")
     t0 = 1_700_000_000 * 10**9
     msgs: list[tuple[str, bytes, int]] = []
     for i in range(50):

@@ -343,8 +343,6 @@ def test_record_stops_on_sigterm_with_nothing_recorded(router: str, tmp_path: Pa
 
 def test_replay_offline_cli(tmp_path: Path) -> None:
     """``replay --offline`` runs the service's pipeline over the file, as fast as it can."""
-    # TODO(recording): drop this guard once the physics modules have all landed.
-    pytest.importorskip("groundstation.pipeline", exc_type=ImportError)
     t0 = 1_700_000_000 * 10**9
     msgs = [
         (

@@ -166,3 +166,24 @@ def test_two_instances_split_the_drones(procs: Procs, make_probe: Any) -> None:
     assert len(seen) == 600 and set(seen.values()) == {1}, "every drone estimated exactly once"
     owners = {d: _status(probe, d)["service"] for d in drones}
     assert owners["lab-a-1"] == owners["lab-a-2"] != owners["lab-b-1"]
+
+
+def test_serve_records_the_bus_in_process(procs: Procs, make_probe: Any, tmp_path: Any) -> None:
+    from groundstation.recording import is_complete, iter_messages
+
+    out = tmp_path / "session.mcap"
+    probe, _ = _router_and_service(procs, make_probe, "--record", str(out))
+    probe.collect("tether/*/estimate")
+    _wait_alive(probe)
+    for seq in range(100):
+        probe.publish_json("tether/r1/telemetry", GOOD | {"seq": seq, "stamp_s": seq * 0.004})
+        time.sleep(0.002)
+    probe.wait_for(lambda: len(probe.got("tether/*/estimate")) >= 100, 10, "100 estimates")
+    serve = next(p for p in procs.procs if p.name == "serve")
+    assert serve.stop(signal.SIGTERM) == 0
+    assert is_complete(out)
+    by_key: dict[str, list[int]] = {}
+    for msg in iter_messages(out):
+        by_key.setdefault(msg.key, []).append(json.loads(msg.payload)["seq"])
+    assert by_key["tether/r1/telemetry"] == list(range(100))
+    assert by_key["tether/r1/estimate"] == list(range(100))
