@@ -493,12 +493,25 @@ def _solve_arrays(
     flat = [np.ravel(v) for v in arrays]
     n = flat[0].size
     out = np.empty((6, n))  # rows: a, x0, c, u1 and the anchor x1, y1 (copies of the inputs)
+    # Scratch rows reused by every chunk, so that the loop allocates (almost) nothing: a
+    # freshly allocated temporary of 100 KiB or more costs page faults whenever the
+    # allocator has returned its memory to the OS, which made the solver 3-5x slower.
+    width = max(1, min(n, _CHUNK))
+    work = np.empty((_WORK_ROWS, width))
+    flags = np.empty(width, dtype=np.bool_)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         for start in range(0, n, _CHUNK):
             sl = slice(start, start + _CHUNK)
-            _solve_chunk(*(v[sl] for v in flat), out=out[:, sl], offset=start)
+            chunk = [v[sl] for v in flat]
+            _solve_chunk(*chunk, out=out[:, sl], work=work, flags=flags, offset=start)
     a, x0, c, u1, x1_out, y1_out = (row.reshape(shape) for row in out)
     return _make_catenary(a, x0, c, x1_out, y1_out, u1)
+
+
+# Scratch rows: 9 named ones in _solve_chunk, then 20 for the helpers (gathered subsets,
+# _exact_slack's 12, _xi_iterated's 6).
+_ROW_FIRST_FREE: Final = 9
+_WORK_ROWS: Final = _ROW_FIRST_FREE + 20
 
 
 def _solve_chunk(
@@ -509,58 +522,87 @@ def _solve_chunk(
     big_l: FloatArray,
     *,
     out: FloatArray,
+    work: FloatArray,
+    flags: npt.NDArray[np.bool_],
     offset: int,
 ) -> None:
     """Vectorised solve of one chunk into ``out`` rows (a, x0, c, u1, x1, y1).
 
-    Runs under np.errstate(ignore). Each regime takes only its own path (index subsets,
-    cheaper than computing every path for every element and selecting), with the formulas
-    of :func:`_solve_scalar`.
+    The formulas of :func:`_solve_scalar`, written with ``out=`` into the scratch rows of
+    ``work``. Each regime takes only its own path (index subsets: cheaper than computing
+    every path for every element and selecting). Runs under np.errstate(ignore).
     """
+    m = x1.size
     a, x0, c, u1, x1_out, y1_out = out
-    dx = x2 - x1
-    dy = y2 - y1
-    v = np.abs(dy)
-    l_minus_v = big_l - v
-    l_plus_v = big_l + v
-    d_big = l_minus_v * l_plus_v - dx * dx  # D = L² − v² − h², plain
+    rows = work[:, :m]
+    dx, dy, l_minus_v, l_plus_v, d_big, h, w, y, xi = rows[:_ROW_FIRST_FREE]
+    tmp = rows[_ROW_FIRST_FREE:]
+    t0, t1 = tmp[0], tmp[1]
+    ok = flags[:m]
+
+    np.subtract(x2, x1, out=dx)
+    np.subtract(y2, y1, out=dy)
+    np.abs(dy, out=t0)  # |v|
+    np.subtract(big_l, t0, out=l_minus_v)
+    np.add(big_l, t0, out=l_plus_v)
+    np.multiply(l_minus_v, l_plus_v, out=d_big)
+    d_big -= np.multiply(dx, dx, out=t0)  # D = L² − v² − h², plain
     # Where D is small against L² (nearly taut) rounding in the plain form would dominate:
     # redo those elements without it.
-    tight = np.flatnonzero(~(d_big >= _NAIVE_D_MIN * big_l * big_l))
-    if tight.size == d_big.size:
-        d_big, l_minus_v = _exact_slack(x1, y1, x2, y2, big_l)
-    elif tight.size:
-        d_big[tight], l_minus_v[tight] = _exact_slack(
-            x1[tight], y1[tight], x2[tight], y2[tight], big_l[tight]
-        )
+    np.multiply(big_l, big_l, out=t0)
+    t0 *= _NAIVE_D_MIN
+    np.greater_equal(d_big, t0, out=ok)
+    n_plain = int(np.count_nonzero(ok))
+    if n_plain == 0:
+        _exact_slack(x1, y1, x2, y2, big_l, d_big, l_minus_v, tmp)
+    elif n_plain < m:
+        tight = np.flatnonzero(~ok)
+        k = tight.size
+        sub = tmp[:, :k]
+        for i, v in enumerate((x1, y1, x2, y2, big_l)):
+            np.take(v, tight, out=sub[i])
+        _exact_slack(sub[0], sub[1], sub[2], sub[3], sub[4], sub[5], sub[6], sub[7:])
+        d_big[tight] = sub[5]
+        l_minus_v[tight] = sub[6]
     d_min = d_big.min()
     if not (d_min >= 0.0 and d_big.max() < np.inf and big_l.min() >= 0.0):
         raise _first_domain_error(x1, y1, x2, y2, big_l, d_big, offset)
-    h = np.abs(dx)
-    w = d_big / (h * h)  # q² − 1
-    y = 0.5 * np.log1p(w)  # ln q
+
+    np.abs(dx, out=h)
+    np.multiply(h, h, out=w)
+    np.divide(d_big, w, out=w)  # q² − 1
+    np.log1p(w, out=y)
+    y *= 0.5  # ln q
     if y.max() == np.inf:  # h below ~1e-154·L: w overflows, ln q = ½·ln D − ln h
-        y = np.where(y == np.inf, 0.5 * np.log(d_big) - np.log(h), y)
-
-    small = w <= _SERIES_MAX_W
-    n_small = int(np.count_nonzero(small))
-    if n_small == w.size:
-        xi = _xi_series(w)
+        y[...] = np.where(y == np.inf, 0.5 * np.log(d_big) - np.log(h), y)
+    np.less_equal(w, _SERIES_MAX_W, out=ok)
+    n_small = int(np.count_nonzero(ok))
+    if n_small == m:
+        _xi_series(w, xi)
     elif n_small == 0:
-        xi = _xi_iterated(y)
+        _xi_iterated(y, xi, tmp)
     else:
-        xi = np.empty_like(w)
-        i_small = np.flatnonzero(small)
-        i_large = np.flatnonzero(~small)
-        xi[i_small] = _xi_series(w[i_small])
-        xi[i_large] = _xi_iterated(y[i_large])
+        i_small = np.flatnonzero(ok)
+        i_large = np.flatnonzero(~ok)
+        ks, kl = i_small.size, i_large.size
+        _xi_series(np.take(w, i_small, out=tmp[0, :ks]), tmp[1, :ks])
+        xi[i_small] = tmp[1, :ks]
+        _xi_iterated(np.take(y, i_large, out=tmp[0, :kl]), tmp[1, :kl], tmp[2:, :kl])
+        xi[i_large] = tmp[1, :kl]
 
-    np.divide(h, 2.0 * xi, out=a)
+    np.multiply(xi, 2.0, out=t0)
+    np.divide(h, t0, out=a)
     # atanh(|v|/L) = ½·ln((L + |v|)/(L − |v|)) (eq:cat6), with the sign of v·(x2 − x1);
     # its absolute error, not its relative one, is what reaches x0 and the curve.
-    t = np.copysign(0.5 * np.log(l_plus_v / np.maximum(l_minus_v, _TINY)), dy * dx)
-    np.subtract(t, np.copysign(xi, dx), out=u1)  # (x1 − x0)/a = t − sign(x2 − x1)·ξ
-    np.subtract(0.5 * (x1 + x2), a * t, out=x0)  # eq:cat6
+    np.maximum(l_minus_v, _TINY, out=t1)
+    np.divide(l_plus_v, t1, out=t1)
+    np.log(t1, out=t1)
+    t1 *= 0.5
+    np.copysign(t1, np.multiply(dy, dx, out=t0), out=t1)
+    np.subtract(t1, np.copysign(xi, dx, out=t0), out=u1)  # (x1 − x0)/a = t − sign(dx)·ξ
+    np.add(x1, x2, out=x0)
+    x0 *= 0.5
+    x0 -= np.multiply(a, t1, out=t0)  # eq:cat6
     np.cosh(u1, out=c)
     c *= a
     np.subtract(y1, c, out=c)  # eq:sys2_eq1
@@ -569,78 +611,153 @@ def _solve_chunk(
 
     if d_min == 0.0 or a.min() == 0.0 or not np.isfinite(c).all():
         a[...], x0[...], c[...], u1[...] = _patch_degenerate(
-            x1, y1, y2, big_l, dx, d_big, t, a, x0, c, u1
+            x1, y1, y2, big_l, dx, d_big, t1, a, x0, c, u1
         )
 
 
+def _split(x: FloatArray, hi: FloatArray, lo: FloatArray, p: FloatArray) -> None:
+    """Dekker's split x = hi + lo, 26 bits each, so products of parts are exact."""
+    np.multiply(x, _SPLIT, out=p)
+    np.subtract(p, x, out=lo)
+    np.subtract(p, lo, out=hi)
+    np.subtract(x, hi, out=lo)
+
+
+def _two_diff(
+    a: FloatArray, b: FloatArray, d: FloatArray, err: FloatArray, tmp: FloatArray
+) -> None:
+    """Knuth's two-sum for a − b: d + err == a − b exactly."""
+    np.subtract(a, b, out=d)
+    np.subtract(d, a, out=tmp)  # bb
+    np.subtract(d, tmp, out=err)
+    np.subtract(a, err, out=err)  # a − (d − bb)
+    tmp += b  # b + bb
+    err -= tmp
+
+
 def _exact_slack(
-    x1: FloatArray, y1: FloatArray, x2: FloatArray, y2: FloatArray, big_l: FloatArray
-) -> tuple[FloatArray, FloatArray]:
+    x1: FloatArray,
+    y1: FloatArray,
+    x2: FloatArray,
+    y2: FloatArray,
+    big_l: FloatArray,
+    d_out: FloatArray,
+    lmv_out: FloatArray,
+    scratch: FloatArray,
+) -> None:
     """D = L² − (x2 − x1)² − (y2 − y1)² and L − |y2 − y1| to ~2^-100·L², error-free.
 
     Knuth's two-sum gives each difference with its exact rounding error, Dekker's split
     makes every product of parts exact, and l_hi² − (x_hi² + y_hi²) is exact when nearly
     taut (Sterbenz); what is left is below 2^-80·L². :func:`_solve_scalar` inlines the same.
+    ``scratch`` needs 12 rows.
     """
-    dx = x2 - x1
-    bb = dx - x2
-    dx_err = (x2 - (dx - bb)) - (x1 + bb)  # dx + dx_err == x2 − x1 exactly
-    dy = y2 - y1
-    bb = dy - y2
-    dy_err = (y2 - (dy - bb)) - (y1 + bb)
-    p = _SPLIT * big_l
-    l_hi = p - (p - big_l)
-    l_lo = big_l - l_hi
-    p = _SPLIT * dx
-    x_hi = p - (p - dx)
-    x_lo = dx - x_hi
-    p = _SPLIT * dy
-    y_hi = p - (p - dy)
-    y_lo = dy - y_hi
-    x_hi2 = x_hi * x_hi
-    y_hi2 = y_hi * y_hi
-    s_hi = x_hi2 + y_hi2
-    bb = s_hi - x_hi2
-    s_err = (x_hi2 - (s_hi - bb)) + (y_hi2 - bb)
-    d_big = (
-        ((l_hi * l_hi - s_hi) - s_err)
-        + 2.0 * (l_hi * l_lo - x_hi * x_lo - y_hi * y_lo)
-        + (l_lo * l_lo - x_lo * x_lo - y_lo * y_lo)
-        - 2.0 * (dx * dx_err + dy * dy_err)
-    )
-    return d_big, (big_l - np.abs(dy)) - np.sign(dy) * dy_err
+    dx, dx_err, dy, dy_err, l_hi, l_lo, x_hi, x_lo, y_hi, y_lo, p, bb = scratch[:12]
+    _two_diff(x2, x1, dx, dx_err, p)
+    _two_diff(y2, y1, dy, dy_err, p)
+    # L − |v| with the exact v = dy + dy_err.
+    np.subtract(big_l, np.abs(dy, out=p), out=lmv_out)
+    lmv_out -= np.multiply(np.sign(dy, out=p), dy_err, out=p)
+    np.multiply(dx_err, dx, out=dx_err)
+    dx_err += np.multiply(dy_err, dy, out=dy_err)  # dx·dx_err + dy·dy_err
+    _split(big_l, l_hi, l_lo, p)
+    _split(dx, x_hi, x_lo, p)
+    _split(dy, y_hi, y_lo, p)
+    x_hi2 = np.multiply(x_hi, x_hi, out=dx)
+    y_hi2 = np.multiply(y_hi, y_hi, out=dy)
+    s_hi = np.add(x_hi2, y_hi2, out=dy_err)
+    np.subtract(s_hi, x_hi2, out=bb)
+    np.subtract(s_hi, bb, out=p)
+    np.subtract(x_hi2, p, out=p)
+    np.subtract(y_hi2, bb, out=bb)
+    p += bb  # two-sum error of s_hi
+    # D = ((l_hi² − s_hi) − s_err) + 2(l_hi·l_lo − x_hi·x_lo − y_hi·y_lo)
+    #     + (l_lo² − x_lo² − y_lo²) − 2(dx·dx_err + dy·dy_err)
+    np.multiply(l_hi, l_hi, out=d_out)
+    d_out -= s_hi
+    d_out -= p
+    np.multiply(l_hi, l_lo, out=p)
+    p -= np.multiply(x_hi, x_lo, out=bb)
+    p -= np.multiply(y_hi, y_lo, out=bb)
+    p *= 2.0
+    d_out += p
+    np.multiply(l_lo, l_lo, out=p)
+    p -= np.multiply(x_lo, x_lo, out=bb)
+    p -= np.multiply(y_lo, y_lo, out=bb)
+    d_out += p
+    dx_err *= 2.0
+    d_out -= dx_err
 
 
-def _xi_series(w: FloatArray) -> FloatArray:
-    """ξ for w <= _SERIES_MAX_W from the reverted series t(w) = ξ²."""
-    t = _T5 * w
+def _xi_series(w: FloatArray, xi: FloatArray) -> None:
+    """ξ into ``xi`` for w <= _SERIES_MAX_W from the reverted series t(w) = ξ²."""
+    np.multiply(w, _T5, out=xi)
     for coef in (_T4, _T3, _T2, _T1):
-        t += coef
-        t *= w
-    return np.sqrt((t + _T0) * w)
+        xi += coef
+        xi *= w
+    xi += _T0
+    xi *= w
+    np.sqrt(xi, out=xi)
 
 
-def _xi_iterated(y: FloatArray) -> FloatArray:
-    """ξ from y = ln q > ½·ln(1 + _SERIES_MAX_W): start, Halley, Newton (see _solve_scalar)."""
-    y_capped = np.minimum(y, _MAX_LN_Q)
-    yc = np.minimum(y_capped, 30.0)
-    y_2q = y_capped + _LN2  # ln 2q
-    xi = np.maximum(np.sqrt(yc * (6.0 + 1.2 * yc)), y_2q + np.log(y_2q + np.log(y_2q)))
-    e = np.exp(xi)
-    ei = 1.0 / e
-    sh2 = e - ei  # 2·sinh ξ
-    rx = 1.0 / xi
-    f = np.log(sh2 * rx) - y_2q  # ψ
-    p1 = (e + ei) / sh2 - rx  # ψ'
-    xi -= 2.0 * f * p1 / (2.0 * p1 * p1 - f * (rx * rx - 4.0 / (sh2 * sh2)))  # Halley
-    e = np.exp(xi)
-    ei = 1.0 / e
-    sh2 = e - ei
-    xi -= (np.log(sh2 / xi) - y_2q) / ((e + ei) / sh2 - 1.0 / xi)  # Newton
+def _xi_iterated(y: FloatArray, xi: FloatArray, scratch: FloatArray) -> None:
+    """ξ into ``xi`` from y = ln q > ½·ln(1 + _SERIES_MAX_W) (7 scratch rows).
+
+    Start: the larger of ξ² ≈ 6y + 1.2y² (series of ψ) and ξ ≈ ln(2qξ) iterated once from
+    ln 2q, each within 4 % where it is the larger. Then one Halley and one Newton step on
+    ψ(ξ) = ln(sinh ξ/ξ) − ln q (4e-2 → 5e-7 → 1e-13) with ψ' = coth ξ − 1/ξ and
+    ψ'' = 1/ξ² − 1/sinh² ξ.
+    """
+    y_2q, b0, b1, b2, b3, b4 = scratch[:6]
+    np.minimum(y, _MAX_LN_Q, out=y_2q)  # sinh stays finite; larger y below
+    np.minimum(y_2q, 30.0, out=b0)
+    np.multiply(b0, 1.2, out=b1)
+    b1 += 6.0
+    b1 *= b0
+    np.sqrt(b1, out=b1)
+    y_2q += _LN2  # ln 2q
+    np.log(y_2q, out=b0)
+    b0 += y_2q
+    np.log(b0, out=b0)
+    b0 += y_2q
+    np.maximum(b1, b0, out=xi)
+    # Halley
+    e = np.exp(xi, out=b0)
+    ei = np.divide(1.0, e, out=b1)
+    sh2 = np.subtract(e, ei, out=b2)  # 2·sinh ξ
+    ch2 = np.add(e, ei, out=b0)  # 2·cosh ξ
+    rx = np.divide(1.0, xi, out=b3)
+    f = np.multiply(sh2, rx, out=b4)
+    np.log(f, out=f)
+    f -= y_2q  # ψ
+    p1 = np.divide(ch2, sh2, out=b0)
+    p1 -= rx  # ψ'
+    p2 = np.multiply(sh2, sh2, out=b1)
+    np.divide(4.0, p2, out=p2)
+    np.subtract(np.multiply(rx, rx, out=b2), p2, out=p2)  # ψ''
+    p2 *= f
+    den = np.multiply(p1, p1, out=b2)
+    den *= 2.0
+    den -= p2  # 2ψ'² − ψψ''
+    f *= p1
+    f *= 2.0
+    f /= den
+    xi -= f
+    # Newton
+    e = np.exp(xi, out=b0)
+    ei = np.divide(1.0, e, out=b1)
+    sh2 = np.subtract(e, ei, out=b2)
+    ch2 = np.add(e, ei, out=b0)
+    f = np.divide(sh2, xi, out=b4)
+    np.log(f, out=f)
+    f -= y_2q
+    p1 = np.divide(ch2, sh2, out=b0)
+    p1 -= np.divide(1.0, xi, out=b1)
+    f /= p1
+    xi -= f
     if y.max() > _MAX_LN_Q:
         huge = y > _MAX_LN_Q
         xi[huge] = _xi_asymptotic(y[huge])
-    return xi
 
 
 def _patch_degenerate(
