@@ -28,15 +28,21 @@ Numerics
 --------
 ``solve`` reduces eq:cat7 to one equation ``sinh(ξ)/ξ = q`` with ``ξ = h/(2a)`` and
 ``q = sqrt(L² − v²)/h`` (see NOTES.md). Its hard regime is q → 1 (nearly taut): there the
-answer depends on ``L² − h² − v²``, a difference of nearly equal squares, and on the
-differences ``x2 − x1``, ``y2 − y1`` of the inputs. That quantity is evaluated with
-error-free transformations (Dekker's split and Knuth's two-sum), so ``a`` keeps full relative
-precision even when ``a`` is 1e5 times the span, and ``x0 = x̄ − a·atanh(v/L)`` (which can be
-1e5 m away) is right to ~1e-12 m. ``d = q − 1`` is then inverted by its exact power series for
-small ``d`` and by two Halley steps on ``ln(sinh ξ / ξ) = ln q`` otherwise. The curve is
-evaluated from an anchor point on it (NOTES):
+answer depends on the slack ``D = L² − v² − h²``, a difference of nearly equal squares, and
+on the differences ``x2 − x1``, ``y2 − y1`` of the inputs. Where D is below 2^-12·L², it is
+evaluated with error-free transformations (Knuth's two-sum, Dekker's split), so ``a`` keeps
+full relative precision even when it is 1e5 times the span, and ``x0 = x̄ − a·atanh(v/L)``
+(which can be 1e5 m away) stays right to ~1e-12·L. Then ``w = q² − 1 = D/h²`` gives ξ by the
+exact reverted power series ξ²(w) for w <= 2e-3; above, ξ is iterated on the well-conditioned
+``ψ(ξ) = ln(sinh ξ/ξ) − ln q``: vectorised, from a two-formula start (4 %) by one Halley and
+one Newton step; scalar, from a tabulated polynomial start (6e-7) by one Newton step. Both
+reach ~1e-13, measured against 50- and 60-digit mpmath references (tests, benchmark). The
+curve is evaluated from an anchor point on it (NOTES):
 ``y(x) − y1 = 2a·sinh((x + x1 − 2x0)/(2a))·sinh((x − x1)/(2a))``, which never forms the huge,
 cancelling ``c``.
+
+The vectorised path works in chunks of scratch rows reused with ``out=`` (no allocation in
+the loop), each element taking only its own regime's branch; the scalar path uses ``math``.
 """
 
 from __future__ import annotations
@@ -88,70 +94,33 @@ _NAIVE_D_MIN: Final = 2.0**-12
 # c0 … c8). Chebyshev interpolation of the 40-digit root (mpmath) at 9 nodes per segment,
 # converted to powers of s; relative error below 6e-7 (checked in tests/test_catenary.py), so
 # one Newton step leaves 2e-13.
+# fmt: off
 _XI_START: Final = (
-    (
-        0.11842897541618509,
-        0.07493876287440118,
-        22.99367930288302,
-        2.450865092299136,
-        0.0015960717095184858,
-        0.00046281155109291684,
-        -1.8802786169363686e-07,
-        -2.7593027193591934e-08,
-        -1.0813007277113539e-10,
-        -1.006803798488215e-11,
-        1.0283124296592053e-13,
-        8.699293528894794e-15,
-    ),
-    (
-        0.44597992816160803,
-        0.2822044517888966,
-        6.10592026442502,
-        2.4689484605833503,
-        0.02252789184589749,
-        0.0064691375325726065,
-        -4.0464883562110884e-05,
-        -6.6349429199101345e-06,
-        -2.3485627286921354e-07,
-        -8.00873504502517e-09,
-        3.401663706093759e-09,
-        1.6416583196788878e-10,
-    ),
-    (
-        1.6794715619556961,
-        1.062725745058652,
-        1.6214135104007266,
-        2.714977982924537,
-        0.29424663331754347,
-        0.06885650799748458,
-        -0.009391229065466532,
-        -0.0006619641516980653,
-        0.0004900028979490963,
-        3.3572303444332205e-05,
-        -3.900938662214861e-05,
-        -1.5338055431611782e-06,
-    ),
-    (
-        6.324555320336759,
-        4.002013441146228,
-        0.43056274203698197,
-        4.919857521476569,
-        2.0384259248573424,
-        0.1067892696821451,
-        -0.04436026901701293,
-        0.019524921092658555,
-        -0.008595824357706025,
-        0.004280211411542815,
-        -0.0026109328131060233,
-        0.0009196998378642006,
-    ),
+    (0.11842897541618509, 0.07493876287440118, 22.99367930288302,
+     2.450865092299136, 0.0015960717095184858, 0.00046281155109291684,
+     -1.8802786169363686e-07, -2.7593027193591934e-08, -1.0813007277113539e-10,
+     -1.006803798488215e-11, 1.0283124296592053e-13, 8.699293528894794e-15),
+    (0.44597992816160803, 0.2822044517888966, 6.10592026442502,
+     2.4689484605833503, 0.02252789184589749, 0.0064691375325726065,
+     -4.0464883562110884e-05, -6.6349429199101345e-06, -2.3485627286921354e-07,
+     -8.00873504502517e-09, 3.401663706093759e-09, 1.6416583196788878e-10),
+    (1.6794715619556961, 1.062725745058652, 1.6214135104007266,
+     2.714977982924537, 0.29424663331754347, 0.06885650799748458,
+     -0.009391229065466532, -0.0006619641516980653, 0.0004900028979490963,
+     3.3572303444332205e-05, -3.900938662214861e-05, -1.5338055431611782e-06),
+    (6.324555320336759, 4.002013441146228, 0.43056274203698197,
+     4.919857521476569, 2.0384259248573424, 0.1067892696821451,
+     -0.04436026901701293, 0.019524921092658555, -0.008595824357706025,
+     0.004280211411542815, -0.0026109328131060233, 0.0009196998378642006),
 )
+# fmt: on
 _XI_START_Y_MAX: Final = 40.0
 _LN2: Final = math.log(2.0)
 _sqrt, _log, _log1p, _exp, _cosh = math.sqrt, math.log, math.log1p, math.exp, math.cosh
 _TINY: Final = np.finfo(np.float64).tiny
 _EPS: Final = np.finfo(np.float64).eps
-# Elements per pass of the vectorised solver: the ~150 temporaries of a pass stay in cache.
+# Elements per pass of the vectorised solver: its 29 scratch rows (7 MiB) stay in the L3
+# cache; smaller passes pay more Python overhead per element (measured 8k-64k: 32k best).
 _CHUNK: Final = 32768
 # Series of asinh(S) − S and of asinh(S) − 2S/(1 + sqrt(1 + S²)) in S² (after S³), used for
 # a hanging part much shorter than a (S = s/a < 0.1) where the closed forms cancel.
@@ -178,7 +147,7 @@ class TetherTooShortError(CatenaryError):
         self.chord_m = chord_m
         super().__init__(
             f"tether length {length_m!r} m is shorter than the chord {chord_m!r} m between "
-            f"its end points{detail}: no catenary exists (a real tether is taut there)"
+            f"its end points{detail}: no catenary reaches that far"
         )
 
 
@@ -350,8 +319,8 @@ def _solve_scalar(
     dx = x2 - x1
     dy = y2 - y1
     v = abs(dy)
-    # D = L² − h² − v² = 2a·sinh(ξ)·... > 0 measures the slack; see _solve_chunk for the
-    # error-free version, used here only when D is small enough for rounding to matter.
+    # D = L² − v² − h² >= 0, the slack (0 when taut). Where it is small against L², rounding
+    # in this plain form would dominate: the error-free evaluation of _exact_slack, inlined.
     d_big = (big_l - v) * (big_l + v) - dx * dx
     if d_big >= _NAIVE_D_MIN * big_l * big_l:
         l_minus_v = big_l - v
@@ -495,7 +464,7 @@ def _solve_arrays(
     out = np.empty((6, n))  # rows: a, x0, c, u1 and the anchor x1, y1 (copies of the inputs)
     # Scratch rows reused by every chunk, so that the loop allocates (almost) nothing: a
     # freshly allocated temporary of 100 KiB or more costs page faults whenever the
-    # allocator has returned its memory to the OS, which made the solver 3-5x slower.
+    # allocator has handed its memory back to the OS (4x slower iterations in isolation).
     width = max(1, min(n, _CHUNK))
     work = np.empty((_WORK_ROWS, width))
     flags = np.empty(width, dtype=np.bool_)
@@ -701,7 +670,7 @@ def _xi_series(w: FloatArray, xi: FloatArray) -> None:
 
 
 def _xi_iterated(y: FloatArray, xi: FloatArray, scratch: FloatArray) -> None:
-    """ξ into ``xi`` from y = ln q > ½·ln(1 + _SERIES_MAX_W) (7 scratch rows).
+    """ξ into ``xi`` from y = ln q > ½·ln(1 + _SERIES_MAX_W) (6 scratch rows).
 
     Start: the larger of ξ² ≈ 6y + 1.2y² (series of ψ) and ξ ≈ ln(2qξ) iterated once from
     ln 2q, each within 4 % where it is the larger. Then one Halley and one Newton step on
@@ -820,9 +789,9 @@ def locate(
     """Drone end of a freely hanging tether from the tension on the drone (sec. pos_est).
 
     With ``a = H/ω`` (eq:a_param) and ``s2 = T_v/ω`` (eq:s2_param) the signed arc length from
-    the lowest point to the drone (negative when the tether pulls the drone up, i.e. the drone
-    hangs below the lowest point's level on the base side), the base is at ``s2 − L``
-    (eq:posfull_stot) and eqs. posfull_r_0 … posfull_C collapse to (NOTES):
+    the lowest point to the drone (negative when the tether pulls the drone up: then the
+    drone is the lowest point of the tether, which rises all the way to the base), the base is
+    at ``s2 − L`` (eq:posfull_stot) and eqs. posfull_r_0 … posfull_C collapse to (NOTES):
 
         r = a·[asinh(s2/a) + asinh((L − s2)/a)]
         z = z_i + sqrt(a² + s2²) − sqrt(a² + (L − s2)²) = z_i + (2·s2 − L)·L / (sum of roots)
@@ -973,7 +942,7 @@ def locate_with_floor(
         weight_n_per_m: Tether weight per length ω [N/m], > 0.
         length_m: Tether length L [m], > 0.
         base_z_m: Height of the base exit z_i [m], >= floor_z_m.
-        floor_z_m: Height of the floor z_f [m].
+        floor_z_m: Height of the floor z_f [m]; -inf for no floor (then as :func:`locate`).
 
     Returns:
         A :class:`FloorLocation`; floats for scalar inputs, else arrays of the broadcast shape.
@@ -986,7 +955,7 @@ def locate_with_floor(
         horizontal_n, vertical_n, weight_n_per_m, length_m, base_z_m
     )
     z_f = np.broadcast_to(np.asarray(floor_z_m, dtype=np.float64), h_n.shape)
-    _require(z_f, np.isfinite(z_f), "floor_z_m", "finite")
+    _require(z_f, z_f < np.inf, "floor_z_m", "below +inf (-inf: no floor)")
     _require(z_i, z_i >= z_f, "base_z_m", f"at or above floor_z_m ({floor_z_m!r})")
     a = h_n / omega
     s2 = tv_n / omega
@@ -1021,7 +990,7 @@ def locate_with_floor(
         return FloorLocation(
             float(r_m), float(z_m), float(lo), float(r_m), bool(contact), float(run_m)
         )
-    return FloorLocation(r_m, z_m, lo, r_m, contact, run_m)
+    return FloorLocation(r_m, z_m, lo, r_m.copy(), contact, run_m)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -1067,9 +1036,10 @@ def tether_force(
     Floor contact (NOTES): if the free solution's lowest point is below the floor, the
     tether touches down and each side hangs from a zero-slope touchdown point; with a straight
     run on the floor ``a`` solves ``r = a·acosh(1 + h_d/a) + (L − s_d − s_b) + a·acosh(1 +
-    h_b/a)``, ``s = sqrt(h² + 2a·h)``, found by a bracketed Newton iteration (monotone from the
-    left, the function being concave in a). If even a → 0 leaves slack
-    (``L − h_d − h_b >= r``), the tether piles up: H = 0 and T_v = ω·h_d.
+    h_b/a)``, ``s = sqrt(h² + 2a·h)``: Newton's method in a on [0, an upper bound from the
+    small- and large-a asymptotes], monotone once left of the root since the residual is
+    concave and increasing in a (a step past zero shrinks a instead). If even a → 0 leaves
+    slack (``L − h_d − h_b >= r``), the tether piles up: H = 0 and T_v = ω·h_d.
 
     Args:
         base_world_m: (3,) base exit point, world frame [m].
@@ -1182,7 +1152,7 @@ def _hang(r: float, bz: float, pz: float, big_l: float, floor: float) -> _Hang:
 
 
 def _a_sinh_sq_half(a: float, u: float) -> float:
-    """a·sinh²(u/2) = (a·cosh(u) − a)/2: depth of the vertex below the point at parameter u."""
+    """a·sinh²(u/2) = (a·cosh(u) − a)/2: half the depth of the vertex below the point at u."""
     if abs(u) < 1400.0:
         sh = math.sinh(0.5 * u)
         return a * sh * sh
@@ -1311,7 +1281,7 @@ def tether_points(
         x, z = _touchdown_profile(geom.a, geom.s_base, geom.floor_run_m, bz, floor, s)
         pts = _plane_to_world(base, ux, uy, x, z)
     else:  # pile
-        pts = _pile_points(base, drone, ux, uy, r, geom.s_base, geom.floor_run_m, floor, s)
+        pts = _pile_points(base, ux, uy, r, geom.s_base, geom.floor_run_m, floor, s)
     pts[0] = base
     pts[-1] = drone
     return pts
@@ -1354,7 +1324,6 @@ def _touchdown_profile(
 
 def _pile_points(
     base: FloatArray,
-    drone: FloatArray,
     ux: float,
     uy: float,
     r: float,
