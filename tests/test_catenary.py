@@ -8,6 +8,7 @@ import sys
 
 import mpmath as mp
 import numpy as np
+import numpy.typing as npt
 import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
@@ -63,11 +64,17 @@ def mp_curve(ref: dict[str, mp.mpf], x: float) -> mp.mpf:
         return Y1 + 2 * a * mp.sinh((X + X1 - 2 * x0) / (2 * a)) * mp.sinh((X - X1) / (2 * a))
 
 
-def assert_matches_reference(cat: Catenary, case: tuple[float, ...], index: object = None) -> None:
+def arr(value: object) -> npt.NDArray[np.float64]:
+    return np.asarray(value, dtype=np.float64)
+
+
+def assert_matches_reference(
+    cat: Catenary, case: tuple[float, ...], index: int | None = None
+) -> None:
     x1, _, x2, _, length = case
     ref = mp_reference(*case)
-    a = float(cat.a if index is None else cat.a[index])  # type: ignore[index]
-    x0 = float(cat.x0 if index is None else cat.x0[index])  # type: ignore[index]
+    a = float(arr(cat.a) if index is None else arr(cat.a)[index])
+    x0 = float(arr(cat.x0) if index is None else arr(cat.x0)[index])
     scale = max(1.0, length)
     assert math.isfinite(a) and math.isfinite(x0), (case, a, x0)
     assert abs(mp.mpf(a) / ref["a"] - 1) <= 1e-9, (case, a, ref["a"])
@@ -79,15 +86,10 @@ def assert_matches_reference(cat: Catenary, case: tuple[float, ...], index: obje
         assert abs(mp.mpf(y) - mp_curve(ref, x)) <= 1e-9 * scale, (case, frac, y)
 
 
-def _pick(cat: Catenary, index: object) -> Catenary:
-    return Catenary(
-        float(cat.a[index]),  # type: ignore[index]
-        float(cat.x0[index]),  # type: ignore[index]
-        float(cat.c[index]),  # type: ignore[index]
-        float(cat.x1[index]),  # type: ignore[index]
-        float(cat.y1[index]),  # type: ignore[index]
-        float(cat.u1[index]),  # type: ignore[index]
-    )
+def _pick(cat: Catenary, index: int) -> Catenary:
+    fields = (cat.a, cat.x0, cat.c, cat.x1, cat.y1, cat.u1)
+    a, x0, c, x1, y1, u1 = (float(arr(f)[index]) for f in fields)
+    return Catenary(a, x0, c, x1, y1, u1)
 
 
 def _case(x1: float, y1: float, h: float, v: float, ratio: float) -> tuple[float, ...]:
@@ -175,21 +177,22 @@ def test_scalar_and_vectorised_paths_agree() -> None:
     cat = solve(*cols)
     for i, case in enumerate(GRID):
         one = solve(*case)
-        assert one.a == pytest.approx(cat.a[i], rel=1e-11)  # type: ignore[index]
-        assert one.x0 == pytest.approx(cat.x0[i], rel=1e-11, abs=1e-11 * max(1.0, case[4]))  # type: ignore[index]
+        assert one.a == pytest.approx(arr(cat.a)[i], rel=1e-11)
+        assert one.x0 == pytest.approx(arr(cat.x0)[i], rel=1e-11, abs=1e-11 * max(1.0, case[4]))
 
 
-finite = {"allow_nan": False, "allow_infinity": False}
+def floats(lo: float, hi: float) -> st.SearchStrategy[float]:
+    return st.floats(lo, hi, allow_nan=False, allow_infinity=False)
 
 
 @st.composite
 def catenary_cases(draw: st.DrawFn) -> tuple[float, ...]:
     """The whole domain: offsets, spans of both signs, rises, L/chord from 1 + 1e-9 to 1e4."""
-    x1 = draw(st.floats(-20.0, 20.0, **finite))
-    y1 = draw(st.floats(-20.0, 20.0, **finite))
-    h = draw(st.floats(1e-6, 20.0, **finite)) * draw(st.sampled_from((-1.0, 1.0)))
-    v = draw(st.one_of(st.just(0.0), st.floats(-20.0, 20.0, **finite)))
-    excess_log10 = draw(st.floats(-9.0, 4.0, **finite))
+    x1 = draw(floats(-20.0, 20.0))
+    y1 = draw(floats(-20.0, 20.0))
+    h = draw(floats(1e-6, 20.0)) * draw(st.sampled_from((-1.0, 1.0)))
+    v = draw(st.one_of(st.just(0.0), floats(-20.0, 20.0)))
+    excess_log10 = draw(floats(-9.0, 4.0))
     case = _case(x1, y1, h, v, 1.0 + 10.0**excess_log10)
     x2, y2 = case[2], case[3]
     assume(x2 != x1)
@@ -232,11 +235,11 @@ def test_curve_passes_through_both_points_with_length() -> None:
         cat = solve(*case)
         assert cat.y(x1) == y1
         assert cat.y(x2) == pytest.approx(y2, abs=1e-9 * max(1.0, length))
-        if cat.a > 0.0 and cat.a < math.inf:  # type: ignore[operator]
+        if cat.a > 0.0 and cat.a < math.inf:
             # Arc length from the slopes at both ends: a·|sinh(u2) − sinh(u1)|.
-            u1 = float(cat.u1)  # type: ignore[arg-type]
-            u2 = u1 + (x2 - x1) / float(cat.a)  # type: ignore[arg-type]
-            arc = abs(float(cat.a) * (math.sinh(u2) - math.sinh(u1)))  # type: ignore[arg-type]
+            u1 = float(arr(cat.u1))
+            u2 = u1 + (x2 - x1) / float(cat.a)
+            arc = abs(float(cat.a) * (math.sinh(u2) - math.sinh(u1)))
             assert arc == pytest.approx(length, rel=1e-9)
 
 
@@ -264,7 +267,7 @@ def test_arrays_broadcast() -> None:
     for i in range(3):
         for j in range(4):
             one = solve(0.0, 0.754, float(x2[i, 0]), 1.0, float(length[j]))
-            assert cat.a[i, j] == pytest.approx(one.a, rel=1e-11)  # type: ignore[index]
+            assert arr(cat.a)[i, j] == pytest.approx(one.a, rel=1e-11)
     y = cat.y(np.zeros((3, 4)))
     assert isinstance(y, np.ndarray)
     np.testing.assert_allclose(y, 0.754, atol=1e-12)
@@ -281,10 +284,10 @@ def test_arrays_longer_than_a_chunk() -> None:
     y2 = y1 + rng.uniform(-2, 2, n)
     length = np.hypot(x2 - x1, y2 - y1) * (1.0 + 10.0 ** rng.uniform(-9, 3, n))
     cat = solve(x1, y1, x2, y2, length)
-    assert np.all(np.isfinite(cat.a)) and np.all(cat.a > 0)  # type: ignore[operator]
+    assert np.all(np.isfinite(cat.a)) and np.all(cat.a > 0)
     for i in rng.choice(n, 20, replace=False):
         one = solve(float(x1[i]), float(y1[i]), float(x2[i]), float(y2[i]), float(length[i]))
-        assert cat.a[i] == pytest.approx(one.a, rel=1e-11)  # type: ignore[index]
+        assert arr(cat.a)[i] == pytest.approx(one.a, rel=1e-11)
     assert np.all(np.abs(cat.y(x2) - y2) <= 1e-9 * np.maximum(1.0, length))
 
 
@@ -292,7 +295,7 @@ def test_leftward_span_mirrors_rightward() -> None:
     right = solve(0.0, 0.754, 1.0, 1.0, 1.6)
     left = solve(0.0, 0.754, -1.0, 1.0, 1.6)
     assert left.a == pytest.approx(right.a, rel=1e-15)
-    assert left.x0 == pytest.approx(-right.x0, rel=1e-15)  # type: ignore[operator]
+    assert left.x0 == pytest.approx(-right.x0, rel=1e-15)
     assert left.y(-0.3) == pytest.approx(right.y(0.3), abs=1e-15)
 
 
@@ -321,8 +324,8 @@ def test_plumb_line_is_documented_degenerate() -> None:
     taut_vertical = solve(0.5, 0.0, 0.5, 1.0, 1.0)
     assert taut_vertical.a == 0.0 and taut_vertical.c == 0.0
     arrays = solve(np.array([0.5, 0.0]), 0.0, np.array([0.5, 1.0]), 1.0, 1.6)
-    assert arrays.a[0] == 0.0 and arrays.c[0] == pytest.approx(-0.3)  # type: ignore[index]
-    assert np.all(np.isfinite(arrays.a)) and np.all(np.isfinite(arrays.c))  # type: ignore[arg-type]
+    assert arr(arrays.a)[0] == 0.0 and arr(arrays.c)[0] == pytest.approx(-0.3)
+    assert np.all(np.isfinite(arrays.a)) and np.all(np.isfinite(arrays.c))
     y = arrays.y(np.array([0.5, 0.5]))
     assert isinstance(y, np.ndarray) and y[0] == pytest.approx(-0.3) and np.isfinite(y[1])
 
@@ -331,14 +334,14 @@ def test_near_plumb_tends_to_plumb() -> None:
     plumb = solve(0.0, 0.754, 0.0, 1.0, 1.6)
     for h in (1e-3, 1e-6, 1e-9, 1e-12, 1e-100, 1e-300):
         cat = solve(0.0, 0.754, h, 1.0, 1.6)
-        assert 0.0 < cat.a < 10 * h  # type: ignore[operator]
-        assert cat.a + cat.c == pytest.approx(plumb.c, abs=2 * h + 1e-12)  # type: ignore[operator]
-        assert math.isfinite(cat.x0) and math.isfinite(cat.u1)  # type: ignore[arg-type]
+        assert 0.0 < cat.a < 10 * h
+        assert cat.a + cat.c == pytest.approx(plumb.c, abs=2 * h + 1e-12)
+        assert np.isfinite(arr(cat.x0)) and np.isfinite(arr(cat.u1))
         many = solve(np.array([0.0, 0.0]), 0.754, np.array([h, 0.7]), 1.0, 1.6)
-        assert many.a[0] == pytest.approx(cat.a, rel=1e-12)  # type: ignore[index]
-        assert many.c[0] == pytest.approx(cat.c, abs=1e-12)  # type: ignore[index]
+        assert arr(many.a)[0] == pytest.approx(cat.a, rel=1e-12)
+        assert arr(many.c)[0] == pytest.approx(cat.c, abs=1e-12)
     tiniest = solve(np.array([0.0, 0.0]), 0.754, np.array([5e-324, 0.7]), 1.0, 1.6)
-    assert tiniest.a[0] == 0.0 and tiniest.c[0] == pytest.approx(plumb.c)  # type: ignore[index]
+    assert arr(tiniest.a)[0] == 0.0 and arr(tiniest.c)[0] == pytest.approx(plumb.c)
     assert solve(0.0, 0.754, 5e-324, 1.0, 1.6).c == pytest.approx(plumb.c)
 
 
@@ -357,7 +360,7 @@ def test_exactly_taut_is_the_straight_line() -> None:
 
 def test_nearly_taut_a_reaches_1e5_and_sag_is_tiny() -> None:
     cat = solve(0.0, 0.0, 20.0, 0.0, 20.0 * (1 + 1e-9))
-    assert cat.a > 1e5  # type: ignore[operator]
+    assert cat.a > 1e5
     sag = -cat.y(10.0)
     assert sag == pytest.approx(20.0 * math.sqrt(3e-9 / 8), rel=1e-3)
 
@@ -381,18 +384,18 @@ def test_catenary_is_frozen() -> None:
 
 @settings(max_examples=200, deadline=None)
 @given(
-    st.floats(0.05, 5.0, **finite),
-    st.floats(-3.0, 3.0, **finite),
-    st.floats(1e-6, 10.0, **finite),
-    st.floats(1.0 + 1e-6, 3.0, **finite),
+    floats(0.05, 5.0),
+    floats(-3.0, 3.0),
+    floats(1e-6, 10.0),
+    floats(1.0 + 1e-6, 3.0),
 )
 def test_more_slack_sags_deeper(h: float, v: float, excess: float, grow: float) -> None:
     chord = math.hypot(h, v)
     tight = solve(0.0, 0.0, h, v, chord * (1 + excess))
     slack = solve(0.0, 0.0, h, v, chord * (1 + excess) * grow)
-    assert slack.a < tight.a  # type: ignore[operator]
+    assert slack.a < tight.a
     # The height at mid-span drops as the length grows.
-    assert slack.y(0.5 * h) < tight.y(0.5 * h)  # type: ignore[operator]
+    assert slack.y(0.5 * h) < tight.y(0.5 * h)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -502,17 +505,17 @@ def test_locate_rejects_bad_inputs(args: tuple[float, ...], name: str) -> None:
 def _solve_to_tension(x2: float, y2: float, length: float, base_z: float) -> tuple[float, float]:
     """H and T_v at the drone end of solve(0, base_z, x2, y2, L) (eq:cat_T0, eq:cat_Tv)."""
     cat = solve(0.0, base_z, x2, y2, length)
-    a = float(cat.a)  # type: ignore[arg-type]
-    sigma = a * math.sinh(float(cat.u1) + x2 / a)  # type: ignore[arg-type]  # a·sinh((x2 − x0)/a)
+    a = float(cat.a)
+    sigma = a * math.sinh(float(arr(cat.u1)) + x2 / a)  # a·sinh((x2 − x0)/a)
     return OMEGA_N_PER_M * a, OMEGA_N_PER_M * sigma
 
 
 @settings(max_examples=300, deadline=None)
 @given(
-    st.floats(0.01, 5.0, **finite),
-    st.floats(-3.0, 3.0, **finite),
-    st.floats(-6.0, 1.0, **finite),
-    st.floats(-2.0, 2.0, **finite),
+    floats(0.01, 5.0),
+    floats(-3.0, 3.0),
+    floats(-6.0, 1.0),
+    floats(-2.0, 2.0),
 )
 def test_solve_locate_round_trip(r: float, dz: float, excess_log10: float, base_z: float) -> None:
     length = math.hypot(r, dz) * (1 + 10**excess_log10)
@@ -688,7 +691,7 @@ def test_locate_with_floor_arrays() -> None:
     assert isinstance(loc.floor_contact, np.ndarray) and loc.floor_contact.dtype == np.bool_
     for i in range(4):
         one = locate_with_floor(float(h[i]), float(tv[i]), OMEGA_N_PER_M, 1.6, 0.754, 0.0)
-        assert loc.r_m[i] == one.r_m and loc.z_m[i] == one.z_m  # type: ignore[index]
+        assert arr(loc.r_m)[i] == one.r_m and arr(loc.z_m)[i] == one.z_m
         assert loc.floor_contact[i] == one.floor_contact
     assert np.all(np.asarray(loc.r_min_m) <= np.asarray(loc.r_m))
 
@@ -700,11 +703,11 @@ def test_locate_with_floor_rejects_base_below_floor() -> None:
 
 @settings(max_examples=300, deadline=None)
 @given(
-    st.floats(0.0, 2.0, **finite),  # base height above the floor
-    st.floats(0.0, 1.0, **finite),  # drone radial fraction of the reach
-    st.floats(0.0, 2.5, **finite),  # drone height above the floor
-    st.floats(0.2, 4.0, **finite),  # length
-    st.floats(0.0, 6.283, **finite),  # azimuth
+    floats(0.0, 2.0),  # base height above the floor
+    floats(0.0, 1.0),  # drone radial fraction of the reach
+    floats(0.0, 2.5),  # drone height above the floor
+    floats(0.2, 4.0),  # length
+    floats(0.0, 6.283),  # azimuth
 )
 def test_tether_force_locate_with_floor_round_trip(
     hb: float, frac: float, hd: float, length: float, azimuth: float
@@ -725,7 +728,7 @@ def test_tether_force_locate_with_floor_round_trip(
     assert loc.r_min_m - tol <= r_true <= loc.r_max_m + tol
     if not tf.floor_contact:
         r_free, z_free = locate(tf.horizontal_n, tf.vertical_n, OMEGA_N_PER_M, length, base[2])
-        assert loc.r_m == r_free and loc.z_m == max(z_free, floor)  # type: ignore[type-var]
+        assert loc.r_m == r_free and loc.z_m == max(z_free, floor)
         assert r_free == pytest.approx(r_true, abs=tol)
     elif tf.horizontal_n > 0.0:
         assert loc.floor_contact
