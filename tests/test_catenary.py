@@ -815,3 +815,20 @@ def test_import_pulls_no_io_dependencies() -> None:
 def test_public_names() -> None:
     for name in catenary.__all__:
         assert hasattr(catenary, name)
+
+
+def test_benchmark_alternatives_behave_as_documented() -> None:
+    """The paper's recipe and fsolve in benchmarks/ agree on an easy case; the recipe as
+    written fails on a leftward span."""
+    from benchmarks.bench_catenary import fsolve_solve, newton_baseline, paper_recipe_solve
+
+    case = (0.0, 0.754, 1.0, 1.0, 1.6)
+    ours = solve(*case)
+    for other in (paper_recipe_solve(*case), fsolve_solve(*case)):
+        assert other.a == pytest.approx(ours.a, rel=1e-9)
+        assert other.x0 == pytest.approx(ours.x0, abs=1e-9)
+        assert other.y(0.5) == pytest.approx(ours.y(0.5), abs=1e-9)
+    with pytest.raises(ValueError):
+        paper_recipe_solve(1.0, 1.0, 0.0, 0.754, 1.6)
+    a, x0, _ = newton_baseline(*(np.array([v]) for v in case))
+    assert a[0] == pytest.approx(ours.a, rel=1e-9) and x0[0] == pytest.approx(ours.x0, abs=1e-9)
