@@ -561,11 +561,12 @@ def _solve_chunk(
 
     np.multiply(xi, 2.0, out=t0)
     np.divide(h, t0, out=a)
-    # atanh(|v|/L) = ½·ln((L + |v|)/(L − |v|)) (eq:cat6), with the sign of v·(x2 − x1);
-    # its absolute error, not its relative one, is what reaches x0 and the curve.
+    # atanh(|v|/L) = ½·ln(1 + 2|v|/(L − |v|)) (eq:cat6), with the sign of v·(x2 − x1).
+    np.abs(dy, out=t0)
+    t0 *= 2.0
     np.maximum(l_minus_v, _TINY, out=t1)
-    np.divide(l_plus_v, t1, out=t1)
-    np.log(t1, out=t1)
+    np.divide(t0, t1, out=t1)
+    np.log1p(t1, out=t1)
     t1 *= 0.5
     np.copysign(t1, np.multiply(dy, dx, out=t0), out=t1)
     np.subtract(t1, np.copysign(xi, dx, out=t0), out=u1)  # (x1 − x0)/a = t − sign(dx)·ξ
