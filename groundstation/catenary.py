@@ -122,6 +122,8 @@ _EPS: Final = np.finfo(np.float64).eps
 # Elements per pass of the vectorised solver: its 29 scratch rows (7 MiB) stay in the L3
 # cache; smaller passes pay more Python overhead per element (measured 8k-64k: 32k best).
 _CHUNK: Final = 32768
+# Up to this many elements the scalar path, element by element, is faster than one pass.
+_SMALL_ARRAY: Final = 24
 # Series of asinh(S) − S and of asinh(S) − 2S/(1 + sqrt(1 + S²)) in S² (after S³), used for
 # a hanging part much shorter than a (S = s/a < 0.1) where the closed forms cancel.
 _ASINH_MINUS_S: Final = (-1 / 6, 3 / 40, -5 / 112, 35 / 1152, -63 / 2816, 231 / 13312)
@@ -462,6 +464,18 @@ def _solve_arrays(
     flat = [np.ravel(v) for v in arrays]
     n = flat[0].size
     out = np.empty((6, n))  # rows: a, x0, c, u1 and the anchor x1, y1 (copies of the inputs)
+    if n <= _SMALL_ARRAY:
+        # A pass costs ~150 numpy calls whatever its length: few elements go one by one.
+        for i, row in enumerate(zip(*(v.tolist() for v in flat), strict=True)):
+            try:
+                a_i, x0_i, c_i, u1_i, _ = _solve_scalar(*row)
+            except TetherTooShortError as err:
+                raise TetherTooShortError(err.length_m, err.chord_m, f" at flat index {i}") from err
+            except CatenaryError as err:
+                raise CatenaryError(f"{err} at flat index {i}") from err
+            out[:, i] = (a_i, x0_i, c_i, u1_i, row[0], row[1])
+        a, x0, c, u1, x1_out, y1_out = (row.reshape(shape) for row in out)
+        return _make_catenary(a, x0, c, x1_out, y1_out, u1)
     # Scratch rows reused by every chunk, so that the loop allocates (almost) nothing: a
     # freshly allocated temporary of 100 KiB or more costs page faults whenever the
     # allocator has handed its memory back to the OS (4x slower iterations in isolation).

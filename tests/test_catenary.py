@@ -414,6 +414,12 @@ def test_too_short_raises_naming_length_and_chord() -> None:
         solve(0.0, 0.0, 0.0, 1.0, 0.5)  # plumb, too short
 
 
+def test_too_short_in_small_arrays_names_the_index() -> None:
+    with pytest.raises(TetherTooShortError, match="flat index 1") as info:
+        solve(0.0, 0.0, np.array([1.0, 3.0]), 0.0, np.array([2.0, 1.0]))
+    assert info.value.length_m == 1.0 and info.value.chord_m == 3.0
+
+
 def test_too_short_in_arrays_names_the_index() -> None:
     length = np.full(50_000, 2.0)
     length[33_333] = 0.5
