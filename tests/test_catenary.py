@@ -209,10 +209,21 @@ def test_solve_matches_mpmath_everywhere(case: tuple[float, ...]) -> None:
     assert_matches_reference(solve(*case), case)
 
 
+# Arrays of up to catenary._SMALL_ARRAY elements take the scalar path: tile to test the pass.
+VECTOR_MIN = 32
+
+
+def tile(*values: object) -> list[npt.NDArray[np.float64]]:
+    """Each value repeated to VECTOR_MIN elements (element i keeps index i % len)."""
+    arrays = [np.atleast_1d(arr(v)) for v in values]
+    return [np.resize(a, VECTOR_MIN) for a in arrays]
+
+
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.filter_too_much])
 @given(st.lists(catenary_cases(), min_size=1, max_size=8))
 def test_vectorised_solve_matches_mpmath_everywhere(cases: list[tuple[float, ...]]) -> None:
-    cols = [np.array(col) for col in zip(*cases, strict=True)]
+    reps = -(-VECTOR_MIN // len(cases))
+    cols = [np.array(col) for col in zip(*(cases * reps), strict=True)]
     cat = solve(*cols)
     for i, case in enumerate(cases):
         assert_matches_reference(cat, case, i)
@@ -257,18 +268,19 @@ def test_floats_in_python_floats_out() -> None:
     assert type(numpy_scalars.a) is float
 
 
-def test_arrays_broadcast() -> None:
-    x2 = np.array([[0.5], [1.0], [-1.0]])  # (3, 1)
-    length = np.array([1.6, 2.0, 5.0, 50.0])  # (4,)
+@pytest.mark.parametrize("shape", [(3, 4), (6, 5)])  # element by element; one pass
+def test_arrays_broadcast(shape: tuple[int, int]) -> None:
+    x2 = np.linspace(-1.0, 1.2, shape[0])[:, None]  # (rows, 1)
+    length = np.linspace(1.6, 50.0, shape[1])  # (cols,)
     cat = solve(0.0, 0.754, x2, 1.0, length)
     for field in (cat.a, cat.x0, cat.c, cat.x1, cat.y1, cat.u1):
-        assert isinstance(field, np.ndarray) and field.shape == (3, 4)
+        assert isinstance(field, np.ndarray) and field.shape == shape
         assert field.dtype == np.float64
-    for i in range(3):
-        for j in range(4):
+    for i in range(shape[0]):
+        for j in range(shape[1]):
             one = solve(0.0, 0.754, float(x2[i, 0]), 1.0, float(length[j]))
             assert arr(cat.a)[i, j] == pytest.approx(one.a, rel=1e-11)
-    y = cat.y(np.zeros((3, 4)))
+    y = cat.y(np.zeros(shape))
     assert isinstance(y, np.ndarray)
     np.testing.assert_allclose(y, 0.754, atol=1e-12)
     zero_d = solve(np.asarray(0.0), 0.0, 1.0, 0.0, 2.0)
@@ -323,11 +335,15 @@ def test_plumb_line_is_documented_degenerate() -> None:
     assert cat.y(0.6) == math.inf
     taut_vertical = solve(0.5, 0.0, 0.5, 1.0, 1.0)
     assert taut_vertical.a == 0.0 and taut_vertical.c == 0.0
-    arrays = solve(np.array([0.5, 0.0]), 0.0, np.array([0.5, 1.0]), 1.0, 1.6)
-    assert arr(arrays.a)[0] == 0.0 and arr(arrays.c)[0] == pytest.approx(-0.3)
-    assert np.all(np.isfinite(arrays.a)) and np.all(np.isfinite(arrays.c))
-    y = arrays.y(np.array([0.5, 0.5]))
-    assert isinstance(y, np.ndarray) and y[0] == pytest.approx(-0.3) and np.isfinite(y[1])
+    for pair in ([0.5, 0.0], [0.5, 1.0]), tile([0.5, 0.0], [0.5, 1.0]):
+        arrays = solve(np.array(pair[0]), 0.0, np.array(pair[1]), 1.0, 1.6)
+        assert arr(arrays.a)[0] == 0.0 and arr(arrays.c)[0] == pytest.approx(-0.3)
+        assert np.all(np.isfinite(arrays.a)) and np.all(np.isfinite(arrays.c))
+        y = arrays.y(np.full(len(pair[0]), 0.5))
+        assert isinstance(y, np.ndarray) and y[0] == pytest.approx(-0.3)
+        assert np.isfinite(y[1])
+    vertical = solve(*tile(0.5, 0.0, [0.5, 1.0], 1.0, [1.0, 1.5]))
+    assert arr(vertical.a)[0] == 0.0 and arr(vertical.c)[0] == 0.0
 
 
 def test_near_plumb_tends_to_plumb() -> None:
@@ -337,10 +353,10 @@ def test_near_plumb_tends_to_plumb() -> None:
         assert 0.0 < cat.a < 10 * h
         assert cat.a + cat.c == pytest.approx(plumb.c, abs=2 * h + 1e-12)
         assert np.isfinite(arr(cat.x0)) and np.isfinite(arr(cat.u1))
-        many = solve(np.array([0.0, 0.0]), 0.754, np.array([h, 0.7]), 1.0, 1.6)
-        assert arr(many.a)[0] == pytest.approx(cat.a, rel=1e-12)
+        many = solve(*tile(0.0, 0.754, [h, 0.7], 1.0, 1.6))
+        assert arr(many.a)[0] == pytest.approx(cat.a, rel=1e-11)
         assert arr(many.c)[0] == pytest.approx(cat.c, abs=1e-12)
-    tiniest = solve(np.array([0.0, 0.0]), 0.754, np.array([5e-324, 0.7]), 1.0, 1.6)
+    tiniest = solve(*tile(0.0, 0.754, [5e-324, 0.7], 1.0, 1.6))
     assert arr(tiniest.a)[0] == 0.0 and arr(tiniest.c)[0] == pytest.approx(plumb.c)
     assert solve(0.0, 0.754, 5e-324, 1.0, 1.6).c == pytest.approx(plumb.c)
 
@@ -352,10 +368,14 @@ def test_exactly_taut_is_the_straight_line() -> None:
     level = solve(0.0, 1.0, 2.0, 1.0, 2.0)
     assert level.a == math.inf and level.x0 == 1.0
     assert level.y(0.7) == 1.0
-    arrays = solve(0.0, 0.0, np.array([3.0, 2.0]), np.array([4.0, 0.0]), np.array([5.0, 2.0]))
-    np.testing.assert_array_equal(arrays.a, [math.inf, math.inf])
-    np.testing.assert_array_equal(arrays.x0, [-math.inf, 1.0])
-    np.testing.assert_allclose(arrays.y(np.array([1.5, 1.0])), [2.0, 0.0])
+    for cols in (
+        [np.array(v) for v in ([3.0, 2.0], [4.0, 0.0], [5.0, 2.0])],
+        tile([3.0, 2.0], [4.0, 0.0], [5.0, 2.0]),
+    ):
+        arrays = solve(0.0, 0.0, *cols)
+        np.testing.assert_array_equal(arr(arrays.a)[:2], [math.inf, math.inf])
+        np.testing.assert_array_equal(arr(arrays.x0)[:2], [-math.inf, 1.0])
+        np.testing.assert_allclose(arr(arrays.y(np.resize([1.5, 1.0], cols[0].size)))[:2], [2, 0])
 
 
 def test_nearly_taut_a_reaches_1e5_and_sag_is_tiny() -> None:
@@ -444,6 +464,8 @@ def test_bad_inputs_raise_catenary_error(case: tuple[float, ...]) -> None:
     assert not isinstance(info.value, TetherTooShortError)
     with pytest.raises(CatenaryError):
         solve(*(np.array([0.0, v]) for v in case))
+    with pytest.raises(CatenaryError, match="flat index 1"):
+        solve(*tile(*([0.0, v] for v in case)))
 
 
 def test_zero_length_between_coincident_points() -> None:
