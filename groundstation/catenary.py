@@ -36,13 +36,14 @@ full relative precision even when it is 1e5 times the span, and ``x0 = x̄ − a
 exact reverted power series ξ²(w) for w <= 2e-3; above, ξ is iterated on the well-conditioned
 ``ψ(ξ) = ln(sinh ξ/ξ) − ln q``: vectorised, from a two-formula start (4 %) by one Halley and
 one Newton step; scalar, from a tabulated polynomial start (6e-7) by one Newton step. Both
-reach ~1e-13, measured against 50- and 60-digit mpmath references (tests, benchmark). The
+reach ~1e-13, measured against a 50-digit mpmath reference (tests, benchmark). The
 curve is evaluated from an anchor point on it (NOTES):
 ``y(x) − y1 = 2a·sinh((x + x1 − 2x0)/(2a))·sinh((x − x1)/(2a))``, which never forms the huge,
 cancelling ``c``.
 
 The vectorised path works in chunks of scratch rows reused with ``out=`` (no allocation in
-the loop), each element taking only its own regime's branch; the scalar path uses ``math``.
+the loop), each element taking only its own regime's branch; the scalar path uses ``math``,
+and arrays of up to 24 elements go through it element by element.
 """
 
 from __future__ import annotations
@@ -278,9 +279,9 @@ def solve(
 
     Departures from the paper's recipe: no Taylor start (eq:tayl4) and no Newton on eq:cat7
     (which cancels catastrophically when nearly taut and divides by Δx); instead the
-    cancellation-free ``q − 1`` is inverted by its power series or by Halley steps in log form
-    (module docstring). Leftward spans, equal heights (where eq:cat7 is void) and the plumb
-    line are handled. All regimes are documented in the module docstring.
+    cancellation-free ``q² − 1`` is inverted by its power series or by Halley/Newton steps in
+    log form (module docstring). Leftward spans, equal heights (where eq:cat7 is void) and the
+    plumb line are handled. All regimes are documented in the module docstring.
 
     Args:
         x1: Abscissa of the first point [m] (the base).
