@@ -299,22 +299,30 @@ def best_of(fn: Callable[[], object], repeats: int, clock: Callable[[], float]) 
     return best
 
 
+def scalar_pass(fn: Callable[..., Catenary], rows: Sequence[tuple[float, ...]]) -> int:
+    """Calls ``fn`` on every row; returns how many raised."""
+    failed = 0
+    for row in rows:
+        try:
+            fn(*row)
+        except (ValueError, ZeroDivisionError, OverflowError, RuntimeError):
+            failed += 1
+    return failed
+
+
 def time_scalar(
-    fn: Callable[..., Catenary], rows: Sequence[tuple[float, ...]], repeats: int
-) -> tuple[float, int]:
-    """(µs per call over all rows, calls that raised): best of ``repeats`` passes."""
-
-    def one_pass() -> int:
-        failed = 0
-        for row in rows:
-            try:
-                fn(*row)
-            except (ValueError, ZeroDivisionError, OverflowError, RuntimeError):
-                failed += 1
-        return failed
-
-    failed = one_pass()
-    return best_of(one_pass, repeats, time.perf_counter) / len(rows) * 1e6, failed
+    fns: Sequence[Callable[..., Catenary]], rows: Sequence[tuple[float, ...]], repeats: int
+) -> list[tuple[float, int]]:
+    """Per function: (µs per call over all rows, calls that raised), best of ``repeats``
+    passes, the functions' passes interleaved (the machine is shared)."""
+    failed = [scalar_pass(fn, rows) for fn in fns]
+    best = [math.inf] * len(fns)
+    for _ in range(repeats):
+        for i, fn in enumerate(fns):
+            t0 = time.perf_counter()
+            scalar_pass(fn, rows)
+            best[i] = min(best[i], time.perf_counter() - t0)
+    return [(t / len(rows) * 1e6, f) for t, f in zip(best, failed, strict=True)]
 
 
 def machine() -> str:
@@ -402,16 +410,16 @@ def run(quick: bool) -> str:
 
     # Scalar: the first rows of the shuffled set hold every category in proportion.
     rows = [cases.row(i) for i in range(n_scalar)]
-    us_ours, fail_ours = time_scalar(solve, rows, 3)
-    us_paper, fail_paper = time_scalar(paper_recipe_solve, rows, 3)
-    us_fsolve, fail_fsolve = time_scalar(fsolve_solve, rows[:n_fsolve], 1)
+    repeats = 3 if quick else 7
+    (us_ours, fail_ours), (us_paper, fail_paper) = time_scalar(
+        (solve, paper_recipe_solve), rows, repeats
+    )
+    ((us_fsolve, fail_fsolve),) = time_scalar((fsolve_solve,), rows[:n_fsolve], 1)
     per_category: dict[str, tuple[float, float]] = {}
     for k, name in enumerate(CATEGORIES):
         sub = [r for r, c in zip(rows, cases.category[:n_scalar], strict=True) if c == k]
-        per_category[name] = (
-            time_scalar(solve, sub, 3)[0],
-            time_scalar(paper_recipe_solve, sub, 3)[0],
-        )
+        (t_ours, _), (t_paper, _) = time_scalar((solve, paper_recipe_solve), sub, repeats)
+        per_category[name] = (t_ours, t_paper)
 
     acc, acc_cat = measure_accuracy(cases, n_ref, ours_vec, base)
 
