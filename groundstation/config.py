@@ -103,7 +103,9 @@ class BaseSection(_Section):
 class FollowSection(_Section):
     """``[follow]``: tension following and tug-to-land defaults (off until enabled)."""
 
-    threshold_n: float = Field(0.15, gt=0.0)
+    threshold_n: float = Field(0.10, gt=0.0)
+    """|T| above which the drone follows the pull, N. Above the whole default tether's
+    weight (ω·L = 0.08 N) so a hanging tether alone never engages it."""
     hysteresis_ratio: float = Field(0.2, ge=0.0, lt=1.0)
     land_below_m: float | None = None
     max_speed_mps: float = Field(0.5, gt=0.0)

@@ -75,7 +75,7 @@ class FollowParams:
         floor_margin_m: Setpoints stay this far above the floor, m, >= 0.
     """
 
-    threshold_n: float = 0.15
+    threshold_n: float = 0.10
     hysteresis_ratio: float = 0.2
     land_below_m: float | None = None
     max_speed_mps: float = 0.5
