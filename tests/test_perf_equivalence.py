@@ -33,7 +33,7 @@ import numpy as np
 import pytest
 
 from groundstation.bus import Sample
-from groundstation.evaluation import settings_for
+from groundstation.config import Settings, load_settings
 from groundstation.localization import localize
 from groundstation.pipeline import Pipeline
 
@@ -47,6 +47,25 @@ DT_S = 0.004
 DRONE = "cf1"
 HOVER_N = np.array([-0.020, 0.005, -0.060])
 E3 = np.array([0.0, 0.0, 1.0])
+# Every setting the per-message path reads, pinned: a later change of a default must not
+# pass for a change of behaviour (or fail this test).
+PINNED: dict[str, Any] = {
+    "drone": {"mass_kg": MASS_KG, "accel_noise_mps2": 0.3, "thrust_noise_n": 0.003},
+    "tether": {"weight_n_per_m": 0.05, "length_m": 1.6},
+    "base": {"position_m": [0.0, 0.0, 0.754], "floor_z_m": 0.0},
+    "follow": {
+        "threshold_n": 0.15,
+        "hysteresis_ratio": 0.2,
+        "land_below_m": None,
+        "max_speed_mps": 0.5,
+        "reach_margin_m": 0.05,
+        "stale_after_s": 0.5,
+    },
+}
+
+
+def pinned_settings() -> Settings:
+    return load_settings(None, PINNED, use_env=False)
 
 
 # ---------------------------------------------------------------- the sequence
@@ -174,7 +193,7 @@ def _flatten(prefix: str, value: Any, out: dict[str, Any]) -> None:
 def run_case(name: str) -> list[dict[str, Any]]:
     """One row per input sample: its outputs, the filter state and the full localization."""
     seed, make = CASES[name]
-    settings = settings_for()
+    settings = pinned_settings()
     pipe = Pipeline(settings)
     rows = []
     for sample in make(np.random.default_rng(seed)):
