@@ -184,6 +184,88 @@ def _sqrt_psd(cov: FloatArray) -> FloatArray:
         return np.asarray(v * np.sqrt(np.clip(w, 0.0, None)), dtype=np.float64)
 
 
+def _finite_floats(value: object, shape: tuple[int, ...]) -> list[float] | None:
+    """The entries of a float64 array (or flat tuple/list) of ``shape``, if all finite.
+
+    None for anything else; the caller then validates with numpy as it always did (and
+    names the offending values).
+    """
+    kind = type(value)
+    if kind is np.ndarray:
+        if value.shape != shape or value.dtype != np.float64:  # type: ignore[attr-defined]
+            return None
+        flat: list[float] = value.ravel().tolist()  # type: ignore[attr-defined]
+    elif (kind is tuple or kind is list) and len(shape) == 1 and len(value) == shape[0]:  # type: ignore[arg-type]
+        try:
+            flat = [float(v) for v in value]  # type: ignore[attr-defined]
+        except (TypeError, ValueError):
+            return None
+    else:
+        return None
+    return flat if all(map(math.isfinite, flat)) else None
+
+
+def _cholesky3(c: list[float]) -> list[float] | None:
+    """Lower Cholesky factor of a symmetric 3x3 (row-major 9 floats), or None if not PD.
+
+    ``np.linalg.cholesky`` up to rounding, without its per-call overhead.
+    """
+    c00, _, _, c10, c11, _, c20, c21, c22 = c
+    if not c00 > 0.0:
+        return None
+    l00 = math.sqrt(c00)
+    l10 = c10 / l00
+    l20 = c20 / l00
+    d1 = c11 - l10 * l10
+    if not d1 > 0.0:
+        return None
+    l11 = math.sqrt(d1)
+    l21 = (c21 - l20 * l10) / l11
+    d2 = c22 - l20 * l20 - l21 * l21
+    if not d2 > 0.0:
+        return None
+    return [l00, 0.0, 0.0, l10, l11, 0.0, l20, l21, math.sqrt(d2)]
+
+
+def _locate_points(
+    horizontal_n: FloatArray,
+    vertical_n: FloatArray,
+    weight_n_per_m: float,
+    length_m: float,
+    base_z_m: float,
+    floor_z_m: float,
+) -> tuple[list[float], list[float], list[float], list[float], list[float], list[float]]:
+    """:func:`_locate` for the few points of one estimate, returned as lists of floats.
+
+    The free-hanging solution comes from ``catenary._locate_free``, the body of
+    :func:`catenary.locate` after its input checks: ``try_localize`` has already checked
+    omega, L and z_i, and the caller checks H >= 0 and T_v finite for every point, so the
+    checks (about two thirds of ``locate``'s cost on 7 points) would only repeat them.
+    """
+    a = horizontal_n / weight_n_per_m  # eq:a_param
+    s2 = vertical_n / weight_n_per_m  # eq:s2_param
+    r_arr, z_arr = catenary._locate_free(
+        a, s2, np.asarray(length_m, dtype=np.float64), np.asarray(base_z_m, dtype=np.float64)
+    )
+    r: list[float] = r_arr.tolist()
+    z: list[float] = z_arr.tolist()
+    if floor_z_m != -math.inf:
+        # Lowest point of the free curve (NOTES): the drone when s2 < 0, the base when
+        # s2 > L, else the vertex, sqrt(a^2 + s2^2) - a below the drone.
+        limit = floor_z_m + 1e-6
+        hyp = np.hypot(a, s2).tolist()
+        for ai, si, zi, hi in zip(a.tolist(), s2.tolist(), z, hyp, strict=True):
+            lowest = zi if si < 0.0 else (base_z_m if si > length_m else zi - (hi - ai))
+            if not lowest > limit:
+                floor = _locate_floor(
+                    horizontal_n, vertical_n, weight_n_per_m, length_m, base_z_m, floor_z_m
+                )
+                r, z, r_min, r_max, contact, run = (v.tolist() for v in floor)
+                return r, z, r_min, r_max, contact, run
+    zeros = [0.0] * len(r)
+    return r, z, r, r, zeros, zeros
+
+
 def try_localize(
     tension_world_n: ArrayLike | None,
     tension_cov_n2: ArrayLike,
@@ -210,32 +292,49 @@ def try_localize(
     Returns:
         The estimate, or a :class:`LocalizationFailure` with the reason. Never NaN.
     """
+    # This runs once per telemetry message on 3-vectors and a 3x3: the arithmetic is on
+    # Python floats, and numpy is kept for the one vectorised catenary call (7 or 9
+    # points), where it pays. The formulas are those of the array version line for line.
     if tension_world_n is None:
         return LocalizationFailure("no tension estimate")
-    T = np.asarray(tension_world_n, dtype=np.float64)
-    cov = np.asarray(tension_cov_n2, dtype=np.float64)
-    base = np.asarray(base_world_m, dtype=np.float64)
-    if T.shape != (3,) or not np.isfinite(T).all():
-        return LocalizationFailure(f"tension_world_n must be a finite 3-vector, got {T.tolist()}")
-    if cov.shape != (3, 3) or not np.isfinite(cov).all():
-        return LocalizationFailure(f"tension_cov_n2 must be a finite 3x3, got {cov.tolist()}")
-    if base.shape != (3,) or not np.isfinite(base).all():
-        return LocalizationFailure(f"base_world_m must be a finite 3-vector, got {base.tolist()}")
+    t_in = _finite_floats(tension_world_n, (3,))
+    c_in = _finite_floats(tension_cov_n2, (3, 3))
+    b_in = _finite_floats(base_world_m, (3,))
+    if t_in is None or c_in is None or b_in is None:
+        T = np.asarray(tension_world_n, dtype=np.float64)
+        cov_a = np.asarray(tension_cov_n2, dtype=np.float64)
+        base_a = np.asarray(base_world_m, dtype=np.float64)
+        if T.shape != (3,) or not np.isfinite(T).all():
+            return LocalizationFailure(
+                f"tension_world_n must be a finite 3-vector, got {T.tolist()}"
+            )
+        if cov_a.shape != (3, 3) or not np.isfinite(cov_a).all():
+            return LocalizationFailure(f"tension_cov_n2 must be a finite 3x3, got {cov_a.tolist()}")
+        if base_a.shape != (3,) or not np.isfinite(base_a).all():
+            return LocalizationFailure(
+                f"base_world_m must be a finite 3-vector, got {base_a.tolist()}"
+            )
+        t_in, c_in, b_in = T.tolist(), cov_a.ravel().tolist(), base_a.tolist()
+    tx, ty, tz = t_in
+    bx, by, bz = b_in
     if not (math.isfinite(weight_n_per_m) and weight_n_per_m > 0.0):
         return LocalizationFailure(f"weight_n_per_m must be finite and > 0, got {weight_n_per_m!r}")
     if not (math.isfinite(length_m) and length_m > 0.0):
         return LocalizationFailure(f"length_m must be finite and > 0, got {length_m!r}")
     if math.isnan(floor_z_m) or floor_z_m == math.inf:
         return LocalizationFailure(f"floor_z_m must be finite or -inf, got {floor_z_m!r}")
-    if math.isfinite(floor_z_m) and base[2] < floor_z_m:
-        return LocalizationFailure(f"base z {base[2]} m is below the floor {floor_z_m} m")
-    cov = 0.5 * (cov + cov.T)
+    if math.isfinite(floor_z_m) and bz < floor_z_m:
+        return LocalizationFailure(f"base z {bz} m is below the floor {floor_z_m} m")
+    # cov = (cov + cov') / 2
+    c00, c01, c02, c10, c11, c12, c20, c21, c22 = c_in
+    cxy, cxz, cyz = 0.5 * (c01 + c10), 0.5 * (c02 + c20), 0.5 * (c12 + c21)
+    cxx, cyy, czz = 0.5 * (c00 + c00), 0.5 * (c11 + c11), 0.5 * (c22 + c22)
+    cov = [cxx, cxy, cxz, cxy, cyy, cyz, cxz, cyz, czz]
 
     # eq:a_param, eq:s2_param act through H and T_v (catenary.locate divides by omega).
-    horizontal_n = math.hypot(T[0], T[1])
-    vertical_n = -T[2]  # T_v: downward pull on the drone
+    horizontal_n = math.hypot(tx, ty)
+    vertical_n = -tz  # T_v: downward pull on the drone
     # sigma_H: the largest horizontal standard deviation, whatever the direction.
-    cxx, cyy, cxy = cov[0, 0], cov[1, 1], cov[0, 1]
     lam_max = 0.5 * (cxx + cyy) + math.sqrt(max(0.25 * (cxx - cyy) ** 2 + cxy * cxy, 0.0))
     sigma_h_n = math.sqrt(max(lam_max, 0.0))
     plumb = horizontal_n <= max(plumb_k * sigma_h_n, MIN_HORIZONTAL_N)
@@ -243,30 +342,36 @@ def try_localize(
     # All catenary evaluations in one vectorised call:
     #   0: the estimate; 1..6: sigma points T +- sqrt(3) S e_i; and when plumb,
     #   7: (k sigma_H, T_v), 8: (0, T_v).
-    sqrt_cov = _sqrt_psd(cov)
-    pts = np.empty((2 * _N + 1, 3))
-    pts[0] = T
-    pts[1 : _N + 1] = T + _SIGMA_SCALE * sqrt_cov.T
-    pts[_N + 1 :] = T - _SIGMA_SCALE * sqrt_cov.T
-    n_all = 2 * _N + 3 if plumb else 2 * _N + 1  # the plumb points only when needed
-    h_all = np.empty(n_all)
-    v_all = np.empty(n_all)
-    h_pts = h_all[: 2 * _N + 1]
-    np.hypot(pts[:, 0], pts[:, 1], out=h_pts)
-    np.negative(pts[:, 2], out=v_all[: 2 * _N + 1])
-    if plumb:
-        h_all[2 * _N + 1 :] = (plumb_k * sigma_h_n, 0.0)
-        v_all[2 * _N + 1 :] = vertical_n
+    sq = _cholesky3(cov)
+    if sq is None:  # singular (e.g. zero) covariance
+        sq = _sqrt_psd(np.array(cov).reshape(3, 3)).ravel().tolist()
+    k = _SIGMA_SCALE
+    px, py, pz = [tx], [ty], [tz]
+    for sign in (1.0, -1.0):
+        for i in range(_N):  # T +- sqrt(3) (column i of S)
+            px.append(tx + sign * k * sq[i] if sign > 0 else tx - k * sq[i])
+            py.append(ty + k * sq[3 + i] if sign > 0 else ty - k * sq[3 + i])
+            pz.append(tz + k * sq[6 + i] if sign > 0 else tz - k * sq[6 + i])
+    n_pts = 2 * _N + 1
+    h_pts: list[float] = np.hypot(px, py).tolist()
+    v_pts = [-v for v in pz]
+    h_all, v_all = h_pts, v_pts
+    if plumb:  # the plumb points only when needed
+        h_all = [*h_pts, plumb_k * sigma_h_n, 0.0]
+        v_all = [*v_pts, vertical_n, vertical_n]
     try:
-        r, z, r_min, r_max, contact, run = _locate(
-            h_all, v_all, weight_n_per_m, length_m, float(base[2]), floor_z_m
+        if not all(map(math.isfinite, h_all)) or not all(map(math.isfinite, v_all)):
+            # Out of the fast path's preconditions (overflow): catenary.locate says why.
+            catenary.locate(h_all, v_all, weight_n_per_m, length_m, bz)
+        r, z, r_min, r_max, contact, run = _locate_points(
+            np.array(h_all), np.array(v_all), weight_n_per_m, length_m, bz, floor_z_m
         )
     except (catenary.CatenaryError, ValueError, FloatingPointError) as exc:
         return LocalizationFailure(
             f"catenary failed for H={horizontal_n!r} N, T_v={vertical_n!r} N, "
             f"L={length_m!r} m: {exc}"
         )
-    if not (np.isfinite(r).all() and np.isfinite(z).all()):
+    if not (all(map(math.isfinite, r)) and all(map(math.isfinite, z))):
         return LocalizationFailure(
             f"non-finite catenary result for H={horizontal_n!r} N, T_v={vertical_n!r} N, "
             f"omega={weight_n_per_m!r} N/m, L={length_m!r} m"
@@ -275,61 +380,73 @@ def try_localize(
     if plumb:
         # Azimuth undetermined: straight above/below the base, horizontal std the
         # radius reachable at H = k sigma_H (including any slack on the floor).
-        r_reach = float(max(r_max[2 * _N + 1], r[2 * _N + 1]))
-        z_best = float(z[2 * _N + 2])
-        dz = z[1 : 2 * _N + 1] - z[0]
-        var_z = float(_SIGMA_WEIGHT * np.sum(dz * dz))
-        position = np.array([base[0], base[1], z_best])
-        pos_cov = np.diag([r_reach**2, r_reach**2, var_z])
+        r_reach = max(r_max[n_pts], r[n_pts])
+        z_best = z[n_pts + 1]
+        var_z = 0.0
+        for zi in z[1:n_pts]:
+            var_z += (zi - z[0]) * (zi - z[0])
+        var_z = _SIGMA_WEIGHT * var_z
+        pos_cov = [r_reach**2, 0.0, 0.0, 0.0, r_reach**2, 0.0, 0.0, 0.0, var_z]
         return PositionEstimate(
-            position_world_m=_frozen(position),
-            std_world_m=_frozen(np.sqrt(np.diag(pos_cov))),
-            cov_world_m2=_frozen(pos_cov),
+            position_world_m=_frozen([bx, by, z_best]),
+            std_world_m=_frozen([math.sqrt(pos_cov[0]), math.sqrt(pos_cov[4]), math.sqrt(var_z)]),
+            cov_world_m2=_frozen(np.array(pos_cov).reshape(3, 3)),
             radial_m=0.0,
             radial_interval_m=(0.0, r_reach),
             azimuth_rad=None,
             azimuth_determined=False,
-            floor_contact=bool(contact[2 * _N + 2] > 0.5),
-            floor_run_m=float(run[2 * _N + 2]),
+            floor_contact=bool(contact[n_pts + 1] > 0.5),
+            floor_run_m=float(run[n_pts + 1]),
             case="plumb",
         )
 
     # Direction from the base to the drone: opposite the horizontal pull.
-    u0 = -T[:2] / horizontal_n
-    positive = h_pts > 0.0
-    u_pts = -pts[:, :2] / np.where(positive, h_pts, 1.0)[:, None]
-    u_pts[~positive] = u0  # a sigma point at H = 0 keeps the estimate's direction
-    n_pts = 2 * _N + 1
-    p = np.empty((n_pts, 3))
-    p[:, :2] = base[:2] + r[:n_pts, None] * u_pts
-    p[:, 2] = z[:n_pts]
-    d = p[1:] - p[0]
-    pos_cov = _SIGMA_WEIGHT * (d.T @ d)  # unscented covariance about the estimate
-    r0 = float(r[0])
-    interval = (float(r_min[0]), float(r_max[0]))
+    u0x, u0y = -tx / horizontal_n, -ty / horizontal_n
+    # Sigma point positions; one at H = 0 keeps the estimate's direction.
+    qx, qy = [], []
+    for i in range(n_pts):
+        hi = h_pts[i]
+        ux, uy = (-px[i] / hi, -py[i] / hi) if hi > 0.0 else (u0x, u0y)
+        qx.append(bx + r[i] * ux)
+        qy.append(by + r[i] * uy)
+    # Unscented covariance about the estimate: W sum_i d_i d_i', d_i = p_i - p_0.
+    sxx = sxy = sxz = syy = syz = szz = 0.0
+    for i in range(1, n_pts):
+        dx, dy, dz = qx[i] - qx[0], qy[i] - qy[0], z[i] - z[0]
+        sxx += dx * dx
+        sxy += dx * dy
+        sxz += dx * dz
+        syy += dy * dy
+        syz += dy * dz
+        szz += dz * dz
+    w = _SIGMA_WEIGHT
+    sxx, sxy, sxz, syy, syz, szz = w * sxx, w * sxy, w * sxz, w * syy, w * syz, w * szz
+    r0 = r[0]
+    interval = (r_min[0], r_max[0])
     floor_contact = bool(contact[0] > 0.5)
     if floor_contact:
         # The 1-sigma radial extent covers the slack interval on either side.
-        extent = max(r0 - interval[0], interval[1] - r0, 0.0)
-        u3 = np.array([u0[0], u0[1], 0.0])
-        pos_cov = pos_cov + extent**2 * np.outer(u3, u3)
-    pos_cov = 0.5 * (pos_cov + pos_cov.T)
-    position = p[0]
-    std = np.sqrt(np.clip(np.diag(pos_cov), 0.0, None))
-    if not (np.isfinite(position).all() and np.isfinite(pos_cov).all()):
+        extent2 = max(r0 - interval[0], interval[1] - r0, 0.0) ** 2
+        sxx += extent2 * (u0x * u0x)
+        sxy += extent2 * (u0x * u0y)
+        syy += extent2 * (u0y * u0y)
+    pos_cov = [sxx, sxy, sxz, sxy, syy, syz, sxz, syz, szz]
+    position = [qx[0], qy[0], z[0]]
+    if not (all(map(math.isfinite, position)) and all(map(math.isfinite, pos_cov))):
         return LocalizationFailure(
-            f"non-finite position for T={T.tolist()} N, L={length_m!r} m"
+            f"non-finite position for T={[tx, ty, tz]} N, L={length_m!r} m"
         )  # pragma: no cover - guarded above; kept so NaN can never leave
+    std = [math.sqrt(max(v, 0.0)) for v in (sxx, syy, szz)]
     return PositionEstimate(
         position_world_m=_frozen(position),
         std_world_m=_frozen(std),
-        cov_world_m2=_frozen(pos_cov),
+        cov_world_m2=_frozen(np.array(pos_cov).reshape(3, 3)),
         radial_m=r0,
         radial_interval_m=interval,
-        azimuth_rad=math.atan2(u0[1] + 0.0, u0[0]),  # + 0.0: no -pi from a -0.0
+        azimuth_rad=math.atan2(u0y + 0.0, u0x),  # + 0.0: no -pi from a -0.0
         azimuth_determined=True,
         floor_contact=floor_contact,
-        floor_run_m=float(run[0]),
+        floor_run_m=run[0],
         case="floor" if floor_contact else "free",
     )
 

@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 import threading
 from collections import Counter, deque
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -120,6 +120,8 @@ class DroneRuntime:
     last_estimate: Estimate | None = None
     land_below_m_memory: float | None = None
     """Last tug-to-land height, restored when tug-to-land is switched back on."""
+    follow_info_cache: tuple[follow_mod.FollowParams, tuple[Any, ...], FollowInfo] | None = None
+    """The last Estimate's FollowInfo, with the params and flags it was made from."""
 
 
 class Pipeline:
@@ -323,8 +325,8 @@ class Pipeline:
         runtime.telemetry_rate.add(now_s)
 
         position: PositionEstimate | None = None
-        tension = np.zeros(3)
-        std = np.zeros(3)
+        tension: Sequence[float] = _ZEROS3
+        std: Sequence[float] = _ZEROS3
         converged = False
         if obs.tension_world_n is None:
             # On the ground the floor carries the drone: no tension estimate. The filter
@@ -334,12 +336,14 @@ class Pipeline:
             est = runtime.filter.update(obs.tension_world_n, dt_s, msg.quat_wxyz)
             if est.change_detected:
                 runtime.change_detections += 1
-            tension = est.tension_world_n
-            std = est.std_n
+            # Python floats from here on: a handful of numbers per message, for which
+            # numpy's per-call overhead would cost more than the arithmetic.
+            tension = est.tension_world_n.tolist()
+            std = est.std_n.tolist()
             converged = est.converged
             if converged:
                 position = localize(
-                    tension,
+                    est.tension_world_n,
                     est.cov_n2,
                     runtime.weight_n_per_m,
                     runtime.length_m,
@@ -356,7 +360,7 @@ class Pipeline:
             runtime.follow_state,
             runtime.follow_params,
             stamp_s=msg.stamp_s,
-            tension_norm_n=float(np.linalg.norm(tension)) if converged else None,
+            tension_norm_n=_norm3(tension) if converged else None,
             position_world_m=follow_position,
             base_world_m=runtime.base_world_m,
             length_m=runtime.length_m,
@@ -384,8 +388,8 @@ class Pipeline:
         self,
         runtime: DroneRuntime,
         msg: Telemetry,
-        tension: np.ndarray,
-        std: np.ndarray,
+        tension: np.ndarray | Sequence[float],
+        std: np.ndarray | Sequence[float],
         position: PositionEstimate | None,
         on_ground: bool,
         converged: bool,
@@ -394,22 +398,22 @@ class Pipeline:
             self.count_drop(runtime.drone, "non_finite_estimate", "filter produced NaN/inf")
             runtime.filter.reset()
             return None
+        tension = _vec3(tension)
+        std = _vec3(std)
         if position is not None and not (
             _finite(position.position_world_m) and _finite(position.std_world_m)
         ):
             position = None
         fs = runtime.follow_state
         fp = runtime.follow_params
-        lo_hi = position.radial_interval_m if position is not None else None
-        return Estimate(
-            seq=msg.seq,
-            stamp_s=msg.stamp_s,
-            tension_n=_vec3(tension),
-            tension_std_n=_vec3(std),
-            horizontal_n=math.hypot(float(tension[0]), float(tension[1])),
-            vertical_n=-float(tension[2]),
-            position_m=_vec3(position.position_world_m) if position is not None else None,
-            follow=FollowInfo(
+        # FollowInfo changes only when follow changes state: reuse it (it is frozen). The
+        # params are compared by identity, so their floats are the very same objects.
+        flags = (fs.enabled, fs.active, fs.landing_armed, fs.stopped, fs.reason)
+        cached = runtime.follow_info_cache
+        if cached is not None and cached[0] is fp and cached[1] == flags:
+            follow = cached[2]
+        else:
+            follow = FollowInfo(
                 enabled=fs.enabled,
                 active=fs.active,
                 threshold_n=fp.threshold_n,
@@ -417,7 +421,18 @@ class Pipeline:
                 landing_armed=fs.landing_armed,
                 stopped=fs.stopped,
                 reason=fs.reason,
-            ),
+            )
+            runtime.follow_info_cache = (fp, flags, follow)
+        lo_hi = position.radial_interval_m if position is not None else None
+        return Estimate(
+            seq=msg.seq,
+            stamp_s=msg.stamp_s,
+            tension_n=tension,
+            tension_std_n=std,
+            horizontal_n=math.hypot(tension[0], tension[1]),
+            vertical_n=-tension[2],
+            position_m=_vec3(position.position_world_m) if position is not None else None,
+            follow=follow,
             position_std_m=_vec3(position.std_world_m) if position is not None else None,
             radial_m=float(position.radial_m) if position is not None else None,
             radial_interval_m=(float(lo_hi[0]), float(lo_hi[1])) if lo_hi is not None else None,
@@ -481,10 +496,32 @@ class Pipeline:
             return list(self.drones)
 
 
+_ZEROS3 = (0.0, 0.0, 0.0)
+
+
 def _finite(values: np.ndarray | Iterable[float]) -> bool:
+    if type(values) is tuple or type(values) is list:  # the per-message case: 3 floats
+        try:
+            return all(map(math.isfinite, values))
+        except TypeError:
+            pass
     return bool(np.all(np.isfinite(np.asarray(values, dtype=float))))
 
 
+def _norm3(v: Sequence[float]) -> float:
+    """``float(np.linalg.norm(v))`` of 3 floats: sqrt of the dot in numpy's order."""
+    return math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+
+
 def _vec3(values: np.ndarray | Iterable[float]) -> tuple[float, float, float]:
+    if type(values) is np.ndarray and values.dtype == np.float64 and values.shape == (3,):
+        x, y, z = values.tolist()
+        return (x, y, z)
+    if (
+        (type(values) is tuple or type(values) is list)
+        and len(values) == 3
+        and all(type(v) is float for v in values)
+    ):
+        return (values[0], values[1], values[2])
     a = np.asarray(values, dtype=float)
     return (float(a[0]), float(a[1]), float(a[2]))

@@ -74,13 +74,79 @@ def _frozen(array: ArrayLike) -> FloatArray:
     return out
 
 
+def _floats(value: object, n: int) -> list[float] | None:
+    """The ``n`` entries of a tuple, list or 1-D float64 array as Python floats.
+
+    None when ``value`` is anything else (or holds something ``float`` refuses): the caller
+    then takes its numpy path, which accepts or rejects it exactly as before. The per-message
+    inputs (pydantic tuples, the observation array) are 3- and 4-vectors, for which scalar
+    math costs a fraction of numpy's per-call overhead.
+    """
+    kind = type(value)
+    if kind is tuple or kind is list:
+        if len(value) != n:  # type: ignore[arg-type]
+            return None
+        try:
+            return [float(v) for v in value]  # type: ignore[attr-defined]
+        except (TypeError, ValueError):
+            return None
+    if kind is np.ndarray and value.shape == (n,) and value.dtype == np.float64:  # type: ignore[attr-defined]
+        out: list[float] = value.tolist()  # type: ignore[attr-defined]
+        return out
+    return None
+
+
 def _vector3(value: ArrayLike, name: str) -> FloatArray:
+    if type(value) is np.ndarray and value.shape == (3,) and value.dtype == np.float64:
+        a, b, c = value.tolist()
+        if math.isfinite(a) and math.isfinite(b) and math.isfinite(c):
+            return value  # what np.asarray returns for a float64 array
     arr = np.asarray(value, dtype=np.float64)
     if arr.shape != (3,):
         raise InvalidObservationError(f"{name} must have shape (3,), got shape {arr.shape}")
     if not np.all(np.isfinite(arr)):
         raise InvalidObservationError(f"{name} must be finite, got {arr.tolist()}")
     return arr
+
+
+def _unit_quaternion(quat_wxyz: ArrayLike) -> tuple[float, float, float, float]:
+    """``quat_wxyz / |quat_wxyz|`` as floats; raises as :func:`rotation_world_body`.
+
+    The sum of squares is taken in the order of numpy's 4-term dot (``q @ q``), so the
+    result is the one the array code gives, bit for bit.
+    """
+    q = _floats(quat_wxyz, 4)
+    if q is not None:
+        w, x, y, z = q
+        ss = ((w * w + x * x) + y * y) + z * z
+        if math.isfinite(ss):  # also: every entry is finite
+            norm = math.sqrt(ss)
+            if norm >= _QUAT_MIN_NORM:
+                return w / norm, x / norm, y / norm, z / norm
+    # Degenerate, overflowing or an unusual type: the array code raises or copes.
+    w, x, y, z = _unit_quaternion_array(quat_wxyz).tolist()
+    return w, x, y, z
+
+
+def _unit_quaternion_array(quat_wxyz: ArrayLike) -> FloatArray:
+    q = np.asarray(quat_wxyz, dtype=np.float64)
+    if q.shape != (4,):
+        raise DegenerateQuaternionError(f"quat_wxyz must have shape (4,), got shape {q.shape}")
+    norm = float(np.sqrt(q @ q)) if np.all(np.isfinite(q)) else math.nan
+    if not (norm >= _QUAT_MIN_NORM):  # also catches nan/inf
+        raise DegenerateQuaternionError(
+            f"quat_wxyz={q.tolist()} cannot be normalised (norm {norm!r} < {_QUAT_MIN_NORM})"
+        )
+    out: FloatArray = q / norm
+    return out
+
+
+def _thrust_axis(quat_wxyz: ArrayLike | None) -> tuple[float, float, float]:
+    """Body +z in the world frame, ``R_world_body[:, 2]``; world +z for None."""
+    if quat_wxyz is None:
+        return 0.0, 0.0, 1.0
+    w, x, y, z = _unit_quaternion(quat_wxyz)
+    return 2.0 * (x * z + w * y), 2.0 * (y * z - w * x), 1.0 - 2.0 * (x * x + y * y)
 
 
 def rotation_world_body(quat_wxyz: ArrayLike) -> FloatArray:
@@ -100,15 +166,7 @@ def rotation_world_body(quat_wxyz: ArrayLike) -> FloatArray:
         DegenerateQuaternionError: If the quaternion has the wrong shape, a non-finite
             entry or a norm below 1e-6.
     """
-    q = np.asarray(quat_wxyz, dtype=np.float64)
-    if q.shape != (4,):
-        raise DegenerateQuaternionError(f"quat_wxyz must have shape (4,), got shape {q.shape}")
-    norm = float(np.sqrt(q @ q)) if np.all(np.isfinite(q)) else math.nan
-    if not (norm >= _QUAT_MIN_NORM):  # also catches nan/inf
-        raise DegenerateQuaternionError(
-            f"quat_wxyz={q.tolist()} cannot be normalised (norm {norm!r} < {_QUAT_MIN_NORM})"
-        )
-    w, x, y, z = q / norm
+    w, x, y, z = _unit_quaternion(quat_wxyz)
     return np.array(
         [
             [1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - w * z), 2.0 * (x * z + w * y)],
@@ -176,8 +234,10 @@ def observe_tension(
         InvalidObservationError: If the acceleration is not a finite 3-vector, or the
             thrust, mass or gravity is not finite or out of range.
     """
-    R_world_body = rotation_world_body(quat_wxyz)
-    accel = _vector3(accel_body_mps2, "accel_body_mps2")
+    w, x, y, z = _unit_quaternion(quat_wxyz)  # raises first, as rotation_world_body did
+    accel = _floats(accel_body_mps2, 3)
+    if accel is None or not all(map(math.isfinite, accel)):
+        accel = _vector3(accel_body_mps2, "accel_body_mps2").tolist()  # raises
     if not (math.isfinite(thrust_n) and thrust_n >= 0.0):
         raise InvalidObservationError(f"thrust_n must be finite and >= 0, got {thrust_n!r}")
     if not (math.isfinite(mass_kg) and mass_kg > 0.0):
@@ -188,10 +248,22 @@ def observe_tension(
         return TensionObservation(None, True, "disarmed")
     if thrust_n < 0.5 * mass_kg * gravity_mps2:
         return TensionObservation(None, True, "low_thrust")
-    # T = R (m f - e3 F): one rotation instead of two.
-    force_body_n = mass_kg * accel
-    force_body_n[2] -= thrust_n
-    return TensionObservation(_frozen(R_world_body @ force_body_n), False, "ok")
+    # T = R (m f - e3 F): one rotation instead of two; R as in rotation_world_body,
+    # multiplied out in scalars (numpy's overhead is most of the cost for a 3-vector).
+    fx = mass_kg * accel[0]
+    fy = mass_kg * accel[1]
+    fz = mass_kg * accel[2] - thrust_n
+    xx, yy, zz = x * x, y * y, z * z
+    xy, xz, yz, wx, wy, wz = x * y, x * z, y * z, w * x, w * y, w * z
+    tension = np.array(
+        [
+            (1.0 - 2.0 * (yy + zz)) * fx + 2.0 * (xy - wz) * fy + 2.0 * (xz + wy) * fz,
+            2.0 * (xy + wz) * fx + (1.0 - 2.0 * (xx + zz)) * fy + 2.0 * (yz - wx) * fz,
+            2.0 * (xz - wy) * fx + 2.0 * (yz + wx) * fy + (1.0 - 2.0 * (xx + yy)) * fz,
+        ]
+    )
+    tension.setflags(write=False)
+    return TensionObservation(tension, False, "ok")
 
 
 def observation_cov_n2(
@@ -346,25 +418,35 @@ class _Ring:
     size: int
     obs_n: FloatArray = field(init=False)
     info_n2: FloatArray = field(init=False)  # R^-1 of each observation, 1/N^2
-    innov: FloatArray = field(init=False)  # whitened innovations, dimensionless
+    # Whitened innovations, dimensionless, each written twice (slots i and i + size), so
+    # the latest n of them are one contiguous slice at any head: the change statistic reads
+    # a view instead of gathering a copy by index every step.
+    innov2: FloatArray = field(init=False)
     head: int = 0  # next slot to write
     count: int = 0  # valid entries (innovations) since the regime began
 
     def __post_init__(self) -> None:
         self.obs_n = np.zeros((self.size, 3))
         self.info_n2 = np.zeros((self.size, 3, 3))
-        self.innov = np.zeros((self.size, 3))
+        self.innov2 = np.zeros((2 * self.size, 3))
 
-    def push(self, obs_n: NDArray[Any], info_n2: NDArray[Any], innov: NDArray[Any]) -> None:
-        self.obs_n[self.head] = obs_n
-        self.info_n2[self.head] = info_n2
-        self.innov[self.head] = innov
-        self.head = (self.head + 1) % self.size
+    def push(self, obs_n: NDArray[Any], info_n2: NDArray[Any], innov: list[float]) -> None:
+        head = self.head
+        self.obs_n[head] = obs_n
+        self.info_n2[head] = info_n2
+        self.innov2[head] = innov
+        self.innov2[head + self.size] = innov
+        self.head = head + 1 if head + 1 < self.size else 0
         self.count = min(self.count + 1, self.size)
 
     def latest_first(self, n: int) -> NDArray[np.intp]:
         """Indices of the ``n`` most recent entries, newest first."""
         return (self.head - 1 - np.arange(n)) % self.size
+
+    def innov_latest_first(self, n: int) -> FloatArray:
+        """The ``n`` most recent whitened innovations, newest first, shape (n, 3) (a view)."""
+        end = self.head + self.size
+        return self.innov2[end - n : end][::-1]
 
 
 class TensionFilter:
@@ -448,6 +530,11 @@ class TensionFilter:
         self._kf.H = np.eye(3)  # C = I
         self._ring = _Ring(self.params.change_max_window)
         self._beta_cache: tuple[float, float] = (math.nan, math.nan)
+        self._decay_cache: tuple[float, float] = (math.nan, math.nan)
+        self._constants_for: TensionFilterParams | None = None
+        self._s2 = self._f2 = self._k = self._random_walk2 = self._q_dt = math.nan
+        self._Q: FloatArray = np.eye(3) * math.nan
+        self._windows: FloatArray = np.zeros(0)
         self.reset()
 
     # -- state -------------------------------------------------------------------------
@@ -456,7 +543,7 @@ class TensionFilter:
         """Forgets everything: the next observation initialises the filter again."""
         self._initialized = False
         self._samples = 0
-        self._bias = np.zeros(3)  # EWMA of whitened innovations
+        self._bias = [0.0, 0.0, 0.0]  # EWMA of whitened innovations
         self._bias_var = 0.0  # its variance per axis at no drift
         self._scale = 1.0
         self._ring.count = 0
@@ -504,6 +591,8 @@ class TensionFilter:
             DegenerateQuaternionError: If the quaternion cannot be normalised.
         """
         p = self.params
+        if p is not self._constants_for:
+            self._set_constants()
         y = _vector3(tension_obs_world_n, "tension_obs_world_n")
         dt = _check_dt(dt_s)
         R, R_inv = self._observation_cov_and_info(quat_wxyz)
@@ -514,21 +603,25 @@ class TensionFilter:
             kf.P = R.copy()
             self._initialized = True
             self._samples = 1
-            self._bias[:] = 0.0
+            self._bias = [0.0, 0.0, 0.0]
             self._bias_var = 0.0
             self._scale = 1.0
             self._ring.count = 0
             return self._publish(False, 0.0, 1.0)
 
         scale = self._drift_scale(dt)
-        kf.Q = np.eye(3) * (scale * p.random_walk_n_per_sqrt_s**2 * dt)  # Q = q dt I
+        q_dt = scale * self._random_walk2 * dt
+        if q_dt != self._q_dt:  # at hover (scale 1, fixed dt) Q is the same every step
+            self._Q = np.eye(3) * q_dt  # Q = q dt I
+            self._q_dt = q_dt
+        kf.Q = self._Q
         kf.R = R
         kf.predict()  # x- = A x,  P- = A P A' + Q
         kf.update(y)  # K = P-C'(CP-C' + R)^-1,  x = x- + K(y - Cx-),  Joseph-form P
         self._samples += 1
 
         # Whitened innovation w = L^-1 nu with S = L L' (filterpy kept nu and S).
-        innov = np.linalg.solve(np.linalg.cholesky(kf.S), kf.y[:, 0])
+        innov = _whiten(kf.S, kf.y)
         self._update_bias(innov, dt)
         self._ring.push(y, R_inv, innov)
         stat, window = self._change_statistic()
@@ -568,22 +661,47 @@ class TensionFilter:
 
         R = s^2 I + f^2 u u' with |u| = 1 gives R^-1 = (I - f^2 / (s^2 + f^2) u u') / s^2.
         """
-        p = self.params
-        u = np.array([0.0, 0.0, 1.0]) if quat_wxyz is None else rotation_world_body(quat_wxyz)[:, 2]
-        s2 = (p.mass_kg * p.accel_noise_mps2) ** 2
-        f2 = p.thrust_noise_n**2
-        uu = np.outer(u, u)
-        R = np.eye(3) * s2 + f2 * uu
-        R_inv = (np.eye(3) - (f2 / (s2 + f2)) * uu) / s2
+        # Scalar arithmetic, element for element the array expressions
+        # R = s^2 I + f^2 u u' and R^-1 = (I - k u u') / s^2 with k = f^2 / (s^2 + f^2).
+        ux, uy, uz = _thrust_axis(quat_wxyz)
+        s2, f2, k = self._s2, self._f2, self._k
+        xx, yy, zz, xy, xz, yz = ux * ux, uy * uy, uz * uz, ux * uy, ux * uz, uy * uz
+        oxy, oxz, oyz = 0.0 + f2 * xy, 0.0 + f2 * xz, 0.0 + f2 * yz
+        R = np.array([[s2 + f2 * xx, oxy, oxz], [oxy, s2 + f2 * yy, oyz], [oxz, oyz, s2 + f2 * zz]])
+        ixy, ixz, iyz = (0.0 - k * xy) / s2, (0.0 - k * xz) / s2, (0.0 - k * yz) / s2
+        R_inv = np.array(
+            [
+                [(1.0 - k * xx) / s2, ixy, ixz],
+                [ixy, (1.0 - k * yy) / s2, iyz],
+                [ixz, iyz, (1.0 - k * zz) / s2],
+            ]
+        )
         return R, R_inv
 
-    def _update_bias(self, innov: FloatArray, dt: float) -> None:
+    def _set_constants(self) -> None:
+        """Per-parameter constants of the step (recomputed if ``params`` is replaced)."""
+        p = self.params
+        self._s2 = (p.mass_kg * p.accel_noise_mps2) ** 2
+        self._f2 = p.thrust_noise_n**2
+        self._k = self._f2 / (self._s2 + self._f2)
+        self._random_walk2 = p.random_walk_n_per_sqrt_s**2
+        self._q_dt = math.nan
+        self._Q = np.eye(3) * math.nan
+        self._beta_cache = (math.nan, math.nan)
+        self._decay_cache = (math.nan, math.nan)
+        # Window lengths of the change statistic; the ring keeps its size from construction.
+        self._windows = np.arange(p.change_min_window, self._ring.size + 1, dtype=np.float64)
+        self._constants_for = p
+
+    def _update_bias(self, innov: list[float], dt: float) -> None:
         # EWMA b = (1 - beta) b + beta w, with beta from the time constant and dt.
         if self._beta_cache[0] != dt:
             beta = -math.expm1(-dt / self.params.drift_time_constant_s) if dt > 0 else 0.0
             self._beta_cache = (dt, beta)
         beta = self._beta_cache[1]
-        self._bias += beta * (innov - self._bias)
+        b0, b1, b2 = self._bias
+        w0, w1, w2 = innov
+        self._bias = [b0 + beta * (w0 - b0), b1 + beta * (w1 - b1), b2 + beta * (w2 - b2)]
         # Var(b) = (1 - beta)^2 Var(b) + beta^2 per axis, for white unit w.
         self._bias_var = (1.0 - beta) ** 2 * self._bias_var + beta * beta
 
@@ -591,13 +709,17 @@ class TensionFilter:
         p = self.params
         inst = 1.0
         if self._bias_var > 0.0:
-            d = float(self._bias @ self._bias) / self._bias_var
+            b0, b1, b2 = self._bias
+            d = ((b0 * b0 + b1 * b1) + b2 * b2) / self._bias_var  # |b|^2, numpy's dot order
             ratio = d / p.drift_threshold
             if ratio > 1.0:
                 inst = min(ratio**p.drift_exponent, p.drift_max_scale)
         # The scale decays with drift_memory_s rather than dropping at once, so a re-initialisation
         # (which clears the innovation bias) does not forget that the tension was moving.
-        decay = math.exp(-dt / p.drift_memory_s) if p.drift_memory_s > 0 else 0.0
+        if self._decay_cache[0] != dt:
+            decay = math.exp(-dt / p.drift_memory_s) if p.drift_memory_s > 0 else 0.0
+            self._decay_cache = (dt, decay)
+        decay = self._decay_cache[1]
         self._scale = max(inst, 1.0 + (self._scale - 1.0) * decay)
         if self._scale < 1.0 + 1e-3:
             self._scale = 1.0
@@ -609,11 +731,13 @@ class TensionFilter:
         n_valid = self._ring.count
         if n_valid < p.change_min_window:
             return 0.0, 0
-        idx = self._ring.latest_first(n_valid)
-        sums = np.cumsum(self._ring.innov[idx], axis=0)[p.change_min_window - 1 :]
-        n = np.arange(p.change_min_window, n_valid + 1)
+        # np.add.accumulate is np.cumsum without its wrapper; the window lengths are kept
+        # as floats (the int -> float conversion of the division, done once).
+        latest = self._ring.innov_latest_first(n_valid)
+        sums = np.add.accumulate(latest, axis=0)[p.change_min_window - 1 :]
+        n = self._windows[: n_valid - p.change_min_window + 1]
         stats = np.einsum("ij,ij->i", sums, sums) / n
-        best = int(np.argmax(stats))
+        best = int(stats.argmax())
         return float(stats[best]), int(n[best])
 
     def _reinitialize(self, window: int) -> None:
@@ -626,16 +750,18 @@ class TensionFilter:
         self._kf.P = P
         self._kf.x = (P @ info_obs).reshape(3, 1)  # x = P sum R_i^-1 y_i
         self._ring.count = 0
-        self._bias[:] = 0.0
+        self._bias = [0.0, 0.0, 0.0]
         self._bias_var = 0.0
 
     def _publish(self, change: bool, stat: float, scale: float) -> TensionEstimate:
         x = self._kf.x[:, 0]
         P = self._kf.P
+        std = np.array([_sqrt_clipped(P[0, 0]), _sqrt_clipped(P[1, 1]), _sqrt_clipped(P[2, 2])])
+        std.setflags(write=False)
         est = TensionEstimate(
             tension_world_n=_frozen(x),
             cov_n2=_frozen(P),
-            std_n=_frozen(np.sqrt(np.clip(np.diag(P), 0.0, None))),
+            std_n=std,  # sqrt(clip(diag(P), 0))
             converged=self._samples >= self.params.converged_min_samples,
             change_detected=change,
             samples=self._samples,
@@ -644,6 +770,47 @@ class TensionFilter:
         )
         self._last = est
         return est
+
+
+def _sqrt_clipped(v: float) -> float:
+    """``np.sqrt(np.clip(v, 0.0, None))`` for one value (NaN stays NaN)."""
+    return math.sqrt(v) if v > 0.0 else (v if v != v else 0.0)
+
+
+def _whiten(S: FloatArray, nu: FloatArray) -> list[float]:
+    """Whitened innovation ``L^-1 nu`` with ``S = L L'`` (Cholesky), in scalars.
+
+    Equal to ``np.linalg.solve(np.linalg.cholesky(S), nu)`` up to rounding (numpy's cost
+    for a 3x3 is mostly per-call overhead). Like numpy, reads the lower triangle of S and
+    raises ``LinAlgError`` when S is not positive definite.
+
+    Args:
+        S: Innovation covariance, shape (3, 3).
+        nu: Innovation, shape (3, 1) or (3,).
+
+    Returns:
+        The whitened innovation, 3 floats.
+    """
+    (s00, _, _), (s10, s11, _), (s20, s21, s22) = S.tolist()
+    n0, n1, n2 = nu.ravel().tolist()
+    if not s00 > 0.0:
+        raise np.linalg.LinAlgError("Matrix is not positive definite")
+    l00 = math.sqrt(s00)
+    l10 = s10 / l00
+    l20 = s20 / l00
+    d1 = s11 - l10 * l10
+    if not d1 > 0.0:
+        raise np.linalg.LinAlgError("Matrix is not positive definite")
+    l11 = math.sqrt(d1)
+    l21 = (s21 - l20 * l10) / l11
+    d2 = s22 - l20 * l20 - l21 * l21
+    if not d2 > 0.0:
+        raise np.linalg.LinAlgError("Matrix is not positive definite")
+    l22 = math.sqrt(d2)
+    w0 = n0 / l00
+    w1 = (n1 - l10 * w0) / l11
+    w2 = (n2 - l20 * w0 - l21 * w1) / l22
+    return [w0, w1, w2]
 
 
 def _check_dt(dt_s: float) -> float:

@@ -1,0 +1,308 @@
+"""Cost of the per-message path, stage by stage, for a converged hovering drone.
+
+Run from the repository root::
+
+    .venv/bin/python -m benchmarks.bench_pipeline            # writes docs/pipeline_benchmark.md
+    .venv/bin/python -m benchmarks.bench_pipeline --quick    # a smoke run, prints only
+    .venv/bin/python -m benchmarks.bench_pipeline --json /tmp/after.json --before /tmp/before.json
+
+The telemetry is the service benchmark's (``benchmarks.bench_service``: one drone holding
+still against a 63 mN tether pull, the simulator's IMU and thrust noise, 250 Hz), parsed
+once. A pipeline takes ``--warmup`` messages first, so the filter has converged and every
+message runs the whole path: observation, filter, localization, follow, Estimate.
+
+* ``total``: :meth:`Pipeline.handle` (validation of the bytes included, the Estimate encoded
+  to JSON), one call per message, each timed with ``perf_counter_ns``. Reported: the median
+  and p90 over all timed messages, and the mean of the best repeat.
+* Stages: each stage alone over the same converged messages (mean per call, best of the
+  repeats): ``validate`` (key + JSON → Telemetry), ``observe_tension``,
+  ``TensionFilter.update`` (a copy of the converged filter fed the stream),
+  ``localize``, ``follow_step``, ``estimate`` (the Estimate model and its JSON).
+
+As :mod:`timeit` does, the garbage collector is off while timing. The machine is shared:
+compare runs made close together, and trust the best repeat more than one run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import gc
+import json
+import math
+import os
+import platform
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from benchmarks.bench_service import _telemetry_payloads
+from groundstation import follow as follow_mod
+from groundstation.bus import Sample
+from groundstation.evaluation import settings_for
+from groundstation.localization import localize
+from groundstation.messages import Telemetry
+from groundstation.pipeline import Pipeline
+from groundstation.tension import TensionFilter, observe_tension
+
+DOC_PATH = Path(__file__).resolve().parent.parent / "docs" / "pipeline_benchmark.md"
+KEY = "tether/d0/telemetry"
+STAGES = ("validate", "observe_tension", "filter_update", "localize", "follow_step", "estimate")
+
+
+def _best_mean_us(run: Callable[[], int], repeats: int) -> float:
+    """Best over ``repeats`` of (time of ``run()``) / (calls it made), µs."""
+    best = math.inf
+    for _ in range(repeats):
+        t0 = time.perf_counter_ns()
+        n = run()
+        best = min(best, (time.perf_counter_ns() - t0) / n / 1e3)
+    return best
+
+
+def measure(warmup: int, messages: int, repeats: int, seed: int = 0) -> dict[str, Any]:
+    payloads = [row[0] for row in _telemetry_payloads(1, (warmup + messages) / 250.0, seed)]
+    warm, timed = payloads[:warmup], payloads[warmup : warmup + messages]
+    settings = settings_for()
+
+    def warmed() -> Pipeline:
+        pipe = Pipeline(settings)
+        for p in warm:
+            pipe.handle(Sample(KEY, p), 0.0)
+        return pipe
+
+    samples = [Sample(KEY, p) for p in timed]
+    gc_was = gc.isenabled()
+    gc.disable()
+    try:
+        # -- total: Pipeline.handle, each message timed
+        per_msg: list[float] = []
+        means: list[float] = []
+        for _ in range(repeats):
+            pipe = warmed()
+            handle = pipe.handle
+            clock = time.perf_counter_ns
+            times = []
+            for s in samples:
+                t0 = clock()
+                handle(s, 0.0)
+                times.append(clock() - t0)
+            assert pipe.drones["d0"].estimates == warmup + messages, "a message was dropped"
+            per_msg.extend(times)
+            means.append(sum(times) / len(times) / 1e3)
+        per_msg_us = np.array(per_msg) / 1e3
+
+        # -- stages, on the converged state
+        pipe = warmed()
+        rt = pipe.drones["d0"]
+        mass_kg = rt.params.drone.mass_kg
+        floor_z_m = rt.params.base.floor_z_m
+        msgs = [Telemetry.parse(p) for p in timed]
+        obs = [
+            observe_tension(m.accel_mps2, m.quat_wxyz, m.thrust_n, mass_kg, armed=m.armed)
+            for m in msgs
+        ]
+        filt0: TensionFilter = copy.deepcopy(rt.filter)
+        ests = []
+        f = copy.deepcopy(filt0)
+        for m, o in zip(msgs, obs, strict=True):
+            assert o.tension_world_n is not None
+            ests.append(f.update(o.tension_world_n, 0.004, m.quat_wxyz))
+        positions = [
+            localize(
+                e.tension_world_n,
+                e.cov_n2,
+                rt.weight_n_per_m,
+                rt.length_m,
+                rt.base_world_m,
+                floor_z_m,
+            )
+            for e in ests
+        ]
+        assert all(p is not None for p in positions)
+
+        def run_validate() -> int:
+            for s in samples:
+                pipe.validate(s, 0.0)
+            return len(samples)
+
+        def run_observe() -> int:
+            for m in msgs:
+                observe_tension(m.accel_mps2, m.quat_wxyz, m.thrust_n, mass_kg, armed=m.armed)
+            return len(msgs)
+
+        def run_localize() -> int:
+            for e in ests:
+                localize(
+                    e.tension_world_n,
+                    e.cov_n2,
+                    rt.weight_n_per_m,
+                    rt.length_m,
+                    rt.base_world_m,
+                    floor_z_m,
+                )
+            return len(ests)
+
+        def run_follow() -> int:
+            state, fp = rt.follow_state, rt.follow_params
+            for m, e, p in zip(msgs, ests, positions, strict=True):
+                assert p is not None
+                follow_mod.follow_step(
+                    state,
+                    fp,
+                    stamp_s=m.stamp_s,
+                    tension_norm_n=float(np.linalg.norm(e.tension_world_n)),
+                    position_world_m=p.position_world_m,
+                    base_world_m=rt.base_world_m,
+                    length_m=rt.length_m,
+                    floor_z_m=floor_z_m,
+                )
+            return len(msgs)
+
+        def run_estimate() -> int:
+            for m, e, p in zip(msgs, ests, positions, strict=True):
+                est = pipe._estimate(rt, m, e.tension_world_n, e.std_n, p, False, True)
+                assert est is not None
+                est.to_json()
+            return len(msgs)
+
+        stages = {
+            "validate": _best_mean_us(run_validate, repeats),
+            "observe_tension": _best_mean_us(run_observe, repeats),
+            "filter_update": _filter_us(filt0, msgs, obs, repeats),
+            "localize": _best_mean_us(run_localize, repeats),
+            "follow_step": _best_mean_us(run_follow, repeats),
+            "estimate": _best_mean_us(run_estimate, repeats),
+        }
+    finally:
+        if gc_was:
+            gc.enable()
+    return {
+        "warmup": warmup,
+        "messages": messages,
+        "repeats": repeats,
+        "stages_us": stages,
+        "stages_sum_us": sum(stages.values()),
+        "total_median_us": float(np.median(per_msg_us)),
+        "total_p90_us": float(np.percentile(per_msg_us, 90)),
+        "total_best_mean_us": min(means),
+        "commit": _commit(),
+        "python": sys.version.split()[0],
+        "numpy": np.__version__,
+        "machine": platform.machine(),
+        "cpus": os.cpu_count(),
+        "loadavg": os.getloadavg(),
+    }
+
+
+def _filter_us(filt0: TensionFilter, msgs: list[Telemetry], obs: list[Any], repeats: int) -> float:
+    best = math.inf
+    for _ in range(repeats):
+        f = copy.deepcopy(filt0)
+        update = f.update
+        t0 = time.perf_counter_ns()
+        for m, o in zip(msgs, obs, strict=True):
+            update(o.tension_world_n, 0.004, m.quat_wxyz)
+        best = min(best, (time.perf_counter_ns() - t0) / len(msgs) / 1e3)
+    return best
+
+
+def _commit() -> str:
+    try:
+        out = subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"],
+            capture_output=True,
+            text=True,
+            check=True,
+            cwd=DOC_PATH.parent.parent,
+        )
+        dirty = subprocess.run(
+            ["git", "status", "--porcelain", "groundstation"],
+            capture_output=True,
+            text=True,
+            check=True,
+            cwd=DOC_PATH.parent.parent,
+        )
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+    return out.stdout.strip() + (" (modified)" if dirty.stdout.strip() else "")
+
+
+def _fmt(v: float | None) -> str:
+    return "" if v is None else f"{v:.1f}"
+
+
+def render(result: dict[str, Any], before: dict[str, Any] | None, argv: list[str]) -> str:
+    rows = [(n, result["stages_us"][n], (before or {}).get("stages_us", {}).get(n)) for n in STAGES]
+    rows.append(("sum of stages", result["stages_sum_us"], (before or {}).get("stages_sum_us")))
+    for key, label in (
+        ("total_median_us", "**Pipeline.handle, median**"),
+        ("total_p90_us", "Pipeline.handle, p90"),
+        ("total_best_mean_us", "Pipeline.handle, mean (best repeat)"),
+    ):
+        rows.append((label, result[key], (before or {}).get(key)))
+    head = "| stage | µs/msg |" + (" before µs/msg |" if before else "")
+    sep = "| --- | --- |" + (" --- |" if before else "")
+    lines = [
+        "# Per-message pipeline cost",
+        "",
+        f"Generated by `.venv/bin/python -m benchmarks.bench_pipeline {' '.join(argv)}`".rstrip()
+        + f" at commit {result['commit']} (Python {result['python']}, numpy {result['numpy']},"
+        f" {result['machine']}, {result['cpus']} CPUs, load average "
+        f"{', '.join(f'{x:.2f}' for x in result['loadavg'])}).",
+        "",
+        f"One converged hovering drone (after {result['warmup']} messages), "
+        f"{result['messages']} messages x {result['repeats']} repeats; method in the module "
+        "docstring of `benchmarks/bench_pipeline.py`. Stages are each timed alone (best "
+        "repeat); the handle rows time whole messages.",
+        "",
+        head,
+        sep,
+    ]
+    for name, now, was in rows:
+        lines.append(f"| {name} | {_fmt(now)} |" + (f" {_fmt(was)} |" if before else ""))
+    if before:
+        lines += [
+            "",
+            f"Before: commit {before['commit']}, load average "
+            f"{', '.join(f'{x:.2f}' for x in before['loadavg'])}.",
+        ]
+    lines += [
+        "",
+        "Budget: 8 drones x 250 Hz = 2000 msg/s on 2 cores, so every 100 µs of pipeline is "
+        "20 % of a core (plus zenoh's share, measured by `benchmarks.bench_service`).",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--warmup", type=int, default=500, help="messages before timing")
+    parser.add_argument("--messages", type=int, default=2000, help="timed messages per repeat")
+    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--quick", action="store_true", help="small run, print only")
+    parser.add_argument("--json", type=Path, help="also write the raw result here")
+    parser.add_argument("--before", type=Path, help="a --json result to show beside this one")
+    parser.add_argument("--no-doc", action="store_true", help=f"do not write {DOC_PATH.name}")
+    args = parser.parse_args(argv)
+    if args.quick:
+        args.warmup, args.messages, args.repeats = 100, 200, 2
+    result = measure(args.warmup, args.messages, args.repeats)
+    before = json.loads(args.before.read_text()) if args.before else None
+    text = render(result, before, argv if argv is not None else sys.argv[1:])
+    print(text)
+    if args.json:
+        args.json.write_text(json.dumps(result, indent=1) + "\n")
+    if not (args.quick or args.no_doc):
+        DOC_PATH.write_text(text)
+        print(f"wrote {DOC_PATH}")
+
+
+if __name__ == "__main__":
+    main()
