@@ -94,7 +94,7 @@ CHART_RATE_HZ = 4.0
 STATUS_PERIOD_S = 1.0
 """How often ``tether/*/status`` is queried."""
 STATUS_TIMEOUT_S = 0.5
-PENDING_HOLD_S = 2.0
+PENDING_HOLD_S = 3.0
 """A clicked setting shows the requested value this long at most while the service's report
 still says otherwise; then the report wins again."""
 EDIT_HOLD_S = 30.0
@@ -973,6 +973,10 @@ class DashboardStats:
     """Wall time since start, seconds."""
 
 
+FOREIGN_EDIT_WAIT_S = 1.0
+"""Longest wait for a browser edit's callback before the report wins again, s."""
+
+
 class _Synced:
     """A GUI input that shows a reported value unless the operator has just changed it."""
 
@@ -980,6 +984,9 @@ class _Synced:
         self.handle = handle
         self.pending: Pending | None = None
         self.editing_until_s = -math.inf
+        self.written: Any = handle.value
+        """The value this class last wrote (an operator's edit makes the handle differ)."""
+        self.foreign_since_s: float | None = None
 
     def reset(self) -> None:
         self.pending = None
@@ -988,8 +995,18 @@ class _Synced:
     def show(self, reported: Any, now_s: float) -> None:
         if reported is None or now_s < self.editing_until_s:
             return
+        if self.pending is None and self.handle.value != self.written:
+            # viser stores a browser's edit before it calls our callback, which then turns
+            # it into a pending request. Overwriting it in between would make the callback
+            # read back the old value and send the opposite of the click; wait for it.
+            if self.foreign_since_s is None:
+                self.foreign_since_s = now_s
+            if now_s - self.foreign_since_s < FOREIGN_EDIT_WAIT_S:
+                return
+        self.foreign_since_s = None
         value, self.pending = reconcile(reported, self.pending, now_s)
         _set_value(self.handle, value)
+        self.written = value
 
 
 class Dashboard:

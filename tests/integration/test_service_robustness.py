@@ -92,7 +92,9 @@ def test_bad_input_mixed_into_a_flight(procs: Procs, make_probe: Any) -> None:
         assert all(math.isfinite(v) for v in e["tension_std_n"])
         assert e["position_m"] is None or all(math.isfinite(v) for v in e["position_m"])
     truth = probe.json("tether/*/truth")
-    window = {round(t["stamp_s"], 6) for t in truth if t["stamp_s"] > 2.0}
+    # Estimates may trail the truth stream on a busy machine: leave the last second out.
+    last_s = max(t["stamp_s"] for t in truth)
+    window = {round(t["stamp_s"], 6) for t in truth if 2.0 < t["stamp_s"] < last_s - 1.0}
     estimated = {round(e["stamp_s"], 6) for e in estimates} & window
     assert len(estimated) >= 0.98 * len(window), f"{len(estimated)}/{len(window)} estimated"
     assert not probe.got("tether/*/cmd/**"), "no commands without follow mode"
