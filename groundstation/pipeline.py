@@ -141,6 +141,9 @@ class Pipeline:
         self.settings = settings
         self.drones: dict[str, DroneRuntime] = {}
         self.global_drops: Counter[str] = Counter()
+        self.last_received_s: dict[str, float] = {}
+        """Receive time of each drone's latest valid telemetry, written by :meth:`validate`
+        (so a backlog of queued samples is not mistaken for a silent drone)."""
         self._on_drop = on_drop
         self._lock = threading.Lock()  # guards drop counters touched from bus threads
 
@@ -166,6 +169,10 @@ class Pipeline:
         except InvalidMessage as exc:
             self.count_drop(drone, exc.kind, exc.detail)
             return None
+        if kind == "telemetry" and (
+            drone in self.last_received_s or len(self.last_received_s) < MAX_DRONES
+        ):
+            self.last_received_s[drone] = now_s
         return Parsed(drone, kind, message, now_s)
 
     def count_drop(self, drone: str | None, kind: str, detail: str) -> None:
@@ -225,7 +232,8 @@ class Pipeline:
         for runtime in self.drones.values():
             if runtime.stale or runtime.last_seen_s is None:
                 continue
-            if now_s - runtime.last_seen_s > stale_after:
+            heard_s = max(runtime.last_seen_s, self.last_received_s.get(runtime.drone, -math.inf))
+            if now_s - heard_s > stale_after:
                 runtime.stale = True
                 runtime.follow_state = follow_mod.mark_stale(runtime.follow_state)
         return []
@@ -500,7 +508,11 @@ _ZEROS3 = (0.0, 0.0, 0.0)
 
 
 def _finite(values: np.ndarray | Iterable[float]) -> bool:
-    if type(values) is tuple or type(values) is list:  # the per-message case: 3 floats
+    # The per-message cases, 3 floats in a list, tuple or float64 array, without numpy's
+    # per-call overhead; anything else as before.
+    if type(values) is np.ndarray and values.dtype == np.float64 and values.ndim == 1:
+        return all(map(math.isfinite, values.tolist()))
+    if type(values) is tuple or type(values) is list:
         try:
             return all(map(math.isfinite, values))
         except TypeError:
