@@ -91,7 +91,7 @@ def _s(x: float | None, digits: int = 2) -> str:
 
 def _mm(v: tuple[float, float] | None) -> str:
     """'median … (max …)' of settle times."""
-    return "not settled" if v is None else f"median {v[0]:.2f} s (max {v[1]:.2f} s)"
+    return "not settled" if v is None else f"median {v[0]:.3f} s (max {v[1]:.3f} s)"
 
 
 def _table(header: Sequence[str], rows: Iterable[Sequence[str]]) -> list[str]:
@@ -111,13 +111,13 @@ def _git(*args: str) -> str:
     try:
         return subprocess.run(
             ["git", *args], cwd=REPO, capture_output=True, text=True, check=True, timeout=10
-        ).stdout.strip()
+        ).stdout
     except (OSError, subprocess.SubprocessError):
         return ""
 
 
 def provenance() -> dict[str, str]:
-    commit = _git("rev-parse", "--short=12", "HEAD") or "unknown"
+    commit = _git("rev-parse", "--short=12", "HEAD").strip() or "unknown"
     dirty = _git("status", "--porcelain", "--", "groundstation", "benchmarks")
     changed = sorted({line[3:] for line in dirty.splitlines() if line.strip()})
     return {
@@ -246,75 +246,109 @@ def saturation_text(o: Outcome) -> str:
     )
 
 
+def _trusted(sw: renv.SweepResult, unit: str) -> str:
+    """Where p95 ≤ 10 cm, in words."""
+    r = sw.trusted_range()
+    if r is None:
+        return "nowhere in the swept range"
+    if r[0] == r[1]:
+        return f"only at the nominal {r[0]:g} {unit}"
+    if r[0] == -r[1]:
+        return f"within ±{r[1]:g} {unit}"
+    return f"for {_f(r[0], 1.0, _digits(r[0]))} … {_f(r[1], 1.0, _digits(r[1]))} {unit}"
+
+
+def _digits(x: float) -> int:
+    """Decimals to print a swept value as given (0.5, 2.25, 1.3 …)."""
+    for d in range(4):
+        if abs(round(x, d) - x) < 1e-9:
+            return d
+    return 4
+
+
+def _first_untrusted(sw: renv.SweepResult) -> renv.Point | None:
+    """The first point above the nominal value that is not trusted."""
+    return next(
+        (
+            pt
+            for pt in sw.points
+            if pt.value > sw.sweep.nominal
+            and not (pt.p95_m <= renv.TRUST_P95_M and pt.availability > 0.5)
+        ),
+        None,
+    )
+
+
 def trust_bullets(o: Outcome) -> list[str]:
     """'When it works, when it doesn't', each with its numbers from the envelope and (a)."""
     out: list[str] = []
     pos = o.paper.position.all3d
     out.append(
-        f"**Works:** hovering within the tether's free span with the nominal setup "
-        f"(ω and L known, thrust unbiased, accelerometer noise 0.3 m/s²): median "
+        f"**Works:** hovering on a free-hanging tether with the nominal setup (ω and L "
+        f"known, thrust unbiased, accelerometer noise 0.3 m/s²): median "
         f"{_cm(pos.median_abs)}, p95 {_cm(pos.p95_abs)} over the paper's six spots, no motion "
-        f"capture, azimuth from the tension itself."
+        f"capture, azimuth from the tension itself. 'Trusted' below means p95 ≤ 10 cm."
     )
-
-    def rng(sw: renv.SweepResult, unit: str) -> str:
-        r = sw.trusted_range()
-        if r is None:
-            return "nowhere in the swept range"
-        return f"{r[0]:g} … {r[1]:g} {unit}".strip()
-
     sw = _sweep(o, "thrust_bias")
-    worst = sw.points[-1]
+    bad, worst = _first_untrusted(sw), sw.points[-1]
     out.append(
-        f"**Thrust calibration matters most.** p95 ≤ 10 cm for thrust bias {rng(sw, '%')}; "
-        f"at {worst.value:g} % the median error is {_cm(worst.median_m)} "
-        f"(vertical {_cm(worst.vertical_median_m)}): 1 % of 0.3 N is 3 mN of T_v, i.e. 6 cm of "
-        f"s2 at ω = 0.05 N/m."
+        f"**Thrust calibration matters most:** trusted {_trusted(sw, '%')} thrust bias"
+        + (
+            f"; at {bad.value:g} % the median error is already {_cm(bad.median_m)}"
+            if bad is not None
+            else ""
+        )
+        + f", at {worst.value:g} % {_cm(worst.median_m)} (height: {_cm(worst.vertical_median_m)})"
+        ". A thrust error reads as vertical tension (1 % of 0.3 N is 3 mN, 6 cm of s2 at "
+        "ω = 0.05 N/m), and s2 sets the height. Calibrate thrust to well under 1 %."
     )
     sw = _sweep(o, "omega_error")
     lo, hi = sw.points[0], sw.points[-1]
     out.append(
-        f"**ω must be known.** p95 ≤ 10 cm for ω off by {rng(sw, '%')}; at {lo.value:+g} % "
-        f"the median is {_cm(lo.median_m)}, at {hi.value:+g} % {_cm(hi.median_m)} (mostly "
-        f"height: {_cm(lo.vertical_median_m)} / {_cm(hi.vertical_median_m)}). Weigh the tether."
+        f"**ω must be known:** trusted {_trusted(sw, '%')} error in the configured weight per "
+        f"metre; at {lo.value:+g} % the median is {_cm(lo.median_m)}, at {hi.value:+g} % "
+        f"{_cm(hi.median_m)} (mostly height: {_cm(lo.vertical_median_m)} / "
+        f"{_cm(hi.vertical_median_m)}). Weigh the tether."
     )
     sw = _sweep(o, "accel_noise")
     worst = sw.points[-1]
     out.append(
-        f"**IMU noise is forgiving.** p95 ≤ 10 cm for accelerometer noise σ {rng(sw, 'm/s²')} "
-        f"(configured to match); at σ = {worst.value:g} m/s² median {_cm(worst.median_m)}, "
-        f"p95 {_cm(worst.p95_m)}."
+        f"**IMU noise is forgiving:** trusted {_trusted(sw, 'm/s²')} accelerometer noise "
+        f"(the service configured with the same σ); at σ = {worst.value:g} m/s² median "
+        f"{_cm(worst.median_m)}, p95 {_cm(worst.p95_m)}."
     )
     sw = _sweep(o, "length")
     longest = sw.points[-1]
     floor_from = next((p.value for p in sw.points if p.floor_contact > 0.5), None)
     out.append(
-        f"**Slack tether on the floor: distance unknown.** p95 ≤ 10 cm for L in "
-        f"{rng(sw, 'm')} at the paper's spots"
+        f"**A slack tether lying on the floor hides the distance:** trusted "
+        f"{_trusted(sw, 'm')} of tether at the paper's spots"
         + (
-            f"; from L = {floor_from:g} m the tether rests on the floor and the horizontal "
-            f"distance is only an interval (the service says so: `radial_interval_m`, "
-            f"`floor_contact`): at L = {longest.value:g} m median {_cm(longest.median_m)} "
-            f"(horizontal {_cm(longest.horizontal_median_m)}, height "
-            f"{_cm(longest.vertical_median_m)})."
+            f"; from L = {floor_from:g} m the tether rests on the floor most of the time, the "
+            f"horizontal tension no longer tells the distance and the service says so "
+            f"(`floor_contact`, `radial_interval_m`, `azimuth_determined`): at L = "
+            f"{longest.value:g} m the median error is {_cm(longest.median_m)} (horizontal "
+            f"{_cm(longest.horizontal_median_m)}, height still {_cm(longest.vertical_median_m)})."
             if floor_from is not None
             else "."
         )
     )
     sw = _sweep(o, "distance")
-    near = sw.points[0]
-    az_min = next((p.value for p in sw.points if p.azimuth_determined > 0.9), None)
-    out.append(
-        f"**Near plumb the azimuth is unknown.** At z = 1 m, p95 ≤ 10 cm for r in "
-        f"{rng(sw, 'm')}; at r = {near.value:g} m the service reports "
-        f"`azimuth_determined: false` {_pct(1 - near.azimuth_determined, 0)} of the time "
-        + (
-            f"(it is determined ≥ 90 % of the time from r = {az_min:g} m)"
-            if az_min is not None
-            else "(it is never determined ≥ 90 % of the time in the swept range)"
+    plumb = [p for p in sw.points if p.azimuth_determined < 0.9]
+    if plumb:
+        far = max(plumb, key=lambda p: p.value)
+        shares = ", ".join(
+            f"{_pct(1 - p.azimuth_determined, 0)} at r = {p.value:g} m" for p in plumb
         )
-        + "."
-    )
+        out.append(
+            f"**Close to plumb the azimuth is unknown:** at z = 1 m and r ≤ {far.value:g} m the "
+            f"horizontal tension is often within its noise ({shares} of the samples); the "
+            f"service then places the drone above the base with `azimuth_determined: false` "
+            f"and a horizontal σ covering the reach, so the error is about r (median "
+            f"{_cm(far.median_m)} at r = {far.value:g} m). Trusted {_trusted(sw, 'm')}; "
+            f"height stays good throughout (median |Δz| ≤ "
+            f"{_cm(max(p.vertical_median_m for p in sw.points))})."
+        )
     fol = {f.tag: f for f in o.paper.follow}
     land = {lr.tag: lr for lr in o.paper.landing}
     tl = land["tether"]
@@ -322,11 +356,11 @@ def trust_bullets(o: Outcome) -> list[str]:
         f"**Doesn't work: following or landing on the tether estimate.** A hand pulling the "
         f"tether adds a force the catenary model does not contain, so during a pull the "
         f"position estimate is off by a median {_cm(fol['tether'].pull_pos_error_m, 0)} "
-        f"(at hover {_cm(fol['tether'].hover_pos_error_m)}). Tug-to-land with the tether "
-        f"estimate as position sent {tl.stops:g} Stop(s) in {tl.runs} run(s) and the drone "
-        f"climbed to z = {tl.max_z_m:.2f} m; with motion capture (the paper's setup) it "
-        f"landed in {land['mocap'].landed}/{land['mocap'].runs} runs. Use motion capture (or "
-        f"a height sensor) for following and tug-to-land."
+        f"(at hover {_cm(fol['tether'].hover_pos_error_m)}). Tug-to-land on the tether "
+        f"estimate sent {tl.stops:g} Stop(s) per run and the drone climbed to z = "
+        f"{tl.max_z_m:.2f} m; with motion capture (the paper's setup) it landed in "
+        f"{land['mocap'].landed}/{land['mocap'].runs} runs. Follow and tug-to-land need motion "
+        f"capture or another position source."
     )
     return out
 
@@ -580,7 +614,10 @@ def _paper_section(o: Outcome) -> list[str]:
         "carry the drone the floor's reaction looks like tension; the paper's estimate showed "
         "it (~0.3 N, the drone's weight). The service detects ground contact (disarmed, or "
         "thrust below half the weight) and reports `on_ground: true` with zero tension; the "
-        "red curve is the same filter fed the same samples without that detection.",
+        "red curve is the same filter fed the same samples without that detection. At "
+        "lift-off the filter restarts from the first airborne observation (one sample: about "
+        "9 mN of noise per axis), so H briefly exceeds the paper's 10 mN before it settles; "
+        "in hover it stays far below.",
         "",
     ]
     t03, t13 = p.takeoff
@@ -991,7 +1028,8 @@ def _envelope_section(o: Outcome) -> list[str]:
         SECTIONS[4],
         "",
         "One factor at a time, everything else nominal; no motion capture. Each point pools "
-        f"{ep.spots} of the paper's hover spots (distance sweep: {ep.azimuths} azimuth(s) at "
+        f"the paper's hover spots {', '.join(str(i + 1) for i in ep.spots)} (distance sweep: "
+        f"{ep.azimuths} azimuth(s) at "
         f"z = 1 m), {ep.seconds:g} s each, errors from t ≥ {ep.steady_from_s:g} s. 'trusted' "
         "is p95 ≤ 10 cm. ω error: the service is configured with ω·(1 + e), the simulated "
         "tether weighs ω = 0.05 N/m. Accelerometer noise: the service is configured with the "

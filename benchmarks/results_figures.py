@@ -426,6 +426,7 @@ def service(svc: ServiceResult, dash: DashboardResult, out_dir: Path) -> str:
     ax.plot(n, [r["p50_ms"] for r in rows], "o-", label="p50")
     ax.plot(n, [r["p99_ms"] for r in rows], "s-", label="p99")
     for r in svc.dashboard_rows:
+        ax.plot(r["drones"], r["p50_ms"], "d", color="tab:purple", label="p50 with dashboard")
         ax.plot(r["drones"], r["p99_ms"], "D", color="tab:red", label="p99 with dashboard")
     ax.axhline(SERVICE_TARGET_P99_MS, color="tab:red", ls=":", label="p99 target 10 ms")
     ax.set_yscale("log")
@@ -436,7 +437,8 @@ def service(svc: ServiceResult, dash: DashboardResult, out_dir: Path) -> str:
     ax = axes[1]
     ax.plot(n, [100 * r["delivered"] for r in rows], "o-", label="estimates / telemetry sent")
     ax.axhline(99.9, color="tab:red", ls=":", label="target 99.9 %")
-    ax.set_ylim(0, 105)
+    low = min([100 * r["delivered"] for r in rows] + [99.0])
+    ax.set_ylim(max(0.0, low - 0.25 * (100.5 - low)), 100.5)
     ax.set_xlabel("drones × 250 Hz")
     ax.set_ylabel("delivered (%)")
     ax.set_title("Delivery")
@@ -457,7 +459,7 @@ def service(svc: ServiceResult, dash: DashboardResult, out_dir: Path) -> str:
     ax2.set_ylabel("CPU per message (µs)")
     h1, l1 = ax.get_legend_handles_labels()
     h2, l2 = ax2.get_legend_handles_labels()
-    ax.legend(h1 + h2, l1 + l2, fontsize=8, loc="upper left")
+    ax.legend(h1 + h2, l1 + l2, fontsize=8, loc="center right")
     fig.suptitle(
         "Service at scale: router + groundstation serve + load client on 127.0.0.1 "
         f"({svc.seconds:g} s per case; load average {svc.load_before:.1f} at start)",

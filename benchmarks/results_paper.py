@@ -60,7 +60,7 @@ class Plan:
 def plan(quick: bool) -> Plan:
     if quick:
         return Plan(True, 1, 10.0, 1, 5.0, 1, 4.0, 1.5, 1, 16.0, 1, 17.0, 8.0)
-    return Plan(False, 3, 20.0, 3, 20.0, 3, 30.0, 2.0, 5, 20.0, 3, 22.0, 16.0)
+    return Plan(False, 2, 16.0, 2, 10.0, 2, 20.0, 2.0, 4, 17.0, 2, 22.0, 12.0)
 
 
 def _no_mocap(seed: int) -> dict[str, Any]:
@@ -69,11 +69,10 @@ def _no_mocap(seed: int) -> dict[str, Any]:
 
 def jobs(p: Plan) -> list[SimJob]:
     out: list[SimJob] = []
-    for name in ("takeoff_0.3", "takeoff_1.3"):
+    for j, name in enumerate(("takeoff_0.3", "takeoff_1.3")):
         for k in range(p.takeoff_seeds):
-            out.append(
-                SimJob(f"{name}/{k}", SCENARIOS[name], p.takeoff_s, _no_mocap(k), naive=True)
-            )
+            sim = _no_mocap(10 * j + k)
+            out.append(SimJob(f"{name}/{k}", SCENARIOS[name], p.takeoff_s, sim, naive=True))
     for k in range(p.coin_seeds):
         out.append(SimJob(f"coin/{k}", COIN, p.coin_s, _no_mocap(100 + k)))
     for i, sc in enumerate(PAPER_SPOT_SCENARIOS):
