@@ -202,7 +202,13 @@ def _finite_floats(value: object, shape: tuple[int, ...]) -> list[float] | None:
             return None
     else:
         return None
-    return flat if all(map(math.isfinite, flat)) else None
+    return flat if _all_finite(flat) else None
+
+
+def _all_finite(values: list[float]) -> bool:
+    """Whether every value is finite (one sum decides the common case: NaN or inf in
+    any term makes it non-finite; only an overflowing sum needs the element check)."""
+    return math.isfinite(sum(values)) or all(map(math.isfinite, values))
 
 
 def _cholesky3(c: list[float]) -> list[float] | None:
@@ -345,33 +351,34 @@ def try_localize(
     sq = _cholesky3(cov)
     if sq is None:  # singular (e.g. zero) covariance
         sq = _sqrt_psd(np.array(cov).reshape(3, 3)).ravel().tolist()
-    k = _SIGMA_SCALE
-    px, py, pz = [tx], [ty], [tz]
-    for sign in (1.0, -1.0):
-        for i in range(_N):  # T +- sqrt(3) (column i of S)
-            px.append(tx + sign * k * sq[i] if sign > 0 else tx - k * sq[i])
-            py.append(ty + k * sq[3 + i] if sign > 0 else ty - k * sq[3 + i])
-            pz.append(tz + k * sq[6 + i] if sign > 0 else tz - k * sq[6 + i])
+    # Points T, T + sqrt(3) S[:, i], T - sqrt(3) S[:, i] (i = 0, 1, 2), per coordinate.
+    a0, a1, a2, b0, b1, b2, c0, c1, c2 = [_SIGMA_SCALE * v for v in sq]
+    px = [tx, tx + a0, tx + a1, tx + a2, tx - a0, tx - a1, tx - a2]
+    py = [ty, ty + b0, ty + b1, ty + b2, ty - b0, ty - b1, ty - b2]
+    pz = [tz, tz + c0, tz + c1, tz + c2, tz - c0, tz - c1, tz - c2]
     n_pts = 2 * _N + 1
-    h_pts: list[float] = np.hypot(px, py).tolist()
-    v_pts = [-v for v in pz]
-    h_all, v_all = h_pts, v_pts
+    h_arr = np.hypot(px, py)
+    h_pts: list[float] = h_arr.tolist()
+    v_all = [-v for v in pz]
     if plumb:  # the plumb points only when needed
         h_all = [*h_pts, plumb_k * sigma_h_n, 0.0]
-        v_all = [*v_pts, vertical_n, vertical_n]
+        v_all += [vertical_n, vertical_n]
+        h_arr = np.array(h_all)
+    else:
+        h_all = h_pts
     try:
-        if not all(map(math.isfinite, h_all)) or not all(map(math.isfinite, v_all)):
+        if not (_all_finite(h_all) and _all_finite(v_all)):
             # Out of the fast path's preconditions (overflow): catenary.locate says why.
             catenary.locate(h_all, v_all, weight_n_per_m, length_m, bz)
         r, z, r_min, r_max, contact, run = _locate_points(
-            np.array(h_all), np.array(v_all), weight_n_per_m, length_m, bz, floor_z_m
+            h_arr, np.array(v_all), weight_n_per_m, length_m, bz, floor_z_m
         )
     except (catenary.CatenaryError, ValueError, FloatingPointError) as exc:
         return LocalizationFailure(
             f"catenary failed for H={horizontal_n!r} N, T_v={vertical_n!r} N, "
             f"L={length_m!r} m: {exc}"
         )
-    if not (all(map(math.isfinite, r)) and all(map(math.isfinite, z))):
+    if not (_all_finite(r) and _all_finite(z)):
         return LocalizationFailure(
             f"non-finite catenary result for H={horizontal_n!r} N, T_v={vertical_n!r} N, "
             f"omega={weight_n_per_m!r} N/m, L={length_m!r} m"
@@ -402,17 +409,18 @@ def try_localize(
 
     # Direction from the base to the drone: opposite the horizontal pull.
     u0x, u0y = -tx / horizontal_n, -ty / horizontal_n
-    # Sigma point positions; one at H = 0 keeps the estimate's direction.
-    qx, qy = [], []
-    for i in range(n_pts):
-        hi = h_pts[i]
-        ux, uy = (-px[i] / hi, -py[i] / hi) if hi > 0.0 else (u0x, u0y)
-        qx.append(bx + r[i] * ux)
-        qy.append(by + r[i] * uy)
-    # Unscented covariance about the estimate: W sum_i d_i d_i', d_i = p_i - p_0.
+    # The estimate's position p_0 (h_pts[0] = H > 0 here), then the unscented covariance
+    # about it, W sum_i d_i d_i' with d_i = p_i - p_0 over the sigma points (a sigma point
+    # at H = 0 keeps the estimate's direction).
+    r0 = r[0]
+    x0, y0, z0 = bx + r0 * (-tx / h_pts[0]), by + r0 * (-ty / h_pts[0]), z[0]
     sxx = sxy = sxz = syy = syz = szz = 0.0
-    for i in range(1, n_pts):
-        dx, dy, dz = qx[i] - qx[0], qy[i] - qy[0], z[i] - z[0]
+    for xi, yi, hi, ri, zi in zip(px[1:], py[1:], h_pts[1:], r[1:n_pts], z[1:n_pts], strict=True):
+        if hi > 0.0:
+            dx, dy = (bx + ri * (-xi / hi)) - x0, (by + ri * (-yi / hi)) - y0
+        else:
+            dx, dy = (bx + ri * u0x) - x0, (by + ri * u0y) - y0
+        dz = zi - z0
         sxx += dx * dx
         sxy += dx * dy
         sxz += dx * dz
@@ -421,7 +429,6 @@ def try_localize(
         szz += dz * dz
     w = _SIGMA_WEIGHT
     sxx, sxy, sxz, syy, syz, szz = w * sxx, w * sxy, w * sxz, w * syy, w * syz, w * szz
-    r0 = r[0]
     interval = (r_min[0], r_max[0])
     floor_contact = bool(contact[0] > 0.5)
     if floor_contact:
@@ -431,7 +438,7 @@ def try_localize(
         sxy += extent2 * (u0x * u0y)
         syy += extent2 * (u0y * u0y)
     pos_cov = [sxx, sxy, sxz, sxy, syy, syz, sxz, syz, szz]
-    position = [qx[0], qy[0], z[0]]
+    position = [x0, y0, z0]
     if not (all(map(math.isfinite, position)) and all(map(math.isfinite, pos_cov))):
         return LocalizationFailure(
             f"non-finite position for T={[tx, ty, tz]} N, L={length_m!r} m"

@@ -57,6 +57,8 @@ _INPUT_MODELS = {
 }
 MAX_DRONES = 256
 """Drones tracked at most; more ids are dropped (kind ``too_many_drones``), bounding memory."""
+_KEY_CACHE_SIZE = 4 * MAX_DRONES
+"""Parsed keys remembered (each drone has four input kinds)."""
 _MAX_GAP_S = 1.0
 """A telemetry gap longer than this restarts the filter (the tension may have changed)."""
 
@@ -146,6 +148,9 @@ class Pipeline:
         (so a backlog of queued samples is not mistaken for a silent drone)."""
         self._on_drop = on_drop
         self._lock = threading.Lock()  # guards drop counters touched from bus threads
+        # Valid keys seen, parsed (a dict is safe to share between threads under the GIL;
+        # bounded, so a flood of distinct keys costs memory only up to the limit).
+        self._keys: dict[str, tuple[str, str]] = {}
 
     # ---------------------------------------------------------------- validation
 
@@ -156,7 +161,12 @@ class Pipeline:
         """
         drone: str | None = None
         try:
-            drone, kind = parse_key(sample.key)
+            parsed_key = self._keys.get(sample.key)
+            if parsed_key is None:
+                parsed_key = parse_key(sample.key)
+                if len(self._keys) < _KEY_CACHE_SIZE:
+                    self._keys[sample.key] = parsed_key
+            drone, kind = parsed_key
             model = _INPUT_MODELS.get(kind)
             if model is None:
                 raise InvalidMessage("unexpected_key", f"{sample.key!r} is not an input")

@@ -47,6 +47,8 @@ GRAVITY_MPS2 = 9.81
 """Standard gravity used throughout the project, m/s^2 (world -z)."""
 
 _QUAT_MIN_NORM = 1e-6
+_EYE3 = np.eye(3)
+_EYE3.setflags(write=False)
 
 FloatArray = NDArray[np.float64]
 
@@ -109,12 +111,25 @@ def _vector3(value: ArrayLike, name: str) -> FloatArray:
     return arr
 
 
+# The last tuple normalised, and the result: one telemetry sample's attitude is used by
+# observe_tension and again by TensionFilter.update. Only tuples (immutable) are cached,
+# by identity; the cache holds a reference, so the identity cannot be reused meanwhile.
+_last_unit_quaternion: tuple[object, tuple[float, float, float, float]] = (
+    None,
+    (1.0, 0.0, 0.0, 0.0),
+)
+
+
 def _unit_quaternion(quat_wxyz: ArrayLike) -> tuple[float, float, float, float]:
     """``quat_wxyz / |quat_wxyz|`` as floats; raises as :func:`rotation_world_body`.
 
     The sum of squares is taken in the order of numpy's 4-term dot (``q @ q``), so the
     result is the one the array code gives, bit for bit.
     """
+    global _last_unit_quaternion
+    last = _last_unit_quaternion
+    if last[0] is quat_wxyz:
+        return last[1]
     q = _floats(quat_wxyz, 4)
     if q is not None:
         w, x, y, z = q
@@ -122,7 +137,10 @@ def _unit_quaternion(quat_wxyz: ArrayLike) -> tuple[float, float, float, float]:
         if math.isfinite(ss):  # also: every entry is finite
             norm = math.sqrt(ss)
             if norm >= _QUAT_MIN_NORM:
-                return w / norm, x / norm, y / norm, z / norm
+                unit = (w / norm, x / norm, y / norm, z / norm)
+                if type(quat_wxyz) is tuple:
+                    _last_unit_quaternion = (quat_wxyz, unit)
+                return unit
     # Degenerate, overflowing or an unusual type: the array code raises or copes.
     w, x, y, z = _unit_quaternion_array(quat_wxyz).tolist()
     return w, x, y, z
@@ -417,36 +435,51 @@ class _Ring:
 
     size: int
     obs_n: FloatArray = field(init=False)
-    info_n2: FloatArray = field(init=False)  # R^-1 of each observation, 1/N^2
-    # Whitened innovations, dimensionless, each written twice (slots i and i + size), so
-    # the latest n of them are one contiguous slice at any head: the change statistic reads
-    # a view instead of gathering a copy by index every step.
-    innov2: FloatArray = field(init=False)
+    axis: FloatArray = field(init=False)  # thrust axis u of each observation (R^-1 from it)
+    # Running sums of the whitened innovations (dimensionless), newest window first:
+    # sums[:, start + n - 1] = w_t + w_(t-1) + ... + w_(t-n+1) for n = 1 .. count. A new
+    # innovation moves ``start`` back by one and is added in place to every window that
+    # survives, so the change statistic needs no cumulative sum over the history each step
+    # (the sums agree with that cumulative sum to rounding; they add oldest first).
+    # Laid out (3, n) so the in-place add runs along contiguous rows; 4 x size columns so
+    # the live windows move back to the end only every 3 x size steps.
+    sums: FloatArray = field(init=False)
+    start: int = 0
     head: int = 0  # next slot to write
     count: int = 0  # valid entries (innovations) since the regime began
 
     def __post_init__(self) -> None:
         self.obs_n = np.zeros((self.size, 3))
-        self.info_n2 = np.zeros((self.size, 3, 3))
-        self.innov2 = np.zeros((2 * self.size, 3))
+        self.axis = np.zeros((self.size, 3))
+        self.sums = np.zeros((3, 4 * self.size))
+        self.start = 4 * self.size
 
-    def push(self, obs_n: NDArray[Any], info_n2: NDArray[Any], innov: list[float]) -> None:
+    def push(self, obs_n: NDArray[Any], axis: tuple[float, ...], innov: list[float]) -> None:
         head = self.head
         self.obs_n[head] = obs_n
-        self.info_n2[head] = info_n2
-        self.innov2[head] = innov
-        self.innov2[head + self.size] = innov
+        self.axis[head] = axis
         self.head = head + 1 if head + 1 < self.size else 0
+        # Windows 1 .. n_grow become 2 .. n_grow + 1; the longest drops out once full.
+        n_grow = min(self.count, self.size - 1)
+        sums, start = self.sums, self.start
+        if start == 0:
+            start = sums.shape[1] - n_grow
+            sums[:, start:] = sums[:, :n_grow]
+        start -= 1
+        sums[0, start], sums[1, start], sums[2, start] = innov
+        if n_grow:
+            grown = sums[:, start + 1 : start + 1 + n_grow]
+            np.add(grown, sums[:, start : start + 1], out=grown)
+        self.start = start
         self.count = min(self.count + 1, self.size)
 
     def latest_first(self, n: int) -> NDArray[np.intp]:
         """Indices of the ``n`` most recent entries, newest first."""
         return (self.head - 1 - np.arange(n)) % self.size
 
-    def innov_latest_first(self, n: int) -> FloatArray:
-        """The ``n`` most recent whitened innovations, newest first, shape (n, 3) (a view)."""
-        end = self.head + self.size
-        return self.innov2[end - n : end][::-1]
+    def window_sums(self, n: int) -> FloatArray:
+        """Sums of the newest 1 .. ``n`` whitened innovations, shape (3, n) (a view)."""
+        return self.sums[:, self.start : self.start + n]
 
 
 class TensionFilter:
@@ -532,8 +565,7 @@ class TensionFilter:
         self._beta_cache: tuple[float, float] = (math.nan, math.nan)
         self._decay_cache: tuple[float, float] = (math.nan, math.nan)
         self._constants_for: TensionFilterParams | None = None
-        self._s2 = self._f2 = self._k = self._random_walk2 = self._q_dt = math.nan
-        self._Q: FloatArray = np.eye(3) * math.nan
+        self._s2 = self._f2 = self._k = self._random_walk2 = math.nan
         self._windows: FloatArray = np.zeros(0)
         self.reset()
 
@@ -595,7 +627,8 @@ class TensionFilter:
             self._set_constants()
         y = _vector3(tension_obs_world_n, "tension_obs_world_n")
         dt = _check_dt(dt_s)
-        R, R_inv = self._observation_cov_and_info(quat_wxyz)
+        u = _thrust_axis(quat_wxyz)
+        R = self._observation_cov(u)
         kf = self._kf
         if not self._initialized:
             # First sample: x = y, P = R (see the class docstring).
@@ -610,11 +643,7 @@ class TensionFilter:
             return self._publish(False, 0.0, 1.0)
 
         scale = self._drift_scale(dt)
-        q_dt = scale * self._random_walk2 * dt
-        if q_dt != self._q_dt:  # at hover (scale 1, fixed dt) Q is the same every step
-            self._Q = np.eye(3) * q_dt  # Q = q dt I
-            self._q_dt = q_dt
-        kf.Q = self._Q
+        kf.Q = _EYE3 * (scale * self._random_walk2 * dt)  # Q = q dt I
         kf.R = R
         kf.predict()  # x- = A x,  P- = A P A' + Q
         kf.update(y)  # K = P-C'(CP-C' + R)^-1,  x = x- + K(y - Cx-),  Joseph-form P
@@ -623,7 +652,7 @@ class TensionFilter:
         # Whitened innovation w = L^-1 nu with S = L L' (filterpy kept nu and S).
         innov = _whiten(kf.S, kf.y)
         self._update_bias(innov, dt)
-        self._ring.push(y, R_inv, innov)
+        self._ring.push(y, u, innov)
         stat, window = self._change_statistic()
         if stat > p.change_threshold:
             self._reinitialize(window)
@@ -654,29 +683,35 @@ class TensionFilter:
 
     # -- internals ---------------------------------------------------------------------
 
-    def _observation_cov_and_info(
-        self, quat_wxyz: ArrayLike | None
-    ) -> tuple[FloatArray, FloatArray]:
-        """R of :func:`observation_cov_n2` and its inverse, by Sherman-Morrison.
+    def _observation_cov(self, u: tuple[float, float, float]) -> FloatArray:
+        """R of :func:`observation_cov_n2` for the thrust axis ``u``: R = s^2 I + f^2 u u'.
 
-        R = s^2 I + f^2 u u' with |u| = 1 gives R^-1 = (I - f^2 / (s^2 + f^2) u u') / s^2.
+        In scalars, element for element the array expression (``np.eye(3) * s2 + f2 *
+        np.outer(u, u)``), without numpy's per-call overhead.
         """
-        # Scalar arithmetic, element for element the array expressions
-        # R = s^2 I + f^2 u u' and R^-1 = (I - k u u') / s^2 with k = f^2 / (s^2 + f^2).
-        ux, uy, uz = _thrust_axis(quat_wxyz)
-        s2, f2, k = self._s2, self._f2, self._k
-        xx, yy, zz, xy, xz, yz = ux * ux, uy * uy, uz * uz, ux * uy, ux * uz, uy * uz
-        oxy, oxz, oyz = 0.0 + f2 * xy, 0.0 + f2 * xz, 0.0 + f2 * yz
-        R = np.array([[s2 + f2 * xx, oxy, oxz], [oxy, s2 + f2 * yy, oyz], [oxz, oyz, s2 + f2 * zz]])
-        ixy, ixz, iyz = (0.0 - k * xy) / s2, (0.0 - k * xz) / s2, (0.0 - k * yz) / s2
-        R_inv = np.array(
+        ux, uy, uz = u
+        s2, f2 = self._s2, self._f2
+        oxy, oxz, oyz = 0.0 + f2 * (ux * uy), 0.0 + f2 * (ux * uz), 0.0 + f2 * (uy * uz)
+        return np.array(
             [
-                [(1.0 - k * xx) / s2, ixy, ixz],
-                [ixy, (1.0 - k * yy) / s2, iyz],
-                [ixz, iyz, (1.0 - k * zz) / s2],
+                [s2 + f2 * (ux * ux), oxy, oxz],
+                [oxy, s2 + f2 * (uy * uy), oyz],
+                [oxz, oyz, s2 + f2 * (uz * uz)],
             ]
         )
-        return R, R_inv
+
+    def _observation_info(self, axes: FloatArray) -> FloatArray:
+        """R^-1 for observations with thrust axes ``axes`` (n, 3), by Sherman-Morrison.
+
+        R = s^2 I + f^2 u u' with |u| = 1 gives R^-1 = (I - f^2 / (s^2 + f^2) u u') / s^2.
+        Only a re-initialisation needs it, so it is computed then, for the window.
+
+        Returns:
+            Shape (n, 3, 3), 1/N^2.
+        """
+        uu = axes[:, :, None] * axes[:, None, :]  # np.outer per observation
+        info: FloatArray = (_EYE3 - self._k * uu) / self._s2
+        return info
 
     def _set_constants(self) -> None:
         """Per-parameter constants of the step (recomputed if ``params`` is replaced)."""
@@ -685,8 +720,6 @@ class TensionFilter:
         self._f2 = p.thrust_noise_n**2
         self._k = self._f2 / (self._s2 + self._f2)
         self._random_walk2 = p.random_walk_n_per_sqrt_s**2
-        self._q_dt = math.nan
-        self._Q = np.eye(3) * math.nan
         self._beta_cache = (math.nan, math.nan)
         self._decay_cache = (math.nan, math.nan)
         # Window lengths of the change statistic; the ring keeps its size from construction.
@@ -731,20 +764,19 @@ class TensionFilter:
         n_valid = self._ring.count
         if n_valid < p.change_min_window:
             return 0.0, 0
-        # np.add.accumulate is np.cumsum without its wrapper; the window lengths are kept
-        # as floats (the int -> float conversion of the division, done once).
-        latest = self._ring.innov_latest_first(n_valid)
-        sums = np.add.accumulate(latest, axis=0)[p.change_min_window - 1 :]
+        # The ring keeps the window sums; the window lengths are floats made once.
+        sums = self._ring.window_sums(n_valid)[:, p.change_min_window - 1 :]
         n = self._windows[: n_valid - p.change_min_window + 1]
-        stats = np.einsum("ij,ij->i", sums, sums) / n
+        stats = np.einsum("ij,ij->j", sums, sums) / n
         best = int(stats.argmax())
         return float(stats[best]), int(n[best])
 
     def _reinitialize(self, window: int) -> None:
         """Restarts x, P from the observations of the last ``window`` samples."""
         idx = self._ring.latest_first(window)
-        info = self._ring.info_n2[idx].sum(axis=0)  # sum R_i^-1
-        info_obs = np.einsum("kij,kj->i", self._ring.info_n2[idx], self._ring.obs_n[idx])
+        info_n2 = self._observation_info(self._ring.axis[idx])  # R_i^-1
+        info = info_n2.sum(axis=0)  # sum R_i^-1
+        info_obs = np.einsum("kij,kj->i", info_n2, self._ring.obs_n[idx])
         P = np.linalg.inv(info)  # P = (sum R_i^-1)^-1
         P = 0.5 * (P + P.T)
         self._kf.P = P
@@ -754,13 +786,13 @@ class TensionFilter:
         self._bias_var = 0.0
 
     def _publish(self, change: bool, stat: float, scale: float) -> TensionEstimate:
-        x = self._kf.x[:, 0]
-        P = self._kf.P
-        std = np.array([_sqrt_clipped(P[0, 0]), _sqrt_clipped(P[1, 1]), _sqrt_clipped(P[2, 2])])
+        kf = self._kf
+        p00, p11, p22 = kf.P.diagonal().tolist()
+        std = np.array([_sqrt_clipped(p00), _sqrt_clipped(p11), _sqrt_clipped(p22)])
         std.setflags(write=False)
         est = TensionEstimate(
-            tension_world_n=_frozen(x),
-            cov_n2=_frozen(P),
+            tension_world_n=_frozen(kf.x[:, 0]),
+            cov_n2=_frozen(kf.P),
             std_n=std,  # sqrt(clip(diag(P), 0))
             converged=self._samples >= self.params.converged_min_samples,
             change_detected=change,

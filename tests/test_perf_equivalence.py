@@ -314,3 +314,27 @@ def main() -> None:
 
 if __name__ == "__main__":
     main()
+
+
+def test_running_window_sums_equal_the_cumulative_sum() -> None:
+    """The filter's running window sums equal a fresh cumulative sum over the history,
+    across regime restarts and the moves of the live windows inside the buffer."""
+    from groundstation.tension import _Ring
+
+    rng = np.random.default_rng(7)
+    ring = _Ring(16)
+    history: list[np.ndarray] = []
+    moves = 0
+    for step in range(2000):
+        if rng.random() < 0.01:  # a re-initialisation starts a new regime
+            ring.count = 0
+            history = []
+        w = rng.normal(size=3)
+        start_before = ring.start
+        ring.push(np.zeros(3), (0.0, 0.0, 1.0), w.tolist())
+        moves += ring.start > start_before
+        history.append(w)
+        n = ring.count
+        want = np.cumsum(np.array(history[::-1][:n]), axis=0).T
+        np.testing.assert_allclose(ring.window_sums(n), want, rtol=1e-12, atol=1e-12)
+    assert moves >= 10
