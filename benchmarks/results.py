@@ -51,7 +51,7 @@ from benchmarks.results_sim import run_jobs
 
 REPO = Path(__file__).resolve().parents[1]
 README = REPO / "README.md"
-README_START = re.compile(r"^<!-- results:start.*-->\s*$", re.MULTILINE)
+README_START = re.compile(r"^<!-- results:start.*-->[ \t]*$", re.MULTILINE)
 README_END = "<!-- results:end -->"
 SECTIONS = (
     "## Summary",
@@ -575,9 +575,10 @@ def _summary_table(o: Outcome) -> list[str]:
 
 def readme_block(o: Outcome, prov: dict[str, str], wall_s: float) -> str:
     lines = [
-        f"From `.venv/bin/python -m benchmarks.results` ({wall_s / 60:.1f} min, "
-        f"{prov['date']}, commit `{prov['commit']}`); details, figures and method in "
-        "[docs/RESULTS.md](docs/RESULTS.md).",
+        f"Simulation and this machine ({prov['machine']}), from "
+        f"`.venv/bin/python -m benchmarks.results` ({wall_s / 60:.1f} min; `--quick`, "
+        f"every section in under a minute, runs in CI), {prov['date']}, commit "
+        f"`{prov['commit']}`. Tables, figures and method: [docs/RESULTS.md](docs/RESULTS.md).",
         "",
         *_summary_table(o),
         "### When it works, when it doesn't",
