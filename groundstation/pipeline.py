@@ -418,10 +418,13 @@ class Pipeline:
             return None
         tension = _vec3(tension)
         std = _vec3(std)
-        if position is not None and not (
-            _finite(position.position_world_m) and _finite(position.std_world_m)
-        ):
-            position = None
+        position_m = position_std_m = None
+        if position is not None:
+            if _finite(position.position_world_m) and _finite(position.std_world_m):
+                position_m = _vec3(position.position_world_m)
+                position_std_m = _vec3(position.std_world_m)
+            else:
+                position = None
         fs = runtime.follow_state
         fp = runtime.follow_params
         # FollowInfo changes only when follow changes state: reuse it (it is frozen). The
@@ -449,9 +452,9 @@ class Pipeline:
             tension_std_n=std,
             horizontal_n=math.hypot(tension[0], tension[1]),
             vertical_n=-tension[2],
-            position_m=_vec3(position.position_world_m) if position is not None else None,
+            position_m=position_m,
             follow=follow,
-            position_std_m=_vec3(position.std_world_m) if position is not None else None,
+            position_std_m=position_std_m,
             radial_m=float(position.radial_m) if position is not None else None,
             radial_interval_m=(float(lo_hi[0]), float(lo_hi[1])) if lo_hi is not None else None,
             azimuth_determined=position.azimuth_determined if position is not None else None,
@@ -539,11 +542,9 @@ def _vec3(values: np.ndarray | Iterable[float]) -> tuple[float, float, float]:
     if type(values) is np.ndarray and values.dtype == np.float64 and values.shape == (3,):
         x, y, z = values.tolist()
         return (x, y, z)
-    if (
-        (type(values) is tuple or type(values) is list)
-        and len(values) == 3
-        and all(type(v) is float for v in values)
-    ):
-        return (values[0], values[1], values[2])
+    if (type(values) is tuple or type(values) is list) and len(values) == 3:
+        x, y, z = values
+        if type(x) is float and type(y) is float and type(z) is float:
+            return (x, y, z)
     a = np.asarray(values, dtype=float)
     return (float(a[0]), float(a[1]), float(a[2]))

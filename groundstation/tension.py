@@ -561,6 +561,9 @@ class TensionFilter:
         self._kf = KalmanFilter(dim_x=3, dim_z=3)
         self._kf.F = np.eye(3)  # A = I (eq:Kalman_vars)
         self._kf.H = np.eye(3)  # C = I
+        # filterpy's hook for the inverse of S = P- + R in update() (its default is
+        # np.linalg.inv, whose per-call overhead is most of its cost on a 3x3).
+        self._kf.inv = _inv3
         self._ring = _Ring(self.params.change_max_window)
         self._beta_cache: tuple[float, float] = (math.nan, math.nan)
         self._decay_cache: tuple[float, float] = (math.nan, math.nan)
@@ -802,6 +805,39 @@ class TensionFilter:
         )
         self._last = est
         return est
+
+
+def _inv3(S: FloatArray) -> FloatArray:
+    """Inverse of a 3x3 matrix by its adjugate: S^-1 = adj(S) / det(S).
+
+    Installed as ``KalmanFilter.inv``, filterpy's hook for the inverse it needs in
+    ``update`` (K = P- C' (C P- C' + R)^-1). There S is symmetric positive definite with
+    eigenvalues at least (m sigma_a)^2 = (9 mN)^2, so the adjugate form is as accurate as
+    np.linalg.inv's LU (agreement to rounding). A singular or non-finite S takes
+    np.linalg.inv, which decides what happens, as before.
+
+    Args:
+        S: Shape (3, 3).
+
+    Returns:
+        The inverse, shape (3, 3).
+    """
+    (a, b, c), (d, e, f), (g, h, i) = S.tolist()
+    c00, c01, c02 = e * i - f * h, c * h - b * i, b * f - c * e
+    det = a * c00 + d * c01 + g * c02
+    if not (det != 0.0 and math.isfinite(det)):
+        inv: FloatArray = np.linalg.inv(S)
+        return inv
+    return (
+        np.array(
+            [
+                [c00, c01, c02],
+                [f * g - d * i, a * i - c * g, c * d - a * f],
+                [d * h - e * g, b * g - a * h, a * e - b * d],
+            ]
+        )
+        / det
+    )
 
 
 def _sqrt_clipped(v: float) -> float:

@@ -325,7 +325,7 @@ def test_running_window_sums_equal_the_cumulative_sum() -> None:
     ring = _Ring(16)
     history: list[np.ndarray] = []
     moves = 0
-    for step in range(2000):
+    for _ in range(2000):
         if rng.random() < 0.01:  # a re-initialisation starts a new regime
             ring.count = 0
             history = []
