@@ -826,8 +826,7 @@ def _inv3(S: FloatArray) -> FloatArray:
     c00, c01, c02 = e * i - f * h, c * h - b * i, b * f - c * e
     det = a * c00 + d * c01 + g * c02
     if not (det != 0.0 and math.isfinite(det)):
-        inv: FloatArray = np.linalg.inv(S)
-        return inv
+        return np.asarray(np.linalg.inv(S), dtype=np.float64)
     return (
         np.array(
             [
