@@ -258,6 +258,10 @@ def _trusted(sw: renv.SweepResult, unit: str) -> str:
     return f"for {_f(r[0], 1.0, _digits(r[0]))} … {_f(r[1], 1.0, _digits(r[1]))} {unit}"
 
 
+def _signed(x: float) -> str:
+    return f"{x:+g}".replace("-", "−")
+
+
 def _digits(x: float) -> int:
     """Decimals to print a swept value as given (0.5, 2.25, 1.3 …)."""
     for d in range(4):
@@ -306,7 +310,8 @@ def trust_bullets(o: Outcome) -> list[str]:
     lo, hi = sw.points[0], sw.points[-1]
     out.append(
         f"**ω must be known:** trusted {_trusted(sw, '%')} error in the configured weight per "
-        f"metre; at {lo.value:+g} % the median is {_cm(lo.median_m)}, at {hi.value:+g} % "
+        f"metre; at {_signed(lo.value)} % the median is {_cm(lo.median_m)}, at "
+        f"{_signed(hi.value)} % "
         f"{_cm(hi.median_m)} (mostly height: {_cm(lo.vertical_median_m)} / "
         f"{_cm(hi.vertical_median_m)}). Weigh the tether."
     )
@@ -335,19 +340,28 @@ def trust_bullets(o: Outcome) -> list[str]:
     )
     sw = _sweep(o, "distance")
     plumb = [p for p in sw.points if p.azimuth_determined < 0.9]
-    if plumb:
-        far = max(plumb, key=lambda p: p.value)
+    dz_max = _cm(max(p.vertical_median_m for p in sw.points))
+    off_plumb = [p for p in plumb if p.value > 0]
+    if off_plumb:
+        far = max(off_plumb, key=lambda p: p.value)
         shares = ", ".join(
-            f"{_pct(1 - p.azimuth_determined, 0)} at r = {p.value:g} m" for p in plumb
+            f"{_pct(1 - p.azimuth_determined, 0)} of the samples at r = {p.value:g} m"
+            for p in plumb
         )
         out.append(
             f"**Close to plumb the azimuth is unknown:** at z = 1 m and r ≤ {far.value:g} m the "
-            f"horizontal tension is often within its noise ({shares} of the samples); the "
-            f"service then places the drone above the base with `azimuth_determined: false` "
-            f"and a horizontal σ covering the reach, so the error is about r (median "
-            f"{_cm(far.median_m)} at r = {far.value:g} m). Trusted {_trusted(sw, 'm')}; "
-            f"height stays good throughout (median |Δz| ≤ "
-            f"{_cm(max(p.vertical_median_m for p in sw.points))})."
+            f"horizontal tension is often within its noise ({shares}); the service then places "
+            f"the drone above the base with `azimuth_determined: false` and a horizontal σ "
+            f"covering the reach, so the error is about r (median {_cm(far.median_m)} at "
+            f"r = {far.value:g} m). Trusted {_trusted(sw, 'm')}; height stays good throughout "
+            f"(median |Δz| ≤ {dz_max})."
+        )
+    elif plumb:
+        out.append(
+            f"**Straight above the base the azimuth is unknown** (`azimuth_determined: false` "
+            f"in {_pct(1 - plumb[0].azimuth_determined, 0)} of the samples at r = 0 m; the "
+            f"service places the drone above the base). Trusted {_trusted(sw, 'm')} at z = 1 m; "
+            f"median |Δz| ≤ {dz_max}."
         )
     fol = {f.tag: f for f in o.paper.follow}
     land = {lr.tag: lr for lr in o.paper.landing}
@@ -356,8 +370,11 @@ def trust_bullets(o: Outcome) -> list[str]:
         f"**Doesn't work: following or landing on the tether estimate.** A hand pulling the "
         f"tether adds a force the catenary model does not contain, so during a pull the "
         f"position estimate is off by a median {_cm(fol['tether'].pull_pos_error_m, 0)} "
-        f"(at hover {_cm(fol['tether'].hover_pos_error_m)}). Tug-to-land on the tether "
-        f"estimate sent {tl.stops:g} Stop(s) per run and the drone climbed to z = "
+        f"(at hover {_cm(fol['tether'].hover_pos_error_m)}), and following it the drone moved "
+        f"{' / '.join(_f(m, 1, 2, 'm') for m in fol['tether'].along_pull_m)} along the two "
+        f"pulls of `follow` (with motion capture "
+        f"{' / '.join(_f(m, 1, 2, 'm') for m in fol['mocap'].along_pull_m)}). Tug-to-land on "
+        f"the tether estimate sent {tl.stops:g} Stop(s) per run and the drone climbed to z = "
         f"{tl.max_z_m:.2f} m; with motion capture (the paper's setup) it landed in "
         f"{land['mocap'].landed}/{land['mocap'].runs} runs. Follow and tug-to-land need motion "
         f"capture or another position source."
@@ -565,7 +582,8 @@ def _summary_table(o: Outcome) -> list[str]:
             (
                 "service, 8 drones × 250 Hz",
                 f"{_pct(r8['delivered'], 2)} delivered, p50 {r8['p50_ms']:.1f} ms, "
-                f"p99 {r8['p99_ms']:.1f} ms, {r8['cpu_share']:.2f} cores",
+                f"p99 {r8['p99_ms']:.1f} ms, {r8['cpu_share']:.2f} cores, "
+                f"RSS {r8['rss_mb']:.0f} MB",
                 "target ≥ 99.9 %, p99 ≤ 10 ms",
             )
         )
@@ -575,7 +593,7 @@ def _summary_table(o: Outcome) -> list[str]:
 
 def readme_block(o: Outcome, prov: dict[str, str], wall_s: float) -> str:
     lines = [
-        f"Simulation and this machine ({prov['machine']}), from "
+        f"Simulation, and this machine for speed ({prov['machine']}); from "
         f"`.venv/bin/python -m benchmarks.results` ({wall_s / 60:.1f} min; `--quick`, "
         f"every section in under a minute, runs in CI), {prov['date']}, commit "
         f"`{prov['commit']}`. Tables, figures and method: [docs/RESULTS.md](docs/RESULTS.md).",
@@ -811,7 +829,8 @@ def _paper_section(o: Outcome) -> list[str]:
                 str(f.runs),
                 f"{f.setpoints:.0f}",
                 " / ".join(_s(r, 3) for r in f.reaction_s),
-                " / ".join(_f(m, 1, 2, "m") for m in f.moved_m),
+                " / ".join(_f(m, 1, 2, "m") for m in f.along_pull_m),
+                _s(f.active_without_pull_s, 1),
                 " / ".join(_cm(d) for d in f.hold_drift_m),
                 f"{_cm(f.hover_pos_error_m)} / {_cm(f.pull_pos_error_m, 0)}",
             )
@@ -822,7 +841,8 @@ def _paper_section(o: Outcome) -> list[str]:
             "runs",
             "setpoints/run",
             "first setpoint after pull 1 / 2",
-            "moved by pull 1 / 2",
+            "moved along pull 1 / 2 (+: yields to it)",
+            "following active with no pull",
             "drift 1–4 s after release 1 / 2",
             "tether position error: hover / during pulls",
         ),
@@ -867,10 +887,13 @@ def _paper_section(o: Outcome) -> list[str]:
         "setpoints chase that error. In `tug_landing` the downward pull reads as a longer "
         "hanging tether, i.e. a *higher* drone; the setpoint follows that estimate and the "
         f"drone climbs (to z = {lt.max_z_m:.2f} m, toward the tether's reach) instead of "
-        f"landing: {lt.stops:g} Stop(s). In `follow` the drone is led off to the edge of "
-        "its reach, where the taut tether keeps |T| above the threshold, so following never "
-        "releases. Following and tug-to-land need motion capture (or another position "
-        "source) as in the paper.",
+        f"landing: {lt.stops:g} Stop(s). In `follow` the drone moved "
+        f"{' / '.join(_f(m, 1, 2, 'm') for m in ft.along_pull_m)} along the two pulls "
+        f"(mocap: {' / '.join(_f(m, 1, 2, 'm') for m in fm.along_pull_m)}; negative: away "
+        "from the hand), and where it ended up near the tether's reach the taut tether kept "
+        f"|T| above the threshold: following stayed active for {_s(ft.active_without_pull_s, 1)} "
+        f"with no pull acting (mocap: {_s(fm.active_without_pull_s, 1)}). Following and "
+        "tug-to-land need motion capture (or another position source) as in the paper.",
         "",
         f"![follow](figures/{fig['follow']})",
         "",

@@ -374,6 +374,8 @@ class FollowResult:
     runs: int
     setpoints: float  # mean per run
     moved_m: tuple[float, ...]  # per pull: |p(end + 0.5 s) − p(start)|, mean over runs
+    along_pull_m: tuple[float, ...]  # per pull: that displacement along the pull (+: yields)
+    active_without_pull_s: float  # mean time per run following stays active with no pull
     hold_drift_m: tuple[float, ...]  # per pull: |p(end + 4 s) − p(end + 1 s)|, mean
     reaction_s: tuple[float | None, ...]  # per pull: first setpoint after the pull starts
     pull_pos_error_m: float  # median tether-estimate error while a pull acts
@@ -384,6 +386,8 @@ def follow(traces: dict[str, Trace], tag: str) -> FollowResult:
     sc = SCENARIOS["follow"]
     runs = _runs(traces, f"follow_{tag}")
     moved: list[list[float]] = [[] for _ in sc.pulls]
+    along: list[list[float]] = [[] for _ in sc.pulls]
+    active_free: list[float] = []
     drift: list[list[float]] = [[] for _ in sc.pulls]
     react: list[list[float]] = [[] for _ in sc.pulls]
     pull_err, hover_err, n_sp = [], [], []
@@ -392,9 +396,10 @@ def follow(traces: dict[str, Trace], tag: str) -> FollowResult:
         in_pull = np.zeros(tr.t_s.size, dtype=bool)
         for j, pull in enumerate(sc.pulls):
             in_pull |= (tr.t_s >= pull.start_s) & (tr.t_s < pull.end_s)
-            moved[j].append(
-                float(np.linalg.norm(_pos_at(tr, pull.end_s + 0.5) - _pos_at(tr, pull.start_s)))
-            )
+            d = _pos_at(tr, pull.end_s + 0.5) - _pos_at(tr, pull.start_s)
+            f = np.asarray(pull.force_world_n, dtype=float)
+            moved[j].append(float(np.linalg.norm(d)))
+            along[j].append(float(d @ f / np.linalg.norm(f)))
             if pull.end_s + 4.0 <= tr.t_s[-1]:
                 drift[j].append(
                     float(
@@ -406,6 +411,8 @@ def follow(traces: dict[str, Trace], tag: str) -> FollowResult:
             sp = tr.setpoints[tr.setpoints[:, 0] >= pull.start_s]
             if sp.size and sp[0, 0] < pull.end_s:
                 react[j].append(float(sp[0, 0] - pull.start_s))
+        dt = float(np.median(np.diff(tr.t_s)))
+        active_free.append(float(np.sum(tr.follow_active & ~in_pull)) * dt)
         pull_err.append(tr.pos_error_m[in_pull])
         hover_err.append(tr.pos_error_m[(tr.t_s >= 1.0) & (tr.t_s < sc.pulls[0].start_s)])
 
@@ -417,6 +424,8 @@ def follow(traces: dict[str, Trace], tag: str) -> FollowResult:
         runs=len(runs),
         setpoints=float(np.mean(n_sp)),
         moved_m=tuple(mean(v) for v in moved),
+        along_pull_m=tuple(mean(v) for v in along),
+        active_without_pull_s=float(np.mean(active_free)),
         hold_drift_m=tuple(mean(v) for v in drift),
         reaction_s=tuple(float(np.median(v)) if v else None for v in react),
         pull_pos_error_m=float(np.nanmedian(_cat(pull_err))),
