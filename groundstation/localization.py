@@ -26,6 +26,11 @@ Departures from the paper:
 * **Uncertainty.** The tension covariance is carried to the position with the
   unscented transform (7 sigma points, kappa = 0) through one vectorised catenary
   call, so the large non-linearity of r in H near a taut tether is respected.
+
+Cost: :func:`try_localize` runs once per telemetry message. Its 3-vector and 3x3
+arithmetic is done in Python floats, and the one catenary call on the 7 (or 9) points
+goes to ``catenary._locate_free``, the body of :func:`catenary.locate` without its input
+checks, which this module has already made (see :func:`_locate_points`).
 """
 
 from __future__ import annotations
