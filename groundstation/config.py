@@ -111,6 +111,8 @@ class FollowSection(_Section):
     max_speed_mps: float = Field(0.5, gt=0.0)
     reach_margin_m: float = Field(0.05, ge=0.0)
     stale_after_s: float = Field(0.5, gt=0.0)
+    admittance_mps_per_n: float = Field(2.0, gt=0.0)
+    """Without motion capture the goal moves along the pull at this speed per newton."""
 
 
 class FilterSection(_Section):

@@ -57,6 +57,9 @@ __all__ = [
 FloatArray = NDArray[np.float64]
 Vec3 = tuple[float, float, float]
 
+QUIET_TIME_CONSTANT_S = 0.5
+"""Averaging time of the pre-tug tension and position (without motion capture), s."""
+
 
 @dataclass(frozen=True)
 class FollowParams:
@@ -73,6 +76,9 @@ class FollowParams:
             m, >= 0.
         stale_after_s: Input older than this disengages following, s, > 0.
         floor_margin_m: Setpoints stay this far above the floor, m, >= 0.
+        admittance_mps_per_n: Without motion capture, the goal moves along the pull at
+            this speed per newton of pull (the tension beyond the one before the tug),
+            m/s/N, > 0 (then capped at ``max_speed_mps``).
     """
 
     threshold_n: float = 0.10
@@ -82,6 +88,7 @@ class FollowParams:
     reach_margin_m: float = 0.05
     stale_after_s: float = 0.5
     floor_margin_m: float = 0.05
+    admittance_mps_per_n: float = 2.0
 
     def __post_init__(self) -> None:
         checks = [
@@ -91,6 +98,7 @@ class FollowParams:
             ("reach_margin_m", self.reach_margin_m, self.reach_margin_m >= 0.0),
             ("stale_after_s", self.stale_after_s, self.stale_after_s > 0.0),
             ("floor_margin_m", self.floor_margin_m, self.floor_margin_m >= 0.0),
+            ("admittance_mps_per_n", self.admittance_mps_per_n, self.admittance_mps_per_n > 0),
         ]
         for name, value, ok in checks:
             if not (math.isfinite(value) and ok):
@@ -118,6 +126,10 @@ class FollowState:
         last_stamp_s: Stamp of the previous step, s, or None.
         reason: Why the follower is in this state (human-readable; "" when nothing to
             say).
+        quiet_tension_world_n: Without motion capture: the tension of the last step
+            before the pull (the tether's own), N, or None.
+        quiet_position_world_m: Without motion capture: the tether-based position of
+            the last step before the pull, m, or None.
     """
 
     enabled: bool = False
@@ -128,6 +140,8 @@ class FollowState:
     setpoint_stamp_s: float | None = None
     last_stamp_s: float | None = None
     reason: str = ""
+    quiet_tension_world_n: Vec3 | None = None
+    quiet_position_world_m: Vec3 | None = None
 
 
 @dataclass(frozen=True)
@@ -259,6 +273,8 @@ def follow_step(
     length_m: float,
     floor_z_m: float = -math.inf,
     stale: bool = False,
+    tension_world_n: ArrayLike | None = None,
+    position_is_external: bool = True,
 ) -> FollowDecision:
     """One step of tension following and tug-to-land (see the module docstring).
 
@@ -274,6 +290,11 @@ def follow_step(
         length_m: Tether length paid out, m.
         floor_z_m: Floor height, m (``-inf`` for none).
         stale: The caller knows this input is stale: disengage.
+        tension_world_n: The estimated tension vector, world, N, shape (3,); needed
+            when ``position_is_external`` is False.
+        position_is_external: True when ``position_world_m`` comes from motion capture
+            (the paper's setting). False for the tether-based estimate, which a hand's
+            pull corrupts: the goal then moves along the pull (admittance, step 6b).
 
     Returns:
         The next state, and the setpoint and/or Stop to publish.
@@ -317,43 +338,101 @@ def follow_step(
         active = bool(norm_n >= params.release_n if state.active else norm_n > params.threshold_n)
         reason = "following the pull" if active else "below threshold: goal frozen"
     landing_armed = state.landing_armed or (active and params.land_below_m is not None)
+    was_active = state.active
     state = replace(state, active=active, landing_armed=landing_armed, reason=reason)
-
-    # 5. Tug-to-land: exactly one Stop, then terminal until enabled again.
+    tension = _finite_vec3(tension_world_n)
+    admittance = not position_is_external and tension is not None
     if (
-        state.landing_armed
-        and params.land_below_m is not None
-        and position[2] < params.land_below_m
+        not position_is_external
+        and not active
+        and tension is not None
+        and norm_n is not None
+        and norm_n < params.release_n
     ):
-        stop_reason = (
-            f"tug-to-land: z {position[2]:.3f} m below land_below_m {params.land_below_m} m"
+        # No pull: the tether-based position is valid; remember it and the tether's own
+        # pull, averaged over QUIET_TIME_CONSTANT_S so the first samples of a tug (the
+        # filter needs a few to see it) barely move them.
+        prev_t = _finite_vec3(state.quiet_tension_world_n)
+        prev_p = _finite_vec3(state.quiet_position_world_m)
+        dt_q = stamp_s - prev if prev is not None else 0.0
+        w = (
+            1.0
+            if prev_t is None or prev_p is None
+            else min(1.0, max(dt_q, 0.0) / QUIET_TIME_CONSTANT_S)
         )
+        state = replace(
+            state,
+            quiet_tension_world_n=_vec3(
+                tension if prev_t is None else prev_t + w * (tension - prev_t)
+            ),
+            quiet_position_world_m=_vec3(
+                position if prev_p is None else prev_p + w * (position - prev_p)
+            ),
+        )
+
+    # 6. While active, the goal: within reach and at a bounded speed.
+    radius_m = length_m - params.reach_margin_m if math.isfinite(length_m) else math.nan
+    min_z_m = floor_z_m + params.floor_margin_m if not math.isnan(floor_z_m) else math.nan
+    target: FloatArray | None = None
+    if active:
+        last = _finite_vec3(state.setpoint_world_m)
+        dt_s = (
+            max(stamp_s - state.setpoint_stamp_s, 0.0)
+            if last is not None and state.setpoint_stamp_s is not None
+            else None
+        )
+        if admittance:
+            # 6b. The tether-based position is wrong while a hand pulls (the pull is not
+            # the catenary's), so the goal starts where the drone was before the tug and
+            # moves along the pull: v = k (T - T_before), capped at max_speed_mps.
+            assert tension is not None
+            start = last if was_active else None
+            if start is None:  # the tug begins: from the last position before it
+                start = _finite_vec3(state.quiet_position_world_m)
+                dt_s = 0.0
+            if start is None:
+                start = position
+            quiet = _finite_vec3(state.quiet_tension_world_n)
+            pull = tension - quiet if quiet is not None else tension
+            velocity = params.admittance_mps_per_n * pull
+            speed = math.sqrt(float(velocity @ velocity))
+            if speed > params.max_speed_mps:
+                velocity = velocity * (params.max_speed_mps / speed)
+            target = clamp_to_reach(
+                start + velocity * (dt_s or 0.0), base_world_m, radius_m, min_z_m
+            )
+        else:
+            # 6a. The paper: the goal is the current position (motion capture).
+            target = clamp_to_reach(position, base_world_m, radius_m, min_z_m)
+            if target is not None and last is not None and dt_s is not None:
+                max_step_m = params.max_speed_mps * dt_s
+                step = target - last
+                dist = math.sqrt(float(step @ step))
+                if dist > max_step_m:
+                    # Reach wins over the rate limit if the reachable set moved.
+                    target = clamp_to_reach(
+                        last + step * (max_step_m / dist), base_world_m, radius_m, min_z_m
+                    )
+        if target is None:
+            state = replace(state, reason="position out of reach and no reachable goal")
+            return FollowDecision(state)
+
+    # 5. Tug-to-land: exactly one Stop, then terminal until enabled again. Without motion
+    # capture the height during a pull is the goal's (the drone tracks it).
+    z_m = float(target[2]) if (admittance and target is not None) else float(position[2])
+    if state.landing_armed and params.land_below_m is not None and z_m < params.land_below_m:
+        stop_reason = f"tug-to-land: z {z_m:.3f} m below land_below_m {params.land_below_m} m"
         state = replace(state, enabled=False, active=False, stopped=True, reason=stop_reason)
         return FollowDecision(state, stop_reason=stop_reason)
 
-    if not active:
-        return FollowDecision(state)
-
-    # 6. The goal follows the drone, within reach and at a bounded speed.
-    radius_m = length_m - params.reach_margin_m if math.isfinite(length_m) else math.nan
-    min_z_m = floor_z_m + params.floor_margin_m if not math.isnan(floor_z_m) else math.nan
-    target = clamp_to_reach(position, base_world_m, radius_m, min_z_m)
     if target is None:
-        state = replace(state, reason="position out of reach and no reachable goal")
         return FollowDecision(state)
-    last = _finite_vec3(state.setpoint_world_m)
-    if last is not None and state.setpoint_stamp_s is not None:
-        max_step_m = params.max_speed_mps * max(stamp_s - state.setpoint_stamp_s, 0.0)
-        step = target - last
-        dist = math.sqrt(float(step @ step))
-        if dist > max_step_m:
-            target = last + step * (max_step_m / dist)
-            # Reach wins over the rate limit if the reachable set moved.
-            target = clamp_to_reach(target, base_world_m, radius_m, min_z_m)
-            if target is None:  # cannot happen: the set was non-empty just above
-                return FollowDecision(state)
-    setpoint: Vec3 = (float(target[0]), float(target[1]), float(target[2]))
+    setpoint = _vec3(target)
     state = replace(state, setpoint_world_m=setpoint, setpoint_stamp_s=stamp_s)
     out = np.array(setpoint)
     out.setflags(write=False)
     return FollowDecision(state, setpoint_world_m=out)
+
+
+def _vec3(a: FloatArray) -> Vec3:
+    return (float(a[0]), float(a[1]), float(a[2]))

@@ -269,6 +269,7 @@ class Pipeline:
                 max_speed_mps=fcfg.max_speed_mps,
                 reach_margin_m=fcfg.reach_margin_m,
                 stale_after_s=fcfg.stale_after_s,
+                admittance_mps_per_n=fcfg.admittance_mps_per_n,
             ),
             follow_state=follow_mod.FollowState(),
             length_m=params.tether.length_m,
@@ -383,6 +384,8 @@ class Pipeline:
             base_world_m=runtime.base_world_m,
             length_m=runtime.length_m,
             floor_z_m=runtime.params.base.floor_z_m,
+            tension_world_n=tension if converged else None,
+            position_is_external=msg.position_m is not None,
         )
         runtime.follow_state = decision.state
         out: list[Sample] = []

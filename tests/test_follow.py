@@ -305,3 +305,72 @@ def test_property_setpoints_finite_within_reach_and_one_stop(
             assert stops_since_enable == 1
             assert d.state.stopped
         state = d.state
+
+
+# ---------------------------------------------------------------- without motion capture
+
+
+def _admit(
+    state: FollowState,
+    stamp_s: float,
+    tension: tuple[float, float, float],
+    position: tuple[float, float, float],
+    params: FollowParams = PARAMS,
+) -> FollowDecision:
+    return follow_step(
+        state,
+        params,
+        stamp_s=stamp_s,
+        tension_norm_n=float(np.linalg.norm(tension)),
+        position_world_m=position,
+        base_world_m=(0.0, 0.0, 0.754),
+        length_m=1.6,
+        floor_z_m=0.0,
+        tension_world_n=tension,
+        position_is_external=False,
+    )
+
+
+def test_without_mocap_the_goal_moves_along_the_pull_from_the_pre_tug_position() -> None:
+    hover_t = (-0.014, 0.0, -0.046)
+    state = set_enabled(FollowState(), True)
+    for k in range(250):  # 1 s of quiet hover at (1, 0, 1)
+        state = _admit(state, k * 0.004, hover_t, (1.0, 0.0, 1.0)).state
+    assert state.quiet_position_world_m == pytest.approx((1.0, 0.0, 1.0))
+    pull = np.array([-0.2, 0.0, 0.0])
+    wrong_position = (1.5, -0.3, 0.76)  # what the catenary makes of the hand's pull
+    setpoints = []
+    for k in range(250, 500):  # 1 s of pull toward -x
+        d = _admit(state, k * 0.004, tuple(np.add(hover_t, pull)), wrong_position)
+        state = d.state
+        assert state.active
+        assert d.setpoint_world_m is not None
+        setpoints.append(d.setpoint_world_m)
+    assert setpoints[0] == pytest.approx((1.0, 0.0, 1.0), abs=1e-9)
+    # v = k * pull = 2 m/s/N * 0.2 N = 0.4 m/s for ~1 s, along -x only
+    assert setpoints[-1][0] == pytest.approx(1.0 - 0.4 * 0.996, abs=1e-6)
+    assert setpoints[-1][1:] == pytest.approx((0.0, 1.0), abs=1e-9)
+    # released: the goal freezes where it is
+    d = _admit(state, 2.0, hover_t, wrong_position)
+    assert not d.state.active and d.setpoint_world_m is None
+
+
+def test_without_mocap_tug_to_land_uses_the_goal_height() -> None:
+    params = FollowParams(threshold_n=0.15, land_below_m=0.25, max_speed_mps=0.5)
+    hover_t = (-0.014, 0.0, -0.046)
+    state = set_enabled(FollowState(), True)
+    for k in range(100):
+        state = _admit(state, k * 0.004, hover_t, (0.6, 0.0, 0.5), params).state
+    down = tuple(np.add(hover_t, (0.0, 0.0, -0.25)))
+    stops = []
+    for k in range(100, 1000):
+        # the catenary reads the downward pull as a drone far below: never trusted here
+        d = _admit(state, k * 0.004, down, (0.2, 0.0, 2.0), params)
+        state = d.state
+        if d.stop_reason is not None:
+            stops.append((k * 0.004, d.stop_reason))
+        elif d.setpoint_world_m is not None:
+            assert d.setpoint_world_m[2] >= 0.25 - 1e-9
+    assert len(stops) == 1
+    # from z = 0.5 down at 0.5 m/s: below 0.25 after ~0.5 s
+    assert stops[0][0] == pytest.approx(0.4 + 0.5, abs=0.02)
