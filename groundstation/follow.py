@@ -34,6 +34,15 @@ Behaviour, in the order :func:`follow_step` applies it:
    most ``max_speed_mps`` times the time since that setpoint. If the reachable set
    changed under it (the reel took tether in) the result is projected again: reach
    wins over the rate limit.
+6b. **Without motion capture** (``position_is_external=False``) the "current position"
+   is the tether-based estimate, which a hand's pull corrupts: the pull is not the
+   catenary's, so localization reads it as a drone elsewhere (a downward tug as a drone
+   higher up). Following it would lead the drone away from the hand, and tug-to-land
+   would never fire (measured in docs/RESULTS.md before this rule). The paper itself
+   says tension following needs an external position. So the goal starts at the
+   position before the tug (averaged while quiet) and moves along the pull,
+   ``v = admittance_mps_per_n (T - T_before)``, capped at ``max_speed_mps`` and kept
+   within reach; tug-to-land then watches the goal's height, which the drone tracks.
 """
 
 from __future__ import annotations
