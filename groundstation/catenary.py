@@ -62,6 +62,7 @@ __all__ = [
     "TetherForce",
     "TetherTooShortError",
     "locate",
+    "locate_free",
     "locate_with_floor",
     "solve",
     "tether_force",
@@ -836,13 +837,23 @@ def locate(
     )
     a = h_n / omega
     s2 = tv_n / omega
-    r, z = _locate_free(a, s2, big_l, z_i)
+    r, z = locate_free(a, s2, big_l, z_i)
     return _out(r, scalar), _out(z, scalar)
 
 
-def _locate_free(
+def locate_free(
     a: FloatArray, s2: FloatArray, big_l: FloatArray, z_i: FloatArray
 ) -> tuple[FloatArray, FloatArray]:
+    """:func:`locate` from the catenary parameters, without input checks (hot paths).
+
+    Args:
+        a: H/ω, m, ≥ 0 (eq:a_param). s2: T_v/ω, m (eq:s2_param). big_l: tether length, m.
+        z_i: base height, m. Float64 arrays of one broadcast shape; the caller has
+            validated them (finite, a ≥ 0, L > 0).
+
+    Returns:
+        (r_m, z_m), eq:posfull_radial and eq:posfull_z in the closed form of NOTES.md.
+    """
     t = big_l - s2
     r = _a_asinh(a, s2) + _a_asinh(a, t)  # eq:posfull_r_0 + eq:posfull_radial
     with np.errstate(over="ignore"):
@@ -975,7 +986,7 @@ def locate_with_floor(
     _require(z_i, z_i >= z_f, "base_z_m", f"at or above floor_z_m ({floor_z_m!r})")
     a = h_n / omega
     s2 = tv_n / omega
-    r_free, z_free = _locate_free(a, s2, big_l, z_i)
+    r_free, z_free = locate_free(a, s2, big_l, z_i)
 
     # The tether can only rest on the floor if its lowest point lies between the ends
     # (0 <= s2 <= L) and below the floor. Otherwise the lowest point is an end: the base (at

@@ -29,7 +29,7 @@ Departures from the paper:
 
 Cost: :func:`try_localize` runs once per telemetry message. Its 3-vector and 3x3
 arithmetic is done in Python floats, and the one catenary call on the 7 (or 9) points
-goes to ``catenary._locate_free``, the body of :func:`catenary.locate` without its input
+goes to ``catenary.locate_free``, the body of :func:`catenary.locate` without its input
 checks, which this module has already made (see :func:`_locate_points`).
 """
 
@@ -248,14 +248,14 @@ def _locate_points(
 ) -> tuple[list[float], list[float], list[float], list[float], list[float], list[float]]:
     """:func:`_locate` for the few points of one estimate, returned as lists of floats.
 
-    The free-hanging solution comes from ``catenary._locate_free``, the body of
+    The free-hanging solution comes from ``catenary.locate_free``, the body of
     :func:`catenary.locate` after its input checks: ``try_localize`` has already checked
     omega, L and z_i, and the caller checks H >= 0 and T_v finite for every point, so the
     checks (about two thirds of ``locate``'s cost on 7 points) would only repeat them.
     """
     a = horizontal_n / weight_n_per_m  # eq:a_param
     s2 = vertical_n / weight_n_per_m  # eq:s2_param
-    r_arr, z_arr = catenary._locate_free(
+    r_arr, z_arr = catenary.locate_free(
         a, s2, np.asarray(length_m, dtype=np.float64), np.asarray(base_z_m, dtype=np.float64)
     )
     r: list[float] = r_arr.tolist()
