@@ -366,20 +366,41 @@ def trust_bullets(o: Outcome) -> list[str]:
     fol = {f.tag: f for f in o.paper.follow}
     land = {lr.tag: lr for lr in o.paper.landing}
     tl = land["tether"]
-    out.append(
-        f"**Doesn't work: following or landing on the tether estimate.** A hand pulling the "
-        f"tether adds a force the catenary model does not contain, so during a pull the "
-        f"position estimate is off by a median {_cm(fol['tether'].pull_pos_error_m, 0)} "
-        f"(at hover {_cm(fol['tether'].hover_pos_error_m)}), and following it the drone moved "
-        f"{' / '.join(_f(m, 1, 2, 'm') for m in fol['tether'].along_pull_m)} along the two "
-        f"pulls of `follow` (with motion capture "
-        f"{' / '.join(_f(m, 1, 2, 'm') for m in fol['mocap'].along_pull_m)}). Tug-to-land on "
-        f"the tether estimate sent {tl.stops:g} Stop(s) per run and the drone climbed to z = "
-        f"{tl.max_z_m:.2f} m; with motion capture (the paper's setup) it landed in "
-        f"{land['mocap'].landed}/{land['mocap'].runs} runs. Follow and tug-to-land need motion "
-        f"capture or another position source."
+    ft, fm = fol["tether"], fol["mocap"]
+    pulls_t = " / ".join(_f(m, 1, 2, "m") for m in ft.along_pull_m)
+    pulls_m = " / ".join(_f(m, 1, 2, "m") for m in fm.along_pull_m)
+    corrupted = (
+        f"A hand pulling the tether adds a force the catenary model does not contain, so "
+        f"during a pull the tether-based position is off by a median "
+        f"{_cm(ft.pull_pos_error_m, 0)} (at hover {_cm(ft.hover_pos_error_m)})."
     )
+    if follows_without_mocap(o.paper):
+        out.append(
+            f"**Following without motion capture works, but not on the position estimate.** "
+            f"{corrupted} So without motion capture the goal moves from the pre-tug position "
+            f"along the pull (admittance): the drone moved {pulls_t} along the two pulls of "
+            f"`follow` (with motion capture, the paper's rule: {pulls_m}); tug-to-land stopped "
+            f"the motors in {tl.landed}/{tl.runs} runs ({tl.stops:g} Stop per run; with "
+            f"motion capture {land['mocap'].landed}/{land['mocap'].runs})."
+        )
+    else:
+        out.append(
+            f"**Doesn't work: following or landing on the tether estimate.** {corrupted} "
+            f"Following it, the drone moved {pulls_t} along the two pulls of `follow` (with "
+            f"motion capture {pulls_m}). Tug-to-land on the tether estimate sent "
+            f"{tl.stops:g} Stop(s) per run and the drone climbed to z = {tl.max_z_m:.2f} m; "
+            f"with motion capture (the paper's setup) it landed in "
+            f"{land['mocap'].landed}/{land['mocap'].runs} runs. Follow and tug-to-land need "
+            f"motion capture or another position source."
+        )
     return out
+
+
+def follows_without_mocap(p: Any) -> bool:
+    """Whether following and tug-to-land worked on the runs without motion capture."""
+    ft = next(f for f in p.follow if f.tag == "tether")
+    tl = next(lr for lr in p.landing if lr.tag == "tether")
+    return all(m > 0.1 for m in ft.along_pull_m) and tl.runs > 0 and tl.landed == tl.runs
 
 
 def targets(o: Outcome) -> list[tuple[str, str, str, bool]]:
@@ -877,23 +898,40 @@ def _paper_section(o: Outcome) -> list[str]:
     )
     fm, ft = p.follow
     lm, lt = p.landing
-    L += [
+    with_mocap = (
         f"With motion capture the drone yields to each pull within "
         f"{_s(fm.reaction_s[0], 3)} and holds after it; tug-to-land sends exactly one Stop "
         f"{_s(lm.stop_after_pull_s)} after the pull starts, at z = "
-        f"{_f(lm.z_at_stop_m, 1, 3, 'm')}. **Without motion capture this does not work:** the "
-        "hand's pull is a force the catenary model does not contain, so while it acts the "
-        f"tether-based position is off by {_cm(ft.pull_pos_error_m, 0)} (median) and the "
-        "setpoints chase that error. In `tug_landing` the downward pull reads as a longer "
-        "hanging tether, i.e. a *higher* drone; the setpoint follows that estimate and the "
-        f"drone climbs (to z = {lt.max_z_m:.2f} m, toward the tether's reach) instead of "
-        f"landing: {lt.stops:g} Stop(s). In `follow` the drone moved "
-        f"{' / '.join(_f(m, 1, 2, 'm') for m in ft.along_pull_m)} along the two pulls "
-        f"(mocap: {' / '.join(_f(m, 1, 2, 'm') for m in fm.along_pull_m)}; negative: away "
-        "from the hand), and where it ended up near the tether's reach the taut tether kept "
-        f"|T| above the threshold: following stayed active for {_s(ft.active_without_pull_s, 1)} "
-        f"with no pull acting (mocap: {_s(fm.active_without_pull_s, 1)}). Following and "
-        "tug-to-land need motion capture (or another position source) as in the paper.",
+        f"{_f(lm.z_at_stop_m, 1, 3, 'm')}. "
+    )
+    pulls_t = " / ".join(_f(m, 1, 2, "m") for m in ft.along_pull_m)
+    pulls_m = " / ".join(_f(m, 1, 2, "m") for m in fm.along_pull_m)
+    if follows_without_mocap(p):
+        text = (
+            with_mocap + "**Without motion capture the position estimate cannot be followed:** "
+            "the hand's pull is a force the catenary model does not contain, so while it acts "
+            f"the tether-based position is off by {_cm(ft.pull_pos_error_m, 0)} (median). The "
+            "service therefore moves the goal from the position before the tug along the pull "
+            "(admittance, `groundstation/follow.py` rule 6b) and watches the goal's height for "
+            f"tug-to-land. In `follow` the drone moved {pulls_t} along the two pulls (mocap: "
+            f"{pulls_m}); following stayed active for {_s(ft.active_without_pull_s, 1)} with no "
+            f"pull acting (mocap: {_s(fm.active_without_pull_s, 1)}). In `tug_landing` it sent "
+            f"{lt.stops:g} Stop per run, at a true height of {_f(lt.z_at_stop_m, 1, 3, 'm')}, "
+            f"and landed in {lt.landed}/{lt.runs} runs."
+        )
+    else:
+        text = (
+            with_mocap + "**Without motion capture this does not work:** the "
+            "hand's pull is a force the catenary model does not contain, so while it acts the "
+            f"tether-based position is off by {_cm(ft.pull_pos_error_m, 0)} (median) and the "
+            "setpoints chase that error. In `tug_landing` the drone climbed (to z = "
+            f"{lt.max_z_m:.2f} m) instead of landing: {lt.stops:g} Stop(s). In `follow` the "
+            f"drone moved {pulls_t} along the two pulls (mocap: {pulls_m}; negative: away from "
+            f"the hand); following stayed active for {_s(ft.active_without_pull_s, 1)} with no "
+            f"pull acting (mocap: {_s(fm.active_without_pull_s, 1)})."
+        )
+    L += [
+        text,
         "",
         f"![follow](figures/{fig['follow']})",
         "",
