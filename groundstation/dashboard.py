@@ -1701,34 +1701,22 @@ class Dashboard:
         """Parse what is new for ``drone``; True when anything was."""
         inbox = drone.inbox
         seen = drone.seen
-        changed = (
-            inbox.n_estimate != seen["estimate"]
-            or inbox.n_telemetry != seen["telemetry"]
-            or inbox.n_truth != seen["truth"]
-            or inbox.n_reel != seen["reel"]
-            or inbox.n_stop != seen["stop"]
-        )
+        changed = any(getattr(inbox, f"n_{kind}") != count for kind, count in seen.items())
         new_estimate = inbox.n_estimate != seen["estimate"]
-        if new_estimate:
-            seen["estimate"] = inbox.n_estimate
-            est = self._parse(drone, "estimate", inbox.estimate, parse_estimate)
-            if est is not None:
-                drone.estimate = est
-        if inbox.n_telemetry != seen["telemetry"]:
-            seen["telemetry"] = inbox.n_telemetry
-            tel = self._parse(drone, "telemetry", inbox.telemetry, parse_telemetry)
-            if tel is not None:
-                drone.telemetry = tel
-        if inbox.n_truth != seen["truth"]:
-            seen["truth"] = inbox.n_truth
-            truth = self._parse(drone, "truth", inbox.truth, parse_truth)
-            if truth is not None:
-                drone.truth = truth
-        if inbox.n_reel != seen["reel"]:
-            seen["reel"] = inbox.n_reel
-            reel = self._parse(drone, "reel", inbox.reel, parse_reel)
-            if reel is not None:
-                drone.reel = reel
+        parsers: tuple[tuple[str, Callable[[bytes], Any]], ...] = (
+            ("estimate", parse_estimate),
+            ("telemetry", parse_telemetry),
+            ("truth", parse_truth),
+            ("reel", parse_reel),
+        )
+        for kind, parser in parsers:
+            count = getattr(inbox, f"n_{kind}")
+            if count == seen[kind]:
+                continue
+            seen[kind] = count
+            parsed = self._parse(drone, kind, getattr(inbox, kind), parser)
+            if parsed is not None:
+                setattr(drone, kind, parsed)
         if inbox.n_stop != seen["stop"]:
             seen["stop"] = inbox.n_stop
             reason = _parse_stop_reason(inbox.stop) if inbox.stop is not None else "?"

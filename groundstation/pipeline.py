@@ -428,25 +428,7 @@ class Pipeline:
                 position_std_m = _vec3(position.std_world_m)
             else:
                 position = None
-        fs = runtime.follow_state
-        fp = runtime.follow_params
-        # FollowInfo changes only when follow changes state: reuse it (it is frozen). The
-        # params are compared by identity, so their floats are the very same objects.
-        flags = (fs.enabled, fs.active, fs.landing_armed, fs.stopped, fs.reason)
-        cached = runtime.follow_info_cache
-        if cached is not None and cached[0] is fp and cached[1] == flags:
-            follow = cached[2]
-        else:
-            follow = FollowInfo(
-                enabled=fs.enabled,
-                active=fs.active,
-                threshold_n=fp.threshold_n,
-                land_below_m=fp.land_below_m,
-                landing_armed=fs.landing_armed,
-                stopped=fs.stopped,
-                reason=fs.reason,
-            )
-            runtime.follow_info_cache = (fp, flags, follow)
+        follow = self._follow_info(runtime)
         lo_hi = position.radial_interval_m if position is not None else None
         return Estimate(
             seq=msg.seq,
@@ -468,6 +450,29 @@ class Pipeline:
             base_m=_vec3(runtime.base_world_m),
         )
 
+    def _follow_info(self, runtime: DroneRuntime) -> FollowInfo:
+        """The Estimate's ``follow`` object (also the status's)."""
+        fs = runtime.follow_state
+        fp = runtime.follow_params
+        # FollowInfo changes only when follow changes state: reuse it (it is frozen). The
+        # params are compared by identity, so their floats are the very same objects.
+        flags = (fs.enabled, fs.active, fs.landing_armed, fs.stopped, fs.reason)
+        cached = runtime.follow_info_cache
+        if cached is not None and cached[0] is fp and cached[1] == flags:
+            follow = cached[2]
+        else:
+            follow = FollowInfo(
+                enabled=fs.enabled,
+                active=fs.active,
+                threshold_n=fp.threshold_n,
+                land_below_m=fp.land_below_m,
+                landing_armed=fs.landing_armed,
+                stopped=fs.stopped,
+                reason=fs.reason,
+            )
+            runtime.follow_info_cache = (fp, flags, follow)
+        return follow
+
     # ---------------------------------------------------------------- health
 
     def status(self, drone: str, now_s: float) -> dict[str, Any] | None:
@@ -477,8 +482,6 @@ class Pipeline:
             if runtime is None:
                 return None
             drops = dict(runtime.drops)
-        fs = runtime.follow_state
-        fp = runtime.follow_params
         return {
             "drone": drone,
             "stale": runtime.stale,
@@ -500,15 +503,7 @@ class Pipeline:
                 "initialized": runtime.filter.initialized,
                 "change_detections": runtime.change_detections,
             },
-            "follow": {
-                "enabled": fs.enabled,
-                "active": fs.active,
-                "threshold_n": fp.threshold_n,
-                "land_below_m": fp.land_below_m,
-                "landing_armed": fs.landing_armed,
-                "stopped": fs.stopped,
-                "reason": fs.reason,
-            },
+            "follow": self._follow_info(runtime).model_dump(),
             "length_m": runtime.length_m,
             "length_source": runtime.length_source,
             "base_m": list(map(float, runtime.base_world_m)),
