@@ -128,6 +128,9 @@ class WebSection(_Section):
     host: str = "127.0.0.1"
     port: int = Field(8080, ge=0, le=65535)
     scene_rate_hz: float = Field(20.0, gt=0.0, le=30.0)
+    scene_budget_hz: float = Field(80.0, gt=0.0)
+    """Drone redraws per second in all: with many drones each is drawn less often, so the
+    dashboard's cost stays bounded and estimation keeps its capacity."""
 
 
 class ServiceSection(_Section):

@@ -1038,6 +1038,7 @@ class Dashboard:
         self._port = settings.web.port if port is None else port
         self._use_thread = update_thread
         self._scene_rate_hz = min(30.0, settings.web.scene_rate_hz)
+        self._scene_budget_hz = settings.web.scene_budget_hz
         self._capacity = math.ceil(HISTORY_S * self._scene_rate_hz * 1.25) + 8
 
         self._inbox_lock = threading.Lock()
@@ -1632,6 +1633,9 @@ class Dashboard:
             with self._gui_lock:
                 self._update_all(now_s)
             self._ticks += 1
+            # A bounded number of drone redraws per second in all (settings.web).
+            per_drone_hz = self._scene_budget_hz / max(1, len(self._drones))
+            self._scene_throttle.period_s = 1.0 / min(self._scene_rate_hz, per_drone_hz)
         self._cpu_s += time.thread_time() - cpu0_s
 
     def _update_all(self, now_s: float) -> None:

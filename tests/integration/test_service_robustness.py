@@ -6,6 +6,7 @@ import json
 import math
 import signal
 import time
+import urllib.request
 from typing import Any
 
 import pytest
@@ -133,12 +134,25 @@ def test_signals_end_the_service_with_exit_0_within_2_s(
     serve = procs.groundstation("serve", "serve", "--connect", f"tcp/127.0.0.1:{port}", *args)
     _wait_alive(probe)
     probe.publish_json("tether/s1/telemetry", GOOD)  # a declared subscriber has fired
+    if not headless:
+        # The dashboard runs in its own process (a bus client): it answers, then goes
+        # down with the service.
+        url = f"http://127.0.0.1:{args[1]}"
+        deadline = time.monotonic() + 30
+        while f"dashboard: {url}" not in serve.output():
+            assert time.monotonic() < deadline, serve.output()
+            time.sleep(0.1)
+        with urllib.request.urlopen(url, timeout=10) as resp:
+            assert resp.status == 200
     t0 = time.monotonic()
     serve.popen.send_signal(sig)
     code = serve.popen.wait(10)
     elapsed = time.monotonic() - t0
     assert code == 0, serve.output()[-2000:]
     assert elapsed < 2.0, f"took {elapsed:.2f} s"
+    if not headless:
+        with pytest.raises(OSError):  # the dashboard process is gone too
+            urllib.request.urlopen(f"http://127.0.0.1:{args[1]}", timeout=2)
 
 
 def test_two_instances_split_the_drones(procs: Procs, make_probe: Any) -> None:
