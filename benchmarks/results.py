@@ -488,7 +488,7 @@ def targets(o: Outcome) -> list[tuple[str, str, str, bool]]:
         (
             "tug-to-land, tether estimate",
             "exactly one Stop, landed",
-            f"{tl.stops:g} Stop/run, landed {tl.landed}/{tl.runs}, climbed to {tl.max_z_m:.2f} m",
+            f"{tl.stops:g} Stop/run, landed {tl.landed}/{tl.runs}, highest z {tl.max_z_m:.2f} m",
             tl.stops == 1.0 and tl.landed == tl.runs,
         )
     )
