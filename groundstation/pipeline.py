@@ -55,6 +55,8 @@ _INPUT_MODELS = {
     "follow": FollowCommand,
     "params": TetherParams,
 }
+LIFTOFF_PRIOR_STD_N = (0.005, 0.005, 0.005)
+"""Prior standard deviation of the tension at lift-off, N (per world axis)."""
 MAX_DRONES = 256
 """Drones tracked at most; more ids are dropped (kind ``too_many_drones``), bounding memory."""
 _KEY_CACHE_SIZE = 4 * MAX_DRONES
@@ -349,8 +351,9 @@ class Pipeline:
         converged = False
         if obs.tension_world_n is None:
             # On the ground the floor carries the drone: no tension estimate. The filter
-            # restarts from the first airborne sample rather than from the floor's reaction.
-            runtime.filter.reset()
+            # restarts at lift-off rather than from the floor's reaction, from the prior
+            # that a tether resting on the floor pulls on the drone with next to nothing.
+            runtime.filter.reset(prior_world_n=(0.0, 0.0, 0.0), prior_std_n=LIFTOFF_PRIOR_STD_N)
         else:
             est = runtime.filter.update(obs.tension_world_n, dt_s, msg.quat_wxyz)
             if est.change_detected:

@@ -583,8 +583,32 @@ class TensionFilter:
 
     # -- state -------------------------------------------------------------------------
 
-    def reset(self) -> None:
-        """Forgets everything: the next observation initialises the filter again."""
+    def reset(
+        self,
+        prior_world_n: tuple[float, float, float] | None = None,
+        prior_std_n: tuple[float, float, float] | None = None,
+    ) -> None:
+        """Forgets everything: the next observation initialises the filter again.
+
+        Args:
+            prior_world_n: Optional prior tension, world frame, N. Without it the first
+                observation alone initialises the state (x = y, P = R); with it the first
+                observation updates ``N(prior, diag(prior_std_n^2))`` like any other, so a
+                restart is not one raw sample (9 mN noise per axis) when the tension is
+                known to be near the prior, e.g. at lift-off, when the tether rests on the
+                floor and pulls on the drone with next to nothing. A wrong prior shows in
+                the innovations and the change test restarts from the samples alone.
+            prior_std_n: Its standard deviation per axis, N (required with a prior).
+        """
+        if (prior_world_n is None) != (prior_std_n is None):
+            raise ValueError("reset needs both prior_world_n and prior_std_n, or neither")
+        self._prior = None
+        if prior_world_n is not None and prior_std_n is not None:
+            x0 = _vector3(prior_world_n, "prior_world_n")
+            std = _vector3(prior_std_n, "prior_std_n")
+            if not np.all(std > 0.0):
+                raise ValueError(f"prior_std_n must be > 0, got {prior_std_n!r}")
+            self._prior = (x0, np.diag(std * std))
         self._initialized = False
         self._samples = 0
         self._bias = [0.0, 0.0, 0.0]  # EWMA of whitened innovations
@@ -642,7 +666,7 @@ class TensionFilter:
         u = _thrust_axis(quat_wxyz)
         R = self._observation_cov(u)
         kf = self._kf
-        if not self._initialized:
+        if not self._initialized and self._prior is None:
             # First sample: x = y, P = R (see the class docstring).
             kf.x = y.reshape(3, 1).copy()
             kf.P = R.copy()
@@ -653,6 +677,20 @@ class TensionFilter:
             self._scale = 1.0
             self._ring.count = 0
             return self._publish(False, 0.0, 1.0)
+        if not self._initialized:
+            # First sample after a reset with a prior: x- = prior, P- = its covariance,
+            # then the usual update (no prediction step: no time has passed).
+            x0, P0 = self._prior  # type: ignore[misc]
+            kf.x = x0.reshape(3, 1).copy()
+            kf.P = P0.copy()
+            self._prior = None
+            self._initialized = True
+            self._samples = 0
+            self._bias = [0.0, 0.0, 0.0]
+            self._bias_var = 0.0
+            self._scale = 1.0
+            self._ring.count = 0
+            dt = 0.0
 
         scale = self._drift_scale(dt)
         kf.Q = _EYE3 * (scale * self._random_walk2 * dt)  # Q = q dt I

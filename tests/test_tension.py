@@ -420,3 +420,28 @@ def test_irregular_dt_and_gaps_do_not_diverge() -> None:
     assert not det.any()
     err = np.abs(est - truth)[int(3.0 / DT_S) :]
     assert err.max() <= 2e-3, err.max()
+
+
+def test_reset_with_a_prior_calms_the_restart_and_a_wrong_prior_is_dropped() -> None:
+    rng = np.random.default_rng(11)
+    sigma_n = 0.030 * 0.3  # accelerometer noise on a 30 g drone, per axis
+    for truth in (np.zeros(3), np.array([-0.050, 0.010, -0.020])):
+        errors_prior, errors_plain = [], []
+        for _ in range(200):
+            f_prior, f_plain = TensionFilter(), TensionFilter()
+            f_prior.reset(prior_world_n=(0.0, 0.0, 0.0), prior_std_n=(0.005, 0.005, 0.005))
+            for k in range(75):  # 0.3 s at 250 Hz
+                y = truth + rng.normal(0.0, sigma_n, 3)
+                e_prior = f_prior.update(y, 0.004)
+                e_plain = f_plain.update(y, 0.004)
+                if k == 0:
+                    errors_prior.append(e_prior.tension_world_n - truth)
+                    errors_plain.append(e_plain.tension_world_n - truth)
+            # after 0.3 s both agree with the truth, prior or not
+            assert np.linalg.norm(e_prior.tension_world_n - truth) < 0.006
+        rms_prior = float(np.sqrt(np.mean(np.square(errors_prior))))
+        rms_plain = float(np.sqrt(np.mean(np.square(errors_plain))))
+        if not truth.any():
+            assert rms_prior < 0.5 * rms_plain, (rms_prior, rms_plain)  # first sample calmer
+    with pytest.raises(ValueError):
+        TensionFilter().reset(prior_world_n=(0.0, 0.0, 0.0))
