@@ -174,10 +174,10 @@ def callback_cost_us(n: int = 200_000) -> float:
     settings = load_settings(use_env=False)
     dashboard = Dashboard(settings, InMemoryBus(), update_thread=False)
     sample = Sample("tether/cf1/telemetry", _payloads(0, 1)[0][0])
-    dashboard._on_telemetry(sample)  # first sample creates the drone's inbox
+    dashboard._receive("telemetry", sample)  # first sample creates the drone's inbox
     t0 = time.perf_counter()
     for _ in range(n):
-        dashboard._on_telemetry(sample)
+        dashboard._receive("telemetry", sample)
     return (time.perf_counter() - t0) / n * 1e6
 
 

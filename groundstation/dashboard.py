@@ -27,6 +27,7 @@ including the drone selector; the Stop confirmation is per browser.
 
 from __future__ import annotations
 
+import functools
 import html
 import importlib
 import json
@@ -1081,15 +1082,14 @@ class Dashboard:
         self._build_scene(self._server)
         self._build_gui(self._server)
         self._server.on_client_connect(self._on_client_connect)
-        handlers: dict[str, Callable[[Sample], None]] = {
-            "tether/*/estimate": self._on_estimate,
-            "tether/*/telemetry": self._on_telemetry,
-            "tether/*/truth": self._on_truth,
-            "tether/*/reel": self._on_reel,
-            "tether/*/cmd/stop": self._on_stop,
-        }
-        for keyexpr, handler in handlers.items():
-            self._subs.append(self._bus.subscribe(keyexpr, handler))
+        for kind, keyexpr in (
+            ("estimate", "tether/*/estimate"),
+            ("telemetry", "tether/*/telemetry"),
+            ("truth", "tether/*/truth"),
+            ("reel", "tether/*/reel"),
+            ("stop", "tether/*/cmd/stop"),
+        ):
+            self._subs.append(self._bus.subscribe(keyexpr, functools.partial(self._receive, kind)))
         if self._use_thread:
             for target, name in (
                 (self._run_updates, "dashboard-update"),
@@ -1193,37 +1193,15 @@ class Dashboard:
                 inbox = self._inboxes.setdefault(parts[1], _Inbox())
         return inbox
 
-    def _on_telemetry(self, sample: Sample) -> None:
+    def _receive(self, kind: str, sample: Sample) -> None:
+        """Bus callback: keep the latest payload of ``kind``, count it (no parsing here)."""
         inbox = self._inbox(sample.key)
-        if inbox is not None:
-            inbox.telemetry = sample.payload
-            inbox.n_telemetry += 1
-            inbox.telemetry_rx_s = time.monotonic()
-
-    def _on_estimate(self, sample: Sample) -> None:
-        inbox = self._inbox(sample.key)
-        if inbox is not None:
-            inbox.estimate = sample.payload
-            inbox.n_estimate += 1
-
-    def _on_truth(self, sample: Sample) -> None:
-        inbox = self._inbox(sample.key)
-        if inbox is not None:
-            inbox.truth = sample.payload
-            inbox.n_truth += 1
-
-    def _on_reel(self, sample: Sample) -> None:
-        inbox = self._inbox(sample.key)
-        if inbox is not None:
-            inbox.reel = sample.payload
-            inbox.n_reel += 1
-
-    def _on_stop(self, sample: Sample) -> None:
-        inbox = self._inbox(sample.key)
-        if inbox is not None:
-            inbox.stop = sample.payload
-            inbox.stop_rx_s = time.monotonic()
-            inbox.n_stop += 1
+        if inbox is None:
+            return
+        setattr(inbox, kind, sample.payload)
+        setattr(inbox, f"n_{kind}", getattr(inbox, f"n_{kind}") + 1)
+        if kind in ("telemetry", "stop"):  # link health, and when the Stop was seen
+            setattr(inbox, f"{kind}_rx_s", time.monotonic())
 
     # ---------------------------------------------------------------- status polling
 
