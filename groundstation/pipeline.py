@@ -264,15 +264,8 @@ class Pipeline:
             drone=drone,
             params=params,
             filter=TensionFilter(fparams),
-            follow_params=follow_mod.FollowParams(
-                threshold_n=fcfg.threshold_n,
-                hysteresis_ratio=fcfg.hysteresis_ratio,
-                land_below_m=fcfg.land_below_m,
-                max_speed_mps=fcfg.max_speed_mps,
-                reach_margin_m=fcfg.reach_margin_m,
-                stale_after_s=fcfg.stale_after_s,
-                admittance_mps_per_n=fcfg.admittance_mps_per_n,
-            ),
+            # [follow] and FollowParams share their field names (a new key fails loudly).
+            follow_params=follow_mod.FollowParams(**fcfg.model_dump()),
             follow_state=follow_mod.FollowState(),
             length_m=params.tether.length_m,
             base_world_m=np.array(params.base.position_m, dtype=float),

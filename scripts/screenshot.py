@@ -29,17 +29,7 @@ from PIL import Image  # noqa: E402
 from groundstation.bus import InMemoryBus  # noqa: E402
 from groundstation.config import load_settings  # noqa: E402
 from groundstation.dashboard import Dashboard  # noqa: E402
-
-CHROMIUM = "/usr/bin/chromium"
-CHROMIUM_ARGS = [
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-    "--no-first-run",
-    "--disable-quic",
-]
+from tests.browser.conftest import CHROMIUM, CHROMIUM_ARGS  # noqa: E402  (one set of flags)
 
 
 def _start_feed(bus: InMemoryBus, settings: Any, fake: bool) -> tuple[str, list[Any]]:
