@@ -28,8 +28,9 @@ from pydantic_settings import (
     SettingsConfigDict,
 )
 
+from groundstation.messages import DRONE_ID_RE
+
 __all__ = [
-    "DRONE_ID_PATTERN",
     "BaseSection",
     "ConfigError",
     "DroneOverride",
@@ -46,7 +47,6 @@ __all__ = [
     "load_settings",
 ]
 
-DRONE_ID_PATTERN = re.compile(r"[A-Za-z0-9_-]{1,64}")
 
 Vec3 = tuple[float, float, float]
 
@@ -228,7 +228,7 @@ class Settings(BaseSettings):
     @classmethod
     def _drone_ids(cls, value: dict[str, DroneOverride]) -> dict[str, DroneOverride]:
         for drone_id in value:
-            if not DRONE_ID_PATTERN.fullmatch(drone_id):
+            if not DRONE_ID_RE.fullmatch(drone_id):
                 raise ValueError(f"drone id {drone_id!r} does not match [A-Za-z0-9_-]{{1,64}}")
         return value
 

@@ -250,18 +250,3 @@ class SetpointIn(_In):
 
     stamp_s: Finite
     position_m: Vec3
-
-
-class EstimateIn(_In):
-    """An Estimate read back from the bus (dashboard, tests): lenient on added fields."""
-
-    model_config = ConfigDict(frozen=True, strict=False, extra="allow", allow_inf_nan=False)
-
-    seq: int
-    stamp_s: float
-    tension_n: tuple[float, float, float]
-    tension_std_n: tuple[float, float, float]
-    horizontal_n: float
-    vertical_n: float
-    position_m: tuple[float, float, float] | None
-    follow: dict[str, object]
