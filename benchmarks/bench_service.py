@@ -29,7 +29,8 @@ import numpy as np
 
 from groundstation.bus import Sample
 from groundstation.config import ZenohSection
-from groundstation.sim import quat_wxyz_from_z_axis, rotation_from_quat
+from groundstation.sim import quat_wxyz_from_z_axis
+from groundstation.tension import rotation_world_body
 from groundstation.zenoh_bus import ZenohBus
 
 REPO = Path(__file__).resolve().parents[1]
@@ -90,7 +91,7 @@ def _telemetry_payloads(n_drones: int, seconds: float, seed: int) -> list[list[b
     thrust = float(np.linalg.norm(thrust_vec))
     q = quat_wxyz_from_z_axis(thrust_vec / thrust)
     # Hover: p'' = 0, so the IMU reads f = R'(-g).
-    f_body = rotation_from_quat(q).T @ np.array([0.0, 0.0, 9.81])
+    f_body = rotation_world_body(q).T @ np.array([0.0, 0.0, 9.81])
     out: list[list[bytes]] = []
     for step in range(steps):
         row = []

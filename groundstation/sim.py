@@ -28,6 +28,7 @@ from groundstation.bus import Bus, Sample, Subscription
 from groundstation.catenary import TetherTooShortError, tether_force
 from groundstation.config import Settings
 from groundstation.messages import InvalidMessage, SetpointIn, StopIn, Truth
+from groundstation.tension import rotation_world_body
 
 __all__ = [
     "PAPER_HOVER_SPOTS_M",
@@ -214,17 +215,6 @@ def quat_wxyz_from_z_axis(z_world: np.ndarray) -> np.ndarray:
     return np.array([w, -z[1] / (2.0 * w), z[0] / (2.0 * w), 0.0])
 
 
-def rotation_from_quat(q: np.ndarray) -> np.ndarray:
-    w, x, y, z = q
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ]
-    )
-
-
 @dataclass
 class DroneSim:
     """One drone on its tether, stepped with a fixed ``dt_s`` (semi-implicit Euler).
@@ -319,7 +309,7 @@ class DroneSim:
         return min(thrust, max_thrust), force / thrust
 
     def quat_axis(self) -> np.ndarray:
-        return rotation_from_quat(self.quat_wxyz)[:, 2]
+        return rotation_world_body(self.quat_wxyz)[:, 2]
 
     def step(self, dt_s: float, external_force_world_n: np.ndarray) -> None:
         """Advance by ``dt_s``: control, forces, contact, integration, sensor truth."""
@@ -364,7 +354,7 @@ class DroneSim:
             self.floor_contact = floor_contact
             self.taut = taut
             # Specific force f = R'(p'' - g) = R'(F_total_non_gravity)/m (NOTES.md).
-            R = rotation_from_quat(self.quat_wxyz)
+            R = rotation_world_body(self.quat_wxyz)
             self.specific_force_body_mps2 = R.T @ (accel - _G_WORLD)
 
 

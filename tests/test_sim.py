@@ -15,9 +15,8 @@ from groundstation.sim import (
     DroneSim,
     Simulator,
     quat_wxyz_from_z_axis,
-    rotation_from_quat,
 )
-from groundstation.tension import observe_tension
+from groundstation.tension import observe_tension, rotation_world_body
 
 
 class _Bus:
@@ -41,7 +40,7 @@ def test_quaternion_body_z(z_axis: tuple[float, float, float]) -> None:
     z = np.array(z_axis, float) / np.linalg.norm(z_axis)
     q = quat_wxyz_from_z_axis(z)
     assert np.linalg.norm(q) == pytest.approx(1.0)
-    np.testing.assert_allclose(rotation_from_quat(q)[:, 2], z, atol=1e-12)
+    np.testing.assert_allclose(rotation_world_body(q)[:, 2], z, atol=1e-12)
 
 
 def test_hover_holds_position_against_the_tether() -> None:
