@@ -636,7 +636,7 @@ def _paper_section(o: Outcome) -> list[str]:
     L: list[str] = [
         SECTIONS[1],
         "",
-        "The simulator (`groundstation/sim.py`) stands in for the paper's lab: a 30 g quadrotor "
+        "The simulator (`groundstation/sim/`) stands in for the paper's lab: a 30 g quadrotor "
         "on a 1.6 m tether of ω = 0.05 N/m from a base at (0, 0, 0.754) m, quasi-static "
         "catenary force with floor contact, 250 Hz telemetry with accelerometer noise "
         "0.3 m/s² and thrust noise 3 mN. Each run goes through the service's own pipeline "

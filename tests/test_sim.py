@@ -129,3 +129,18 @@ def test_reel_in_shortens_the_tether() -> None:
     reels = [json.loads(s.payload) for s in samples if s.key.endswith("/reel")]
     assert reels[0]["length_m"] == pytest.approx(1.6)
     assert reels[-1]["length_m"] == pytest.approx(1.3, abs=0.01)
+
+
+def test_simulator_imports_none_of_the_estimator() -> None:
+    """The simulator checks the estimator, so it must not run the estimator's code."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, groundstation.sim, groundstation.sim.runner;"
+        "bad = [m for m in ('groundstation.tension', 'groundstation.localization',"
+        " 'groundstation.pipeline', 'groundstation.follow') if m in sys.modules];"
+        "print(','.join(bad))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "", f"the simulator imports {out.stdout.strip()}"

@@ -128,8 +128,8 @@ _BASE_RGB = (134, 142, 150)
 
 _MESH_PATHS = (
     # Shipped with the package if package-data carries it, else the repository's web/.
-    Path(__file__).resolve().parent / "assets" / "quadrotor.stl",
-    Path(__file__).resolve().parent.parent / "web" / "quadrotor.stl",
+    Path(__file__).resolve().parent.parent / "assets" / "quadrotor.stl",
+    Path(__file__).resolve().parent.parent.parent / "web" / "quadrotor.stl",
 )
 
 

@@ -1,0 +1,255 @@
+"""Runs scenarios on a bus in (scaled) real time: the simulator as an edge.
+
+:class:`Simulator` publishes ``tether/{drone}/telemetry``, ``tether/{drone}/reel`` and the
+ground truth ``tether/{drone}/truth``, and obeys ``cmd/setpoint`` and ``cmd/stop``.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import threading
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from groundstation.bus import Bus, Sample, Subscription
+from groundstation.config import Settings
+from groundstation.messages import InvalidMessage, SetpointIn, StopIn, Truth
+from groundstation.sim.ideal import DroneSim
+from groundstation.sim.scenarios import SCENARIOS, scenario_names
+
+__all__ = ["Simulator"]
+
+_log = logging.getLogger("groundstation.sim")
+
+
+class Simulator:
+    """Runs a scenario for the configured drones on a bus (scaled real time).
+
+    Args:
+        settings: root configuration (``[sim]``, and per-drone ``[tether]``/``[base]``).
+        bus: where to publish and listen for commands.
+        scenario: scenario name (default ``settings.sim.scenario``).
+    """
+
+    def __init__(self, settings: Settings, bus: Bus, scenario: str | None = None) -> None:
+        name = scenario or settings.sim.scenario
+        if name not in SCENARIOS:
+            raise ValueError(f"unknown scenario {name!r}; known: {', '.join(scenario_names())}")
+        self.settings = settings
+        self.bus = bus
+        self.scenario = SCENARIOS[name]
+        self.rng = np.random.default_rng(settings.sim.seed)
+        self.dt_s = 1.0 / settings.sim.rate_hz
+        self.t_s = 0.0
+        self.seq = 0
+        self.drones: dict[str, DroneSim] = {}
+        self._operator_done: set[int] = set()
+        self._handles: list[Subscription] = []
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._commands: list[tuple[str, str, bytes]] = []
+        self._cmd_lock = threading.Lock()
+        self.stops_received: dict[str, str] = {}
+        for i, drone_id in enumerate(settings.sim.drones):
+            self.drones[drone_id] = self._make_drone(drone_id, i)
+
+    def _make_drone(self, drone_id: str, index: int) -> DroneSim:
+        params = self.settings.for_drone(drone_id)
+        sc = self.scenario
+        base = np.array(sc.base_m if sc.base_m is not None else params.base.position_m, float)
+        # Several drones fly the same script, each about its own base: spread them out.
+        offset = np.array([0.0, 3.0 * index, 0.0])
+        if drone_id in self.settings.drones:
+            offset[:] = 0.0  # placed by its own [drones.<id>] table
+        base = base + offset
+        start = np.array(sc.start_m, float) + offset
+        floor = params.base.floor_z_m
+        if sc.start_on_ground:
+            start[2] = floor
+        drone = DroneSim(
+            base_world_m=base,
+            length_m=sc.length_m if sc.length_m is not None else params.tether.length_m,
+            weight_n_per_m=params.tether.weight_n_per_m,
+            floor_z_m=floor,
+            mass_kg=params.drone.mass_kg,
+            position_world_m=start,
+            target_world_m=start.copy(),
+            armed=not sc.start_on_ground,
+            coin_mass_kg=sc.coin_mass_kg,
+            coin_arm_m=np.array(sc.coin_arm_m, float) + offset
+            if sc.coin_mass_kg is not None
+            else None,
+        )
+        drone.offset_m = offset
+        if not sc.start_on_ground:
+            # Start in equilibrium: pre-load the integral with the tether's pull.
+            tension, _, _ = drone._tether(start)
+            drone.integral_m_s = -tension / (drone.mass_kg * drone.ki_per_s3)
+        drone.on_ground = sc.start_on_ground
+        return drone
+
+    # ------------------------------------------------------------------ commands
+
+    def start(self) -> None:
+        """Subscribe to commands and run the scenario on a thread."""
+        for drone_id in self.drones:
+            for kind in ("cmd/setpoint", "cmd/stop"):
+                self._handles.append(
+                    self.bus.subscribe(f"tether/{drone_id}/{kind}", self._on_command)
+                )
+        self._thread = threading.Thread(target=self.run, name="groundstation-sim", daemon=True)
+        self._thread.start()
+
+    def close(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+        for handle in self._handles:
+            handle.close()
+        self._handles.clear()
+
+    def wait(self, timeout_s: float | None = None) -> bool:
+        """Wait for the scenario thread to finish (True when it did)."""
+        if self._thread is None:
+            return True
+        self._thread.join(timeout_s)
+        return not self._thread.is_alive()
+
+    def _on_command(self, sample: Sample) -> None:
+        drone_id = sample.key.split("/")[1]
+        kind = "stop" if sample.key.endswith("/cmd/stop") else "setpoint"
+        with self._cmd_lock:
+            self._commands.append((drone_id, kind, sample.payload))
+
+    def _apply_commands(self) -> None:
+        with self._cmd_lock:
+            commands, self._commands = self._commands, []
+        for drone_id, kind, payload in commands:
+            drone = self.drones.get(drone_id)
+            if drone is None:
+                continue
+            try:
+                if kind == "stop":
+                    stop = StopIn.parse(payload)
+                    if drone.armed:
+                        _log.info("%s: Stop (%s): motors off", drone_id, stop.reason)
+                    drone.armed = False
+                    self.stops_received[drone_id] = stop.reason
+                else:
+                    sp = SetpointIn.parse(payload)
+                    drone.target_world_m = np.array(sp.position_m, float)
+            except InvalidMessage as exc:
+                _log.warning("%s: ignoring bad %s: %s", drone_id, kind, exc)
+
+    # ------------------------------------------------------------------ stepping
+
+    def _scripted(self, drone: DroneSim) -> np.ndarray:
+        """Apply the scenario's script at ``self.t_s``; return the external force."""
+        sc = self.scenario
+        t = self.t_s
+        period = sc.duration_s if sc.name == "hover_spots" and sc.duration_s else None
+        t_wp = t % period if period else t
+        offset = drone.offset_m
+        for wp in sc.waypoints:
+            if wp.at_s <= t_wp < wp.at_s + self.dt_s * 0.999 or (t == 0.0 and wp.at_s == 0.0):
+                drone.target_world_m = np.array(wp.position_m, float) + offset
+        if sc.start_on_ground and not drone.armed and sc.arm_at_s <= t < sc.arm_at_s + self.dt_s:
+            drone.armed = True
+        if sc.reel_rate_mps and sc.reel_window_s[0] <= t < sc.reel_window_s[1]:
+            drone.length_m = max(0.05, drone.length_m + sc.reel_rate_mps * self.dt_s)
+        force = np.zeros(3)
+        for pull in sc.pulls:
+            if pull.start_s <= t < pull.end_s:
+                force += np.array(pull.force_world_n, float)
+        return force
+
+    def step(self) -> list[Sample]:
+        """Advance every drone by one period; return the samples to publish."""
+        out: list[Sample] = []
+        sim_cfg = self.settings.sim
+        for i, (at_s, payload) in enumerate(self.scenario.operator):
+            if i not in self._operator_done and self.t_s >= at_s:
+                self._operator_done.add(i)
+                for drone_id in self.drones:
+                    out.append(Sample(f"tether/{drone_id}/follow", json.dumps(payload).encode()))
+        publish_reel = self.seq % max(1, round(sim_cfg.rate_hz / 10.0)) == 0
+        # The script first, then the service's commands, which override its waypoints.
+        externals = {drone_id: self._scripted(drone) for drone_id, drone in self.drones.items()}
+        self._apply_commands()
+        for drone_id, drone in self.drones.items():
+            external = externals[drone_id]
+            drone.step(self.dt_s, external)
+            out.extend(self._messages(drone_id, drone, external, publish_reel))
+        self.seq += 1
+        self.t_s = self.seq * self.dt_s
+        return out
+
+    def _messages(
+        self, drone_id: str, drone: DroneSim, external: np.ndarray, publish_reel: bool
+    ) -> list[Sample]:
+        cfg = self.settings.sim
+        rng = self.rng
+        accel = drone.specific_force_body_mps2 + rng.normal(0.0, cfg.accel_noise_mps2, 3)
+        thrust = drone.thrust_n * (1.0 + cfg.thrust_bias_ratio)
+        thrust = max(0.0, thrust + rng.normal(0.0, cfg.thrust_noise_n)) if drone.armed else 0.0
+        telemetry: dict[str, object] = {
+            "seq": self.seq,
+            "stamp_s": round(self.t_s, 9),
+            "accel_mps2": accel.tolist(),
+            "quat_wxyz": drone.quat_wxyz.tolist(),
+            "thrust_n": thrust,
+            "gyro_rps": rng.normal(0.0, 0.01, 3).tolist(),
+            "armed": drone.armed,
+        }
+        if cfg.mocap:
+            telemetry["position_m"] = drone.position_world_m.tolist()
+        out = [Sample(f"tether/{drone_id}/telemetry", json.dumps(telemetry).encode())]
+        truth = Truth(
+            stamp_s=round(self.t_s, 9),
+            position_m=_v3(drone.position_world_m),
+            velocity_mps=_v3(drone.velocity_world_mps),
+            tension_n=_v3(drone.tension_world_n + external),
+            length_m=drone.length_m,
+            base_m=_v3(drone.base_world_m),
+            floor_contact=drone.floor_contact,
+            taut=drone.taut,
+            armed=drone.armed,
+            on_ground=drone.on_ground,
+            phase=self.scenario.name,
+        )
+        out.append(Sample(f"tether/{drone_id}/truth", truth.to_json()))
+        if publish_reel and self.scenario.coin_mass_kg is None:
+            reel = {
+                "stamp_s": round(self.t_s, 9),
+                "length_m": drone.length_m,
+                "base_m": drone.base_world_m.tolist(),
+            }
+            out.append(Sample(f"tether/{drone_id}/reel", json.dumps(reel).encode()))
+        return out
+
+    def run(self, on_step: Callable[[float], None] | None = None) -> None:
+        """Run in scaled real time until stopped or the duration is over."""
+        cfg = self.settings.sim
+        duration = cfg.duration_s if cfg.duration_s is not None else None
+        period_s = self.dt_s / cfg.speed
+        next_wall = time.monotonic()
+        while not self._stop.is_set():
+            if duration is not None and self.t_s >= duration:
+                return
+            for sample in self.step():
+                self.bus.publish(sample.key, sample.payload)
+            if on_step is not None:
+                on_step(self.t_s)
+            next_wall += period_s
+            delay = next_wall - time.monotonic()
+            if delay > 0:
+                self._stop.wait(delay)
+            elif delay < -0.5:
+                next_wall = time.monotonic()  # fell behind: do not burst to catch up
+
+
+def _v3(a: np.ndarray) -> tuple[float, float, float]:
+    return (float(a[0]), float(a[1]), float(a[2]))

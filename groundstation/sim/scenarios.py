@@ -1,0 +1,173 @@
+"""The paper's scenarios, scripted for the simulator (pure data, no physics)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+__all__ = [
+    "PAPER_HOVER_SPOTS_M",
+    "SCENARIOS",
+    "Pull",
+    "Scenario",
+    "Waypoint",
+    "scenario_names",
+]
+
+PAPER_HOVER_SPOTS_M: tuple[tuple[float, float, float], ...] = (
+    (1.2, 0.0, 1.0),
+    (1.0, -0.3, 1.0),
+    (1.0, 0.0, 1.2),
+    (1.0, -0.3, 0.5),
+    (0.5, -0.6, 1.0),
+    (0.9, 0.6, 1.0),
+)
+"""The paper's hovering flights (NOTES.md), world frame, base at (0, 0, 0.754)."""
+
+
+@dataclass(frozen=True)
+class Pull:
+    """An external force on the drone over ``[start_s, end_s)``: a hand pulling the tether."""
+
+    start_s: float
+    end_s: float
+    force_world_n: tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class Waypoint:
+    """From ``at_s`` on, the controller's target is ``position_m``."""
+
+    at_s: float
+    position_m: tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A scripted flight.
+
+    Attributes:
+        name: scenario name.
+        description: one line for ``groundstation sim --list``.
+        start_m: initial drone position (on the floor when ``start_on_ground``).
+        waypoints: controller targets over time (the service's Setpoints override them).
+        pulls: external pulls (tugs).
+        base_m: base exit point, or None for the configured one.
+        length_m: tether length at t = 0, or None for the configured one.
+        reel_rate_mps: reel speed (negative reels in) over ``reel_window_s``.
+        arm_at_s: arming time (before it the drone sits disarmed on the floor).
+        coin_mass_kg: the paper's horizontal-tension bench: a thread over an arm at
+            ``coin_arm_m`` with this mass hanging replaces the tether.
+        operator: scripted FollowCommands ``(at_s, payload)``, published by the simulator
+            as an operator would.
+        duration_s: natural length of the scenario (None: run until stopped).
+    """
+
+    name: str
+    description: str
+    start_m: tuple[float, float, float]
+    waypoints: tuple[Waypoint, ...] = ()
+    pulls: tuple[Pull, ...] = ()
+    base_m: tuple[float, float, float] | None = None
+    length_m: float | None = None
+    reel_rate_mps: float = 0.0
+    reel_window_s: tuple[float, float] = (0.0, 0.0)
+    start_on_ground: bool = False
+    arm_at_s: float = 0.0
+    coin_mass_kg: float | None = None
+    coin_arm_m: tuple[float, float, float] = (0.3, 0.0, 1.0)
+    operator: tuple[tuple[float, dict[str, object]], ...] = ()
+    duration_s: float | None = None
+
+
+def _spots_tour(dwell_s: float) -> tuple[Waypoint, ...]:
+    return tuple(Waypoint(i * dwell_s, spot) for i, spot in enumerate(PAPER_HOVER_SPOTS_M))
+
+
+SCENARIOS: dict[str, Scenario] = {
+    s.name: s
+    for s in (
+        Scenario(
+            "hover",
+            "hover at the paper's first spot (1.2, 0, 1) m",
+            start_m=PAPER_HOVER_SPOTS_M[0],
+            waypoints=(Waypoint(0.0, PAPER_HOVER_SPOTS_M[0]),),
+        ),
+        Scenario(
+            "hover_spots",
+            "visit the paper's six hover spots, 15 s each, then repeat",
+            start_m=PAPER_HOVER_SPOTS_M[0],
+            waypoints=_spots_tour(15.0),
+            duration_s=90.0,
+        ),
+        Scenario(
+            "takeoff_0.3",
+            "vertical take-off to 0.3 m straight above a base on the floor",
+            start_m=(0.0, 0.0, 0.0),
+            waypoints=(Waypoint(0.0, (0.0, 0.0, 0.3)),),
+            base_m=(0.0, 0.0, 0.0),
+            start_on_ground=True,
+            arm_at_s=2.0,
+            duration_s=20.0,
+        ),
+        Scenario(
+            "takeoff_1.3",
+            "vertical take-off to 1.3 m straight above a base on the floor",
+            start_m=(0.0, 0.0, 0.0),
+            waypoints=(Waypoint(0.0, (0.0, 0.0, 1.3)),),
+            base_m=(0.0, 0.0, 0.0),
+            start_on_ground=True,
+            arm_at_s=2.0,
+            duration_s=20.0,
+        ),
+        Scenario(
+            "coin",
+            "horizontal-tension bench: a 4.1 g coin on a thread over an arm at (0.3, 0, 1) m",
+            start_m=(0.0, 0.0, 0.9),
+            waypoints=(Waypoint(0.0, (0.0, 0.0, 0.9)),),
+            coin_mass_kg=0.0041,
+            duration_s=20.0,
+        ),
+        Scenario(
+            "tug",
+            "hover at (1, 0, 1) m; a 30 mN step pull toward the base at 10 s for 5 s",
+            start_m=(1.0, 0.0, 1.0),
+            waypoints=(Waypoint(0.0, (1.0, 0.0, 1.0)),),
+            pulls=(Pull(10.0, 15.0, (-0.03, 0.0, 0.0)),),
+            duration_s=20.0,
+        ),
+        Scenario(
+            "follow",
+            "tension following: the operator enables follow at 3 s, pulls at 6 s and 14 s",
+            start_m=(1.0, 0.0, 1.0),
+            waypoints=(Waypoint(0.0, (1.0, 0.0, 1.0)),),
+            pulls=(
+                Pull(6.0, 8.0, (-0.20, 0.05, 0.0)),
+                Pull(14.0, 16.0, (0.0, -0.20, 0.0)),
+            ),
+            operator=((3.0, {"enabled": True, "threshold_n": 0.15}),),
+            duration_s=22.0,
+        ),
+        Scenario(
+            "tug_landing",
+            "tug-to-land: follow with land_below_m 0.25 enabled at 3 s, pulled down at 6 s",
+            start_m=(0.6, 0.0, 0.9),
+            waypoints=(Waypoint(0.0, (0.6, 0.0, 0.9)),),
+            pulls=(Pull(6.0, 12.0, (-0.05, 0.0, -0.22)),),
+            operator=((3.0, {"enabled": True, "threshold_n": 0.15, "land_below_m": 0.25}),),
+            duration_s=16.0,
+        ),
+        Scenario(
+            "reel_in",
+            "hover at (1, 0, 1) m; the reel pulls in 0.3 m between 8 s and 14 s",
+            start_m=(1.0, 0.0, 1.0),
+            waypoints=(Waypoint(0.0, (1.0, 0.0, 1.0)),),
+            reel_rate_mps=-0.05,
+            reel_window_s=(8.0, 14.0),
+            duration_s=20.0,
+        ),
+    )
+}
+
+
+def scenario_names() -> list[str]:
+    return sorted(SCENARIOS)
