@@ -18,9 +18,9 @@ from typing import Any
 import numpy as np
 import pytest
 
-from groundstation.dashboard import app as dash_mod
 from groundstation.bus import InMemoryBus, Sample
 from groundstation.config import Settings, load_settings
+from groundstation.dashboard import app as dash_mod
 from groundstation.dashboard.app import (
     Dashboard,
     FollowView,
