@@ -32,6 +32,7 @@ from groundstation.messages import DRONE_ID_RE
 
 __all__ = [
     "BaseSection",
+    "CalibrationSection",
     "ConfigError",
     "DroneOverride",
     "DroneParams",
@@ -122,6 +123,42 @@ class FilterSection(_Section):
     """Below this fraction of the weight the drone is taken to be on the ground."""
 
 
+class CalibrationSection(_Section):
+    """``[calibration]`` (added; per drone ``[drones.<id>.calibration]``): sensor corrections.
+
+    Applied in the tension observation (eq:NE_tether): ``accel = accel_mps2 − accel_bias``,
+    thrust ``F = thrust_n · (thrust_scale + thrust_vbat_slope_per_v · (vbat_v −
+    thrust_vbat_ref_v))`` (the voltage term only when Telemetry carries ``vbat_v``), along the
+    body axis ``R_x(about_x) · R_y(about_y) · e3`` instead of body +z. Written by
+    ``groundstation calibrate``; the defaults change nothing.
+    """
+
+    thrust_scale: float = Field(1.0, gt=0.2, lt=5.0)
+    """Multiplies ``thrust_n`` (the nominal PWM→thrust map's error)."""
+    thrust_axis_rad: tuple[float, float] = (0.0, 0.0)
+    """Thrust axis as a small rotation of body +z, ``[about_x, about_y]``, radians, in the body
+    frame of the attitude Telemetry reports."""
+    accel_bias_mps2: Vec3 = (0.0, 0.0, 0.0)
+    """Subtracted from ``accel_mps2``, body frame, m/s²."""
+    thrust_vbat_slope_per_v: float = 0.0
+    """Change of the thrust scale per volt of ``vbat_v`` above ``thrust_vbat_ref_v``, 1/V."""
+    thrust_vbat_ref_v: float = Field(3.9, gt=0.0)
+    """Battery voltage at which ``thrust_scale`` holds, V."""
+    rest: bool = True
+    """Estimate the accelerometer's x/y offset while the drone sits disarmed and still on the
+    floor, and apply it until the next disarm (real Crazyflies re-level at every power-on)."""
+    source: str = "none"
+    """Where these numbers come from (file and time, written by ``groundstation calibrate``),
+    reported in Estimate and ``status``; ``none`` when nothing was calibrated."""
+
+    @field_validator("thrust_axis_rad")
+    @classmethod
+    def _small_axis(cls, value: tuple[float, float]) -> tuple[float, float]:
+        if any(not math.isfinite(v) or abs(v) > 0.35 for v in value):
+            raise ValueError(f"{value!r}: each angle must be finite and within ±0.35 rad (20°)")
+        return value
+
+
 class WebSection(_Section):
     """``[web]``: the dashboard."""
 
@@ -191,6 +228,7 @@ class DroneOverride(_Section):
     tether: dict[str, Any] = Field(default_factory=dict)
     base: dict[str, Any] = Field(default_factory=dict)
     follow: dict[str, Any] = Field(default_factory=dict)
+    calibration: dict[str, Any] = Field(default_factory=dict)
 
 
 class DroneParams(_Section):
@@ -201,6 +239,7 @@ class DroneParams(_Section):
     base: BaseSection
     follow: FollowSection
     filter: FilterSection
+    calibration: CalibrationSection = CalibrationSection()
 
 
 class Settings(BaseSettings):
@@ -219,6 +258,7 @@ class Settings(BaseSettings):
     base: BaseSection = BaseSection()
     follow: FollowSection = FollowSection()
     filter: FilterSection = FilterSection()
+    calibration: CalibrationSection = CalibrationSection()
     web: WebSection = WebSection()
     service: ServiceSection = ServiceSection()
     sim: SimSection = SimSection()
@@ -257,6 +297,7 @@ class Settings(BaseSettings):
             "tether": self.tether,
             "base": self.base,
             "follow": self.follow,
+            "calibration": self.calibration,
         }
         merged: dict[str, Any] = {"filter": self.filter}
         for name, section in sections.items():

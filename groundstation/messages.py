@@ -124,6 +124,8 @@ class Telemetry(_In):
     position_m: Vec3 | None = None
     """External (motion-capture) position, world frame, metres."""
     armed: bool = True
+    vbat_v: Finite | None = Field(default=None, gt=0.0)
+    """(added) Battery voltage, volts, where the drone reports it (battery-aware thrust)."""
 
 
 class Reel(_In):
@@ -134,6 +136,15 @@ class Reel(_In):
     """Tether paid out from the base exit point to the drone, metres."""
     base_m: Vec3 | None = None
     """World position of the base exit point, metres."""
+    exit_azimuth_rad: Finite | None = None
+    """(added) World-frame azimuth of the tether's horizontal direction where it leaves the
+    base, pointing from the base toward the drone, radians (atan2(y, x))."""
+    exit_azimuth_std_rad: Finite | None = Field(default=None, gt=0.0)
+    """(added) Standard deviation of ``exit_azimuth_rad``."""
+    exit_elevation_rad: Finite | None = Field(default=None, ge=-1.5708, le=1.5708)
+    """(added) The tether's angle above horizontal where it leaves the base, radians."""
+    exit_elevation_std_rad: Finite | None = Field(default=None, gt=0.0)
+    """(added) Standard deviation of ``exit_elevation_rad``."""
 
 
 class FollowCommand(_In):
