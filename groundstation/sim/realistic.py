@@ -148,7 +148,12 @@ class RealisticDrone:
             self._warm_up(cfg.warmup_s)
             # the hover voltage with this flight's real hover thrust (tether included)
             ratio = self.body.thrust_n / self.body.hover_thrust_n
-            self.errors = replace(self.errors, hover_vbat_v=self.battery.voltage(ratio))
+            f_h = self.body.specific_force_body_mps2
+            self.errors = replace(
+                self.errors,
+                hover_vbat_v=self.battery.voltage(ratio),
+                hover_specific_force_body_mps2=(float(f_h[0]), float(f_h[1]), float(f_h[2])),
+            )
 
     # ------------------------------------------------------------------ runner interface
 
@@ -321,5 +326,9 @@ class RealisticDrone:
             "taut": self.taut,
             "armed": bool(body.armed),
             "on_ground": bool(body.on_ground),
+            # beyond Truth (the Python API only): what the sensors saw before their errors
+            "specific_force_body_mps2": [float(v) for v in f_body],
+            "motor_thrust_n": float(body.thrust_n),
+            "vbat_v": float(vbat),
         }
         return {"telemetry": telemetry, "truth": truth}
