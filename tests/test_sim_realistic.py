@@ -471,3 +471,9 @@ def test_realistic_profile_imports_no_estimator_and_no_catenary() -> None:
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "", f"the realistic profile imports {out.stdout.strip()}"
+
+
+def test_no_mocap_drops_position_on_the_realistic_profile_too() -> None:
+    sim = _realistic_sim("hover", mocap=False)
+    tel = [json.loads(p) for k, p in _payloads(sim, 1.0) if k.endswith("/telemetry")]
+    assert len(tel) > 80 and all("position_m" not in t for t in tel)

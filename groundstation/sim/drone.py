@@ -72,12 +72,12 @@ class AirframeParams:
     motor_tau_s: float = 0.030
     rotor_drag_n_s_per_m: float = 0.0073
     thrust_axis_rad: tuple[float, float] = (0.0, 0.0)
-    kp_per_s2: float = 9.0
-    kd_per_s: float = 5.0
-    ki_per_s3: float = 4.0
+    kp_per_s2: float = 16.0
+    kd_per_s: float = 7.0
+    ki_per_s3: float = 8.0
     attitude_bandwidth_rps: float = 18.0
     attitude_damping: float = 0.8
-    max_tilt_rad: float = math.radians(30.0)
+    max_tilt_rad: float = math.radians(35.0)
     thrust_ramp_s: float = 0.0
 
 

@@ -64,6 +64,7 @@ class RealisticDrone:
         start_on_ground: sits on the floor at t = 0 (no warm-up).
         thrust_ramp_s: spool-up after arming, s.
         coin_mass_kg, coin_arm_m: the coin bench instead of a tether.
+        mocap: publish motion capture (``[sim] mocap``); False: no ``position_m``.
     """
 
     def __init__(
@@ -82,6 +83,7 @@ class RealisticDrone:
         thrust_ramp_s: float = 0.0,
         coin_mass_kg: float | None = None,
         coin_arm_m: np.ndarray | None = None,
+        mocap: bool = True,
     ) -> None:
         self.cfg = cfg
         self.sensors = sensor_params(cfg)
@@ -95,6 +97,7 @@ class RealisticDrone:
         self.mass_kg = float(mass_kg)
         self.offset_m = np.zeros(3)
         self.coin_mass_kg = coin_mass_kg
+        self.publish_mocap = mocap
         self.coin_arm_m = coin_arm_m
         self.battery = Battery(self.sensors)
         self.errors: DrawnErrors = draw_errors(self.sensors, flight_rng, self.battery.voltage(1.0))
@@ -311,7 +314,11 @@ class RealisticDrone:
         if s.battery and s.publish_vbat:
             telemetry["vbat_v"] = float(vbat)
         frame = self._mocap_latest
-        if frame is not None and (self.cfg.mocap_attach == "latest" or self._mocap_new):
+        if (
+            self.publish_mocap
+            and frame is not None
+            and (self.cfg.mocap_attach == "latest" or self._mocap_new)
+        ):
             telemetry["position_m"] = [float(v) for v in frame[2]]
         self._mocap_new = False
         self.seq += 1
