@@ -477,3 +477,15 @@ def test_no_mocap_drops_position_on_the_realistic_profile_too() -> None:
     sim = _realistic_sim("hover", mocap=False)
     tel = [json.loads(p) for k, p in _payloads(sim, 1.0) if k.endswith("/telemetry")]
     assert len(tel) > 80 and all("position_m" not in t for t in tel)
+
+
+def test_the_service_pipeline_runs_in_lock_step_on_the_realistic_profile() -> None:
+    """The benchmarks' closed loop: one estimate per jittered Telemetry, truth at its stamp."""
+    from groundstation.evaluation import closed_loop
+
+    run, _, _ = closed_loop(settings_for(profile="realistic"), "hover", 3.0)
+    assert run.telemetry > 250 and len(run.estimates) == run.telemetry
+    for e in run.estimates[::25]:
+        truth = run.truth_at(e["stamp_s"])
+        assert truth["profile"] == "realistic"
+        assert all(math.isfinite(v) for v in e["tension_n"])
