@@ -168,6 +168,12 @@ class WebSection(_Section):
     scene_budget_hz: float = Field(80.0, gt=0.0)
     """Drone redraws per second in all: with many drones each is drawn less often, so the
     dashboard's cost stays bounded and estimation keeps its capacity."""
+    panel: Literal["tab", "shared"] = "tab"
+    """(added) ``tab``: each browser tab has its own panel and selected drone; ``shared``:
+    one panel for every tab (a wall display mirroring the operator's)."""
+    forget_after_s: float = Field(60.0, ge=0.0)
+    """(added) A drone silent this long (seconds) is dropped from the scene and the selector;
+    it is drawn faded from ``[service] stale_after_s`` on. 0: never forget."""
 
 
 class ServiceSection(_Section):
