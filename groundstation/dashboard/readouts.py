@@ -23,8 +23,8 @@ __all__ = [
 
 SMOOTH_VIEW_NOTE = (
     "A smooth 3D view needs hardware WebGL: a GPU and the browser's hardware acceleration "
-    "on. With software rendering (no GPU, a remote desktop, a VM, `--disable-gpu`) the view "
-    "runs at 3–6 frames/s; the readouts and buttons are not affected."
+    "on. With software rendering (no GPU, a remote desktop, a VM, --disable-gpu) the view "
+    "runs at 2–6 frames/s (docs/dashboard.md); the readouts and buttons are not affected."
 )
 
 
