@@ -811,9 +811,14 @@ def test_stale_drones_fade_then_are_forgotten(
         assert not _node(dashboard, "/drones/cf2/tension").visible
         assert _node(dashboard, "/drones/cf1/body/quad").opacity is None
         assert dashboard.drones == ["cf1", "cf2"]
-        # ...and 40 s ago: past forget_after_s, dropped from scene and selector.
+        # ...and 40 s ago: past forget_after_s, dropped from scene and selector. The service
+        # still answers for it (its status table keeps every drone): that keeps no one alive.
         cf2.inbox.last_rx_s -= 35.0
+        assert dashboard.poll_status() == 2
         _feed(dashboard, bus, fake, 0.2, t0 + 3.0)
+        assert dashboard.drones == ["cf1"]
+        assert dashboard.poll_status() == 1, "a status reply brought a forgotten drone back"
+        _feed(dashboard, bus, fake, 0.3, t0 + 4.0)
         assert dashboard.drones == ["cf1"]
         assert dashboard.server.scene.get_handle_by_name("/drones/cf2/body") is None
         assert tuple(_panel(dashboard).drone_select.options) == ("cf1",)

@@ -306,7 +306,11 @@ class Dashboard:
     # ---------------------------------------------------------------- status polling
 
     def poll_status(self) -> int:
-        """Query ``tether/*/status`` once and store the replies. Returns how many arrived."""
+        """Query ``tether/*/status`` once and store the replies of the drones seen here.
+
+        Returns:
+            How many replies were stored.
+        """
         try:
             replies = self._bus.query("tether/*/status", timeout_s=STATUS_TIMEOUT_S)
         except Exception as exc:  # a bus error must not end the poller; logged once
@@ -315,15 +319,16 @@ class Dashboard:
         now_s = time.monotonic()
         count = 0
         for reply in replies:
-            inbox = self._inbox(reply.key)
+            parts = reply.key.split("/")
+            # A status reply updates a drone whose samples arrive here; it neither creates
+            # one nor keeps one alive: the service answers for a long-dead drone too.
+            inbox = self._inboxes.get(parts[1]) if len(parts) == 3 else None
             if inbox is None:
-                self._log_once("status-key", "status reply on an odd key %r", reply.key)
                 continue
             inbox.status = reply.payload  # parsed by the update pass, as every payload
             inbox.status_rx_s = now_s
-            inbox.last_rx_s = now_s
             count += 1
-        if count:
+        if replies:
             self._status_rx_s = now_s
         self._polled = True
         return count

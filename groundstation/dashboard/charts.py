@@ -39,7 +39,9 @@ def tension_series() -> tuple[viser.uplot.Series, ...]:
         {"label": "Ty", "stroke": "#2f9e44", "width": 1.2},
         {"label": "Tz", "stroke": "#1c7ed6", "width": 1.2},
         {"label": "|T|", "stroke": "#212529", "width": 2.0},
-        {"label": "threshold", "stroke": "#f08c00", "width": 1.5, "dash": (6.0, 4.0)},
+        # Follow compares the threshold with the pull beyond the tether's own tension, not
+        # with |T|: the line shows the setting, the panel's note says what it is compared to.
+        {"label": "threshold (pull)", "stroke": "#f08c00", "width": 1.5, "dash": (6.0, 4.0)},
     )
 
 

@@ -225,7 +225,7 @@ class Inbox:
         self.status: bytes | None = None
         self.status_rx_s = 0.0
         self.last_rx_s = time.monotonic()
-        """When anything (a sample or a status reply) last arrived for this drone."""
+        """When a sample (not a status reply) last arrived for this drone."""
 
 
 @dataclass(frozen=True)
@@ -298,7 +298,7 @@ class DroneState:
         return None if rx_s is None else max(0.0, now_s - rx_s)
 
     def silent_s(self, now_s: float) -> float:
-        """Seconds since anything arrived for this drone."""
+        """Seconds since a sample arrived for this drone (status replies do not count)."""
         return max(0.0, now_s - self.inbox.last_rx_s)
 
     def is_stale(self, now_s: float, stale_after_s: float) -> bool:

@@ -188,6 +188,12 @@ class Panel:
             self.tension_html = gui.add_html(tension_html(None))
         with gui.add_folder(f"Charts (last {HISTORY_S:.0f} s)"):
             self.charts = Charts(gui)
+            gui.add_html(
+                note_html(
+                    "The dashed threshold is a pull: follow engages when the tension beyond "
+                    "the tether's own exceeds it, not when |T| does."
+                )
+            )
         self._build_tether(gui)
         with gui.add_folder("Link health"):
             self.health_html = gui.add_html(health_html(None, LinkStats(0.0, 0.0, None), 0.5))
@@ -313,7 +319,8 @@ class Panel:
             gui.add_html(
                 note_html(
                     f"Keyboard: {STOP_HOTKEY} asks to stop the selected drone, {STOP_HOTKEY} "
-                    "again confirms (not while typing in a field); Ctrl+K lists the commands."
+                    "again confirms. The browser keeps keys while a field or checkbox has the "
+                    "focus: click the 3D view first. Ctrl+K lists the commands."
                 )
             )
             gui.add_html(note_html(SMOOTH_VIEW_NOTE))
