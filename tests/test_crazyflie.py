@@ -470,3 +470,100 @@ def test_runner_attaches_mocap_position_and_forwards_extpos(harness: Any) -> Non
     assert h.telemetry[-1]["position_m"] == [0.3, 0.1, 0.5]
     h.publish("mocap/cf1", {"position_m": [0.3, "x", 0.5]})
     wait_for(lambda: h.bridge.counts.get("bad_input", 0) == 1, "bad pose counted")
+
+
+# --------------------------------------------------------------------------- CflibLink
+
+
+class _RecordingDriver:
+    """Stands in for cflib's radio driver below a real ``Crazyflie``: records packets."""
+
+    needs_resending = False
+
+    def __init__(self) -> None:
+        self.sent: list[tuple[int, int, bytes]] = []
+
+    def send_packet(self, pk: Any) -> None:
+        self.sent.append((pk.port, pk.channel, bytes(pk.data)))
+
+    def close(self) -> None:
+        pass
+
+
+def _cflib_link(toc: dict[str, str]) -> tuple[Any, Any, _RecordingDriver]:
+    """A :class:`CflibLink` on a real cflib ``Crazyflie`` whose TOC is ``toc``."""
+    from cflib.crazyflie import Crazyflie
+    from cflib.crazyflie.log import LogTocElement
+    from cflib.crazyflie.toc import Toc
+
+    from groundstation.bridges.crazyflie.link import CflibLink
+
+    cf = Crazyflie()
+    driver = _RecordingDriver()
+    cf.link = driver
+    cf.platform._protocolVersion = 12  # a firmware with the supervisor port
+    type_ids = {v[0]: k for k, v in LogTocElement.types.items()}
+    table = Toc()
+    for ident, (name, ctype) in enumerate(toc.items()):
+        group, var = name.split(".")
+        data = bytearray([type_ids[ctype]]) + group.encode() + b"\0" + var.encode() + b"\0"
+        table.add_element(LogTocElement(ident, data))
+    cf.log.toc = table
+    link = CflibLink("radio://0/80/2M/E7E7E7E7E7")
+    link._cf = cf
+    return link, cf, driver
+
+
+def test_cflib_accepts_the_planned_blocks_and_decodes_their_packets() -> None:
+    import struct
+
+    from cflib.crtp.crtpstack import CRTPPacket, CRTPPort
+
+    link, cf, driver = _cflib_link(dict(FAKE_TOC))
+    plan = plan_variables(CrazyflieSection(), FAKE_TOC, link.uri)
+    got: list[tuple[str, int, dict[str, float]]] = []
+    link.start_logging([*plan.fast, *plan.slow], lambda b, t, v: got.append((b, t, dict(v))))
+    creates = [p for p in driver.sent if p[0] == CRTPPort.LOGGING and p[2][0] in (0, 6)]
+    assert len(creates) == len(plan.fast) + len(plan.slow), "one create-block per block"
+    # A log packet of the attitude+motors block as the firmware sends it.
+    conf = next(c for c in cf.log.log_blocks if "motor.m1" in [v.name for v in c.variables])
+    fmt = {"float": "f", "uint16_t": "H"}
+    block = next(b for b in plan.fast if b.name == conf.name)
+    values: dict[str, float] = {v: (1.0 if v.endswith("qw") else 0.0) for v in block.variables}
+    values.update({m: 41000 + i for i, m in enumerate(plan.motors)})
+    body = b"".join(
+        struct.pack("<" + fmt[t], values[v])
+        for v, t in zip(block.variables, block.fetch_as, strict=True)
+    )
+    ts = 0x123456
+    pk = CRTPPacket()
+    pk.set_header(CRTPPort.LOGGING, 2)
+    pk.data = bytes([conf.id, ts & 0xFF, (ts >> 8) & 0xFF, ts >> 16]) + body
+    cf.log._new_packet_cb(pk)
+    assert got == [(block.name, ts, values)]
+
+
+def test_cflib_refuses_a_block_larger_than_a_packet() -> None:
+    from groundstation.bridges.crazyflie.link import LinkError, LogBlock
+
+    toc = {f"g.v{i}": "float" for i in range(7)}
+    link, _, _ = _cflib_link(toc)
+    big = LogBlock("big", 10, tuple(toc), ("float",) * 7)  # 28 bytes
+    with pytest.raises(LinkError, match="big"):
+        link.start_logging([big], lambda b, t, v: None)
+
+
+def test_cflib_commands_go_out_on_the_right_ports() -> None:
+    import struct
+
+    from cflib.crtp.crtpstack import CRTPPort
+
+    link, _, driver = _cflib_link(dict(FAKE_TOC))
+    link.send_position_setpoint(0.1, 0.2, 0.5, 30.0)
+    port, _, data = driver.sent[-1]
+    assert port == CRTPPort.COMMANDER_GENERIC
+    assert struct.unpack("<Bffff", data) == pytest.approx((7, 0.1, 0.2, 0.5, 30.0))
+    driver.sent.clear()
+    link.stop_motors()
+    assert (CRTPPort.SUPERVISOR, 1, bytes([0x03])) in driver.sent, "supervisor emergency stop"
+    assert (CRTPPort.COMMANDER_GENERIC, 0, bytes([0])) in driver.sent, "and a stop setpoint"
