@@ -251,9 +251,11 @@ def test_gate_drops_stale_setpoints() -> None:
     assert gate.on_setpoint((0.0, 0.0, 0.5), 10.0, 0.0, 10.0, 0.0) == "accepted"
     assert gate.on_setpoint((9.0, 0.0, 0.5), 9.9, 0.0, 10.0, 0.0) == "stale", "stamp backwards"
     assert gate.on_setpoint((math.nan, 0.0, 0.5), 10.1, 0.0, 10.1, 0.0) == "bad"
+    assert gate.on_setpoint((9.0, 0.0, 0.5), 1.7e9, 0.0, 10.1, 0.0) == "clock", "wall clock"
+    assert gate.on_setpoint((9.0, 0.0, 0.5), 10.2, 0.0, None, 0.0) == "stale", "no telemetry"
     cmd = gate.tick(0.0)
     assert cmd is not None and cmd.position_m == (0.0, 0.0, 0.5)
-    assert gate.dropped == {"stale": 2, "bad": 1}
+    assert gate.dropped == {"stale": 3, "bad": 1, "clock": 1}
 
 
 def test_gate_latches_on_stop_until_rearm_and_forgets_on_link_loss() -> None:
@@ -335,6 +337,7 @@ def harness() -> Iterator[Callable[..., Harness]]:
     made: list[Harness] = []
 
     def make(link: FakeLink | None = None, **section: Any) -> Harness:
+        section.setdefault("data_timeout_s", 60.0)  # tests pause between packets
         h = Harness(link or FakeLink(), CrazyflieSection(**section))
         made.append(h)
         return h.start()
@@ -431,6 +434,15 @@ def test_runner_reconnects_after_a_dropped_link_and_logs_once(
     names = _names(h.link)
     i_lost = names.index("lost")
     assert "send_position_setpoint" not in names[i_lost:], "no held setpoint after a loss"
+
+
+def test_runner_takes_silence_as_a_lost_link(harness: Any) -> None:
+    h = harness(data_timeout_s=0.2)
+    h.period(3)
+    wait_for(lambda: len(h.telemetry) >= 3, "telemetry")
+    # no more packets: after 0.2 s the bridge gives the link up and opens it again
+    wait_for(lambda: h.link.opens >= 2, "reopened after silence")
+    assert h.bridge.counts.get("link_lost", 0) >= 1
 
 
 def test_runner_stop_while_disconnected_is_sent_at_reconnection(harness: Any) -> None:

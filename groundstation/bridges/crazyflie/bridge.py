@@ -401,6 +401,9 @@ class SetpointCommand:
     yaw_deg: float
 
 
+Verdict = Literal["accepted", "latched", "stale", "clock", "bad"]
+
+
 @dataclass
 class CommandGate:
     """Watchdog and stop latch between the bus's commands and the drone.
@@ -409,8 +412,10 @@ class CommandGate:
     * Each tick re-sends the latest setpoint (the firmware levels and then cuts the motors
       when its stream of setpoints stops, so holding means repeating). No fresh setpoint for
       ``watchdog_s``: hold the last one, never extrapolate (``holding`` says so).
-    * A setpoint stamped (drone clock) more than ``watchdog_s`` before the latest Telemetry,
-      or before the setpoint in force, is stale: dropped.
+    * Setpoints are stamped on the drone's clock. One stamped more than ``watchdog_s``
+      before the latest Telemetry, or before the setpoint in force, or arriving before any
+      Telemetry, is stale; one more than ``watchdog_s`` after it is on another clock: both
+      are dropped and counted.
     * Stop latches: no setpoint is sent or accepted until :meth:`rearm`; a link loss also
       forgets the setpoint in force (after a reconnection the drone may be on the floor, and a
       held setpoint would lift it).
@@ -437,17 +442,28 @@ class CommandGate:
         now_s: float,
         telemetry_stamp_s: float | None,
         current_yaw_deg: float | None,
-    ) -> Literal["accepted", "latched", "stale", "bad"]:
-        """Take a Setpoint from the bus (``now_s``: host monotonic clock)."""
-        verdict: Literal["accepted", "latched", "stale", "bad"] = "accepted"
+    ) -> Verdict:
+        """Take a Setpoint from the bus.
+
+        Args:
+            position_m: world frame, metres.
+            stamp_s: the Setpoint's stamp, on the drone's clock (the service stamps it with
+                the Telemetry it was computed from).
+            now_s: host monotonic clock, s.
+            telemetry_stamp_s: ``stamp_s`` of the latest Telemetry published, or None.
+            current_yaw_deg: the drone's yaw now (held when ``yaw_deg`` is None).
+        """
+        verdict: Verdict = "accepted"
         if self.latched:
             verdict = "latched"
         elif len(position_m) != 3 or not all(math.isfinite(v) for v in position_m):
             verdict = "bad"
-        elif stamp_s < self._stamp_s or (
-            telemetry_stamp_s is not None and stamp_s < telemetry_stamp_s - self.watchdog_s
-        ):
+        elif telemetry_stamp_s is None:
+            verdict = "stale"  # no telemetry yet: nothing to judge its age against
+        elif stamp_s < self._stamp_s or stamp_s < telemetry_stamp_s - self.watchdog_s:
             verdict = "stale"
+        elif stamp_s > telemetry_stamp_s + self.watchdog_s:
+            verdict = "clock"  # not on the drone's clock (a wall-clock stamp?)
         elif self._yaw is None:
             yaw = self.yaw_deg if self.yaw_deg is not None else current_yaw_deg
             if yaw is None:

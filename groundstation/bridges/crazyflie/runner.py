@@ -120,6 +120,7 @@ class CrazyflieBridge:
         self._slow: dict[str, float] = {}
         self._mocap: MocapPose | None = None
         self._last_stamp_s: float | None = None
+        self._last_data_s = 0.0
         self._last_yaw_deg: float | None = None
         self._pending_stop = False
         self._commanding = False
@@ -211,6 +212,7 @@ class CrazyflieBridge:
             self.link.close()
             raise
         self.connected = True
+        self._last_data_s = self._clock()
         self._logged.discard("connect_failed")
         self._logged.discard("lost")
         if self._pending_stop:
@@ -243,6 +245,8 @@ class CrazyflieBridge:
             if not self.connected:
                 return next_status
         now = self._clock()
+        if self.connected and now - self._last_data_s > self.section.data_timeout_s:
+            self._on_lost(f"no log data for {self.section.data_timeout_s:g} s")
         if self.connected:
             self._send_setpoint(now)
         if now >= next_status:
@@ -317,6 +321,7 @@ class CrazyflieBridge:
         plan, aligner = self._plan, self._aligner
         if plan is None or aligner is None:
             return
+        self._last_data_s = self._clock()
         if any(block == b.name for b in plan.slow):
             self._slow.update(values)
             return
