@@ -380,7 +380,13 @@ def cmd_crazyflie(args: argparse.Namespace) -> int:
     link = make_link(args.uri, settings, args.drone)
     stop = _stop_on_signals()
     with ZenohBus(settings.zenoh) as bus:
-        bridge = CrazyflieBridge(settings.crazyflie, bus, args.drone, link)
+        bridge = CrazyflieBridge(
+            settings.crazyflie,
+            bus,
+            args.drone,
+            link,
+            floor_z_m=settings.for_drone(args.drone).base.floor_z_m,
+        )
         print(
             f"groundstation crazyflie: {args.uri} as tether/{args.drone} "
             f"every {settings.crazyflie.log_period_ms} ms",

@@ -273,6 +273,31 @@ def test_gate_latches_on_stop_until_rearm_and_forgets_on_link_loss() -> None:
     assert gate.tick(0.4) is None, "after a reconnection a fresh setpoint is needed"
 
 
+def test_gate_ramps_take_off_and_land_then_motors_off() -> None:
+    from groundstation.bridges.crazyflie.bridge import LAND_SETTLE_S
+
+    gate = CommandGate(watchdog_s=0.5)
+    assert gate.ramp((0.3, 0.0, 0.0), (0.3, 0.0, 0.5), 0.25, 10.0, 45.0) == "accepted"
+    mid = gate.tick(11.0)
+    assert mid is not None and mid.position_m == pytest.approx((0.3, 0.0, 0.25))
+    assert mid.yaw_deg == 45.0
+    top = gate.tick(20.0)
+    assert top is not None and top.position_m == pytest.approx((0.3, 0.0, 0.5))
+    assert not gate.holding(20.0), "a ramp is its own fresh setpoint"
+    start = gate.position_in_force(20.0)
+    assert start is not None
+    assert gate.ramp(start, (0.3, 0.0, 0.0), 0.5, 20.0, 0.0, land=True) == "accepted"
+    down = gate.tick(21.0 + LAND_SETTLE_S / 2)
+    assert down is not None and not down.motors_off and down.position_m[2] == pytest.approx(0.0)
+    off = gate.tick(21.0 + 2 * LAND_SETTLE_S)
+    assert off is not None and off.motors_off
+    assert gate.tick(22.0) is None, "after landing nothing is sent"
+    gate.on_stop("x")
+    assert gate.ramp((0, 0, 0), (0, 0, 0.5), 0.25, 30.0, 0.0) == "latched"
+    gate.rearm()
+    assert gate.ramp((0, 0, 0), (0, 0, 0.5), 5.0, 30.0, 0.0) == "bad", "too fast"
+
+
 # --------------------------------------------------------------------------- runner
 
 
@@ -579,3 +604,32 @@ def test_cflib_commands_go_out_on_the_right_ports() -> None:
     link.stop_motors()
     assert (CRTPPort.SUPERVISOR, 1, bytes([0x03])) in driver.sent, "supervisor emergency stop"
     assert (CRTPPort.COMMANDER_GENERIC, 0, bytes([0])) in driver.sent, "and a stop setpoint"
+
+
+def test_runner_takeoff_and_land_from_the_mocap_position(harness: Any) -> None:
+    h = harness(mocap_key="mocap/{drone}", mocap_stale_s=5.0)
+    h.period(3)
+    wait_for(lambda: len(h.telemetry) >= 3, "telemetry")
+    h.publish("tether/cf1/cmd/takeoff", {"height_m": 0.4})
+    wait_for(lambda: h.bridge.counts.get("takeoff_refused", 0) == 1, "refused without mocap")
+    assert "send_position_setpoint" not in _names(h.link)
+    h.publish("mocap/cf1", {"position_m": [0.3, 0.1, 0.02]})
+    h.publish("tether/cf1/cmd/takeoff", {"height_m": 0.4, "speed_mps": 1.0})
+    wait_for(
+        lambda: any(
+            n == "send_position_setpoint" and a[2] == pytest.approx(0.4) for n, a in h.link.commands
+        ),
+        "at the take-off height",
+    )
+    ups = [a for n, a in h.link.commands if n == "send_position_setpoint"]
+    assert all(a[:2] == pytest.approx((0.3, 0.1)) for a in ups), "straight up"
+    zs = [a[2] for a in ups]
+    assert zs == sorted(zs) and zs[0] < 0.1
+    h.publish("tether/cf1/cmd/land", {"speed_mps": 1.0})
+    wait_for(lambda: "send_stop_setpoint" in _names(h.link), "motors off after landing", 10)
+    names = _names(h.link)
+    i_off = names.index("send_stop_setpoint")
+    downs = [a[2] for n, a in h.link.commands[:i_off] if n == "send_position_setpoint"]
+    assert downs[-1] == pytest.approx(0.0)
+    assert h.close() == 0
+    assert "send_position_setpoint" not in _names(h.link)[i_off:]

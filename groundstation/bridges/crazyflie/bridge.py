@@ -399,6 +399,30 @@ class SetpointCommand:
 
     position_m: tuple[float, float, float]
     yaw_deg: float
+    motors_off: bool = False
+    """The landing ramp has ended: send a stop setpoint instead, then nothing."""
+
+
+@dataclass(frozen=True, slots=True)
+class _Ramp:
+    start_m: tuple[float, float, float]
+    target_m: tuple[float, float, float]
+    t0_s: float
+    duration_s: float
+    land: bool
+
+    def at(self, now_s: float) -> tuple[float, float, float]:
+        f = (
+            1.0
+            if self.duration_s <= 0
+            else min(1.0, max(0.0, (now_s - self.t0_s) / self.duration_s))
+        )
+        a, b = self.start_m, self.target_m
+        return (a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1]), a[2] + f * (b[2] - a[2]))
+
+
+LAND_SETTLE_S = 0.5
+"""After the landing ramp reaches the floor, hold this long before the motors go off."""
 
 
 Verdict = Literal["accepted", "latched", "stale", "clock", "bad"]
@@ -434,6 +458,7 @@ class CommandGate:
     _stamp_s: float = -math.inf
     _received_s: float = -math.inf
     _yaw: float | None = None
+    _ramp: _Ramp | None = None
 
     def on_setpoint(
         self,
@@ -474,6 +499,7 @@ class CommandGate:
             self.dropped[verdict] = self.dropped.get(verdict, 0) + 1
             return verdict
         x, y, z = (float(v) for v in position_m)
+        self._ramp = None
         self._position = (x, y, z)
         self._stamp_s = stamp_s
         self._received_s = now_s
@@ -498,13 +524,65 @@ class CommandGate:
         """A setpoint is in force but none arrived for ``watchdog_s``."""
         return self._position is not None and now_s - self._received_s > self.watchdog_s
 
+    def ramp(
+        self,
+        start_m: Sequence[float],
+        target_m: Sequence[float],
+        speed_mps: float,
+        now_s: float,
+        current_yaw_deg: float | None,
+        land: bool = False,
+    ) -> Literal["accepted", "latched", "bad"]:
+        """Fly a straight line at ``speed_mps`` (take-off, landing), then hold its end.
+
+        A landing ramp ends with the motors off (after :data:`LAND_SETTLE_S`). A Setpoint
+        accepted meanwhile replaces the ramp; Stop and link loss end it.
+        """
+        if self.latched:
+            self.dropped["latched"] = self.dropped.get("latched", 0) + 1
+            return "latched"
+        pts = (*start_m, *target_m)
+        yaw = (
+            self._yaw
+            if self._yaw is not None
+            else (self.yaw_deg if self.yaw_deg is not None else current_yaw_deg)
+        )
+        if len(pts) != 6 or not all(math.isfinite(v) for v in pts) or yaw is None:
+            self.dropped["bad"] = self.dropped.get("bad", 0) + 1
+            return "bad"
+        if not 0.0 < speed_mps <= 1.0:
+            self.dropped["bad"] = self.dropped.get("bad", 0) + 1
+            return "bad"
+        a = (float(start_m[0]), float(start_m[1]), float(start_m[2]))
+        b = (float(target_m[0]), float(target_m[1]), float(target_m[2]))
+        dist = math.dist(a, b)
+        self._yaw = yaw
+        self._ramp = _Ramp(a, b, now_s, dist / speed_mps, land)
+        self._position = a
+        self._received_s = now_s
+        return "accepted"
+
+    def position_in_force(self, now_s: float) -> tuple[float, float, float] | None:
+        """Where the drone is being told to be now, or None."""
+        if self._ramp is not None:
+            return self._ramp.at(now_s)
+        return self._position
+
     def tick(self, now_s: float) -> SetpointCommand | None:
         """The setpoint to send now, or None."""
         if self.latched or self._position is None or self._yaw is None:
             return None
+        ramp = self._ramp
+        if ramp is not None:
+            if ramp.land and now_s > ramp.t0_s + ramp.duration_s + LAND_SETTLE_S:
+                self._forget()
+                return SetpointCommand(ramp.target_m, 0.0, motors_off=True)
+            self._received_s = now_s  # a ramp is fresh by construction
+            return SetpointCommand(ramp.at(now_s), self._yaw)
         return SetpointCommand(self._position, self._yaw)
 
     def _forget(self) -> None:
+        self._ramp = None
         self._position = None
         self._stamp_s = -math.inf
         self._received_s = -math.inf

@@ -7,7 +7,10 @@ events is the order they are acted on. Bus keys (``{drone}`` is the drone id):
 * publishes ``tether/{drone}/telemetry`` (contract) and ``tether/{drone}/bridge`` (added:
   status, once per ``status_period_s`` and on every change of connection or latch);
 * reads ``tether/{drone}/cmd/setpoint`` and ``tether/{drone}/cmd/stop`` (contract),
-  ``tether/{drone}/cmd/rearm`` (added: lifts the stop latch, any JSON object) and the
+  ``tether/{drone}/cmd/rearm`` (added: lifts the stop latch, any JSON object),
+  ``tether/{drone}/cmd/takeoff`` ``{"height_m": h, "speed_mps": v}`` and
+  ``tether/{drone}/cmd/land`` ``{"speed_mps": v}`` (added: straight vertical ramps of position
+  setpoints from the motion-capture position; landing ends with the motors off) and the
   configured motion-capture key.
 """
 
@@ -60,6 +63,24 @@ class MocapIn(BaseModel):
     """The motion-capture system's clock (not used: the age is taken on arrival)."""
 
 
+class TakeoffIn(BaseModel):
+    """``tether/{drone}/cmd/takeoff`` (added): climb straight up from where the drone is."""
+
+    model_config = ConfigDict(frozen=True, extra="ignore", allow_inf_nan=False)
+
+    height_m: float = Field(gt=0.0, le=3.0)
+    """Target height, world z, metres."""
+    speed_mps: float = Field(0.25, gt=0.0, le=1.0)
+
+
+class LandIn(BaseModel):
+    """``tether/{drone}/cmd/land`` (added): descend straight down to the floor, motors off."""
+
+    model_config = ConfigDict(frozen=True, extra="ignore", allow_inf_nan=False)
+
+    speed_mps: float = Field(0.25, gt=0.0, le=1.0)
+
+
 def bridge_keys(drone: str) -> dict[str, str]:
     """The bus keys of one drone's bridge."""
     base = f"tether/{drone}"
@@ -69,6 +90,8 @@ def bridge_keys(drone: str) -> dict[str, str]:
         "setpoint": f"{base}/cmd/setpoint",
         "stop": f"{base}/cmd/stop",
         "rearm": f"{base}/cmd/rearm",
+        "takeoff": f"{base}/cmd/takeoff",
+        "land": f"{base}/cmd/land",
     }
 
 
@@ -91,6 +114,7 @@ class CrazyflieBridge:
         link: the drone (:class:`~groundstation.bridges.crazyflie.link.CflibLink`, or the
             test fake).
         clock: monotonic host clock, s.
+        floor_z_m: where a landing ramp ends, world z (``[base] floor_z_m``).
     """
 
     def __init__(
@@ -100,6 +124,7 @@ class CrazyflieBridge:
         drone: str,
         link: Link,
         clock: Callable[[], float] = time.monotonic,
+        floor_z_m: float = 0.0,
     ) -> None:
         self.section = section
         self.bus = bus
@@ -108,6 +133,7 @@ class CrazyflieBridge:
         self.keys = bridge_keys(drone)
         self.mocap_key = section.mocap_key.replace("{drone}", drone) if section.mocap_key else None
         self._clock = clock
+        self.floor_z_m = floor_z_m
         self._events: queue.Queue[_Event] = queue.Queue()
         self.gate = CommandGate(section.watchdog_s, section.yaw_deg)
         self.seq = 0
@@ -143,6 +169,10 @@ class CrazyflieBridge:
                 if not isinstance(json.loads(sample.payload), dict):
                     raise InvalidMessage("invalid", "rearm payload is not a JSON object")
                 self._put("rearm")
+            elif key == self.keys["takeoff"]:
+                self._put("takeoff", TakeoffIn.model_validate_json(sample.payload))
+            elif key == self.keys["land"]:
+                self._put("land", LandIn.model_validate_json(sample.payload))
             elif key == self.mocap_key:
                 self._put("mocap", MocapIn.model_validate_json(sample.payload))
         except (InvalidMessage, ValidationError, ValueError) as exc:
@@ -156,7 +186,7 @@ class CrazyflieBridge:
         Returns:
             0, or 2 when the firmware lacks a needed log variable (the message names them).
         """
-        for name in ("setpoint", "stop", "rearm"):
+        for name in ("setpoint", "stop", "rearm", "takeoff", "land"):
             self._subs.append(self.bus.subscribe(self.keys[name], self._on_bus))
         if self.mocap_key:
             self._subs.append(self.bus.subscribe(self.mocap_key, self._on_bus))
@@ -308,6 +338,8 @@ class CrazyflieBridge:
                 _log.warning("re-armed by the operator: setpoints are accepted again")
             self.gate.rearm()
             self._publish_status()
+        elif kind in ("takeoff", "land"):
+            self._ramp(kind, event.payload)
         elif kind == "mocap":
             pose: MocapIn = event.payload
             self._mocap = MocapPose(pose.position_m, pose.quat_wxyz, self._clock())
@@ -316,6 +348,38 @@ class CrazyflieBridge:
         elif kind == "bad_input":
             self._count("bad_input")
             self._once(f"bad_input:{str(event.payload).split(':')[0]}", "dropped %s", event.payload)
+
+    def _ramp(self, kind: str, cmd: TakeoffIn | LandIn) -> None:
+        now = self._clock()
+        pose = self._mocap
+        fresh = pose is not None and now - pose.received_s <= self.section.mocap_stale_s
+        start = self.gate.position_in_force(now) if kind == "land" else None
+        if start is None and fresh and pose is not None:
+            start = pose.position_m
+        if not self.connected or start is None:
+            self._count(f"{kind}_refused")
+            _log.warning(
+                "%s refused: %s",
+                kind,
+                "link down" if not self.connected else "no fresh motion-capture pose",
+            )
+            return
+        x, y, _ = start
+        z = cmd.height_m if isinstance(cmd, TakeoffIn) else self.floor_z_m
+        verdict = self.gate.ramp(
+            start, (x, y, z), cmd.speed_mps, now, self._last_yaw_deg, land=kind == "land"
+        )
+        if verdict != "accepted":
+            self._count(f"{kind}_refused")
+            _log.warning("%s refused (%s)", kind, verdict)
+        else:
+            _log.info(
+                "%s: from %s to z %.2f m at %.2f m/s",
+                kind,
+                [round(v, 3) for v in start],
+                z,
+                cmd.speed_mps,
+            )
 
     def _on_data(self, block: str, raw_ms: int, values: Mapping[str, float]) -> None:
         plan, aligner = self._plan, self._aligner
@@ -366,6 +430,11 @@ class CrazyflieBridge:
                 self.section.watchdog_s,
                 [round(v, 3) for v in cmd.position_m],
             )
+        if cmd.motors_off:
+            self.link.send_stop_setpoint()
+            self._commanding = False
+            _log.info("landed: motors off")
+            return
         x, y, z = cmd.position_m
         self.link.send_position_setpoint(x, y, z, cmd.yaw_deg)
         self._commanding = True
