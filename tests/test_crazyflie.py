@@ -633,3 +633,12 @@ def test_runner_takeoff_and_land_from_the_mocap_position(harness: Any) -> None:
     assert downs[-1] == pytest.approx(0.0)
     assert h.close() == 0
     assert "send_position_setpoint" not in _names(h.link)[i_off:]
+
+
+def test_example_lab_config_loads() -> None:
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "config" / "crazyflie.toml"
+    settings = load_settings(path, use_env=False)
+    assert settings.crazyflie.mocap_key == "mocap/{drone}"
+    assert settings.crazyflie.thrust_map == DEFAULT_MAP

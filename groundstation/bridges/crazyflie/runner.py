@@ -321,6 +321,7 @@ class CrazyflieBridge:
             stop_msg: StopIn = event.payload
             was_latched = self.gate.latched
             self.gate.on_stop(stop_msg.reason)
+            self._commanding = False  # the stop is the last command
             self._count("stops")
             if self.connected:
                 self.link.stop_motors()
