@@ -367,7 +367,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
 
 
 def cmd_crazyflie(args: argparse.Namespace) -> int:
-    from groundstation.bridges.crazyflie import CrazyflieBridge, make_link
+    from groundstation.bridges.crazyflie import CrazyflieBridge, LinkError, make_link
     from groundstation.messages import DRONE_ID_RE
     from groundstation.zenoh_bus import ZenohBus
 
@@ -377,7 +377,11 @@ def cmd_crazyflie(args: argparse.Namespace) -> int:
     if args.rate_hz is not None:
         args.crazyflie_overrides = {"rate_hz": args.rate_hz}
     settings = _load(args)
-    link = make_link(args.uri, settings, args.drone)
+    try:
+        link = make_link(args.uri, settings, args.drone)
+    except LinkError as exc:
+        print(f"groundstation: {exc}", file=sys.stderr)
+        return 2
     stop = _stop_on_signals()
     with ZenohBus(settings.zenoh) as bus:
         bridge = CrazyflieBridge(

@@ -259,6 +259,8 @@ class CrazyflieSection(_Section):
     """Yaw of the position setpoints, degrees; None holds the yaw the drone has when the first
     setpoint arrives."""
     connect_timeout_s: float = Field(10.0, gt=0.0)
+    toc_cache_dir: str | None = None
+    """Directory where cflib caches the firmware's TOCs (faster reconnections); None: none."""
     data_timeout_s: float = Field(1.0, gt=0.0)
     """No log data for this long on an open link: taken as lost (a driver may not notice)."""
     reconnect_max_s: float = Field(5.0, gt=0.0)

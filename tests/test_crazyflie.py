@@ -642,3 +642,33 @@ def test_example_lab_config_loads() -> None:
     settings = load_settings(path, use_env=False)
     assert settings.crazyflie.mocap_key == "mocap/{drone}"
     assert settings.crazyflie.thrust_map == DEFAULT_MAP
+
+
+def test_a_command_failing_on_the_link_counts_as_a_loss(harness: Any) -> None:
+    from groundstation.bridges.crazyflie.link import LinkError
+
+    class Flaky(FakeLink):
+        failed = False
+
+        def send_position_setpoint(self, x_m: float, y_m: float, z_m: float, yaw: float) -> None:
+            if not self.failed:
+                self.failed = True
+                raise LinkError("radio gone")
+            super().send_position_setpoint(x_m, y_m, z_m, yaw)
+
+    h = harness(Flaky())
+    h.period(3)
+    wait_for(lambda: len(h.telemetry) >= 3, "telemetry")
+    stamp = h.telemetry[-1]["stamp_s"]
+    h.publish("tether/cf1/cmd/setpoint", {"stamp_s": stamp, "position_m": [0.1, 0.0, 0.5]})
+    wait_for(lambda: h.link.opens >= 2 and h.bridge.connected, "reconnected after the failure")
+    assert h.bridge.counts["link_lost"] == 1
+    assert "send_position_setpoint" not in _names(h.link), "the setpoint is forgotten"
+
+
+def test_cflib_link_refuses_a_uri_it_cannot_open() -> None:
+    from groundstation.bridges.crazyflie.link import CflibLink, LinkError
+
+    with pytest.raises(LinkError, match="not a cflib URI"):
+        CflibLink("radio:/0/80")
+    assert CflibLink("udp://127.0.0.1:19850").uri == "udp://127.0.0.1:19850"

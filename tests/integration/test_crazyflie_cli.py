@@ -217,3 +217,13 @@ def test_missing_log_variables_fail_at_start_naming_them() -> None:
     )
     assert out.returncode == 2, out.stderr
     assert "stateEstimate.qz" in out.stderr and "motor.m2" in out.stderr
+
+
+def test_a_uri_that_is_not_cflib_fails_at_start() -> None:
+    out = subprocess.run(
+        [sys.executable, "-m", "groundstation", "crazyflie", "--uri", "bogus://", "--drone", "c"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert out.returncode == 2 and "not a cflib URI" in out.stderr

@@ -26,7 +26,11 @@ __all__ = [
 
 def make_link(uri: str, settings: Settings, drone: str) -> Link:
     """The link for ``uri``: cflib for ``radio://``, ``usb://``, ``udp://``, ``tcp://``;
-    the test fake for ``fake://SCENARIO`` (see :mod:`.fake`)."""
+    the test fake for ``fake://SCENARIO`` (see :mod:`.fake`).
+
+    Raises:
+        LinkError: not a URI cflib or the fake understands.
+    """
     if uri.startswith("fake://"):
         from groundstation.bridges.crazyflie.fake import FakeLink
 
@@ -36,4 +40,4 @@ def make_link(uri: str, settings: Settings, drone: str) -> Link:
             thrust_map=settings.crazyflie.thrust_map,
             realtime=True,
         )
-    return CflibLink(uri)
+    return CflibLink(uri, cache_dir=settings.crazyflie.toc_cache_dir)

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from typing import Any, Protocol
 
 __all__ = [
+    "CFLIB_SCHEMES",
     "TYPE_SIZES",
     "CflibLink",
     "DataHandler",
@@ -107,6 +108,10 @@ class Link(Protocol):
         ...
 
 
+CFLIB_SCHEMES = ("radio", "usb", "udp", "tcp", "serial", "prrt")
+"""URI schemes of cflib 0.1.34's drivers (``cflib.crtp``)."""
+
+
 class CflibLink:
     """:class:`Link` on ``cflib.crazyflie.Crazyflie`` (cflib 0.1.34).
 
@@ -120,6 +125,12 @@ class CflibLink:
     _drivers_lock = threading.Lock()
 
     def __init__(self, uri: str, cache_dir: str | None = None) -> None:
+        scheme = uri.split("://", 1)[0] if "://" in uri else ""
+        if scheme not in CFLIB_SCHEMES:
+            schemes = ", ".join(f"{s}://" for s in CFLIB_SCHEMES)
+            raise LinkError(
+                f"--uri {uri!r}: not a cflib URI ({schemes}; e.g. radio://0/80/2M/E7E7E7E7E7)"
+            )
         self.uri = uri
         self._cache_dir = cache_dir
         self._cf: Any = None

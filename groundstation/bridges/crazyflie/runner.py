@@ -246,7 +246,7 @@ class CrazyflieBridge:
         self._logged.discard("connect_failed")
         self._logged.discard("lost")
         if self._pending_stop:
-            self.link.stop_motors()  # a Stop that arrived while the link was down
+            self._send("stop_motors")  # a Stop that arrived while the link was down
             self._pending_stop = False
         _log.info(
             "connected to %s: blocks %s every %d ms, %s; armed %s, vbat %s",
@@ -324,7 +324,7 @@ class CrazyflieBridge:
             self._commanding = False  # the stop is the last command
             self._count("stops")
             if self.connected:
-                self.link.stop_motors()
+                self._send("stop_motors")
             else:
                 self._pending_stop = True
             _log.warning(
@@ -345,7 +345,7 @@ class CrazyflieBridge:
             pose: MocapIn = event.payload
             self._mocap = MocapPose(pose.position_m, pose.quat_wxyz, self._clock())
             if self.section.send_extpos and self.connected:
-                self.link.send_extpos(pose.position_m, pose.quat_wxyz)
+                self._send("send_extpos", pose.position_m, pose.quat_wxyz)
         elif kind == "bad_input":
             self._count("bad_input")
             self._once(f"bad_input:{str(event.payload).split(':')[0]}", "dropped %s", event.payload)
@@ -432,12 +432,13 @@ class CrazyflieBridge:
                 [round(v, 3) for v in cmd.position_m],
             )
         if cmd.motors_off:
-            self.link.send_stop_setpoint()
+            self._send("send_stop_setpoint")
             self._commanding = False
             _log.info("landed: motors off")
             return
         x, y, z = cmd.position_m
-        self.link.send_position_setpoint(x, y, z, cmd.yaw_deg)
+        if not self._send("send_position_setpoint", x, y, z, cmd.yaw_deg):
+            return
         self._commanding = True
         self._count("setpoints_sent")
 
@@ -453,6 +454,18 @@ class CrazyflieBridge:
                 self.link.close()
                 self.connected = False
         _log.info("bridge stopped: %d telemetry published, counts %s", self.seq, self.counts)
+
+    def _send(self, method: str, *args: Any) -> bool:
+        """Call a command of the link; a link that fails under it is a lost link."""
+        try:
+            getattr(self.link, method)(*args)
+        except LinkError as exc:
+            if self.connected:
+                if method == "stop_motors":
+                    self._pending_stop = True  # send it again once reconnected
+                self._on_lost(f"{method} failed: {exc}")
+            return False
+        return True
 
     # ------------------------------------------------------------------ reporting
 
