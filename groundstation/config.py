@@ -233,9 +233,10 @@ class CrazyflieSection(_Section):
     """``[a, b, c]``: thrust of one motor, ``a·pwm² + b·pwm + c`` newtons, pwm in 0..65535
     (a motor at pwm 0 gives 0 N). The default is the widely used Crazyflie 2.x fit."""
     motor_variables: Literal["motor", "pwm"] = "motor"
-    """``motor``: ``motor.m1..m4``, the thrust command before the firmware's battery
-    compensation (keep ``thrust_vbat_slope_per_v = 0``); ``pwm``: ``pwm.m1_pwm..m4_pwm``,
-    the duty cycle after it (its thrust falls with the battery: fit the voltage slope)."""
+    """``motor``: ``motor.m1..m4``; ``pwm``: ``pwm.m1_pwm..m4_pwm``. Where the firmware logs
+    both, ``motor.*`` is the request before its battery compensation (keep
+    ``thrust_vbat_slope_per_v = 0``) and ``pwm.*`` the duty after it (fit the slope); see
+    docs/real-lab.md, "compensating once"."""
     attitude_source: Literal["estimator", "mocap"] = "estimator"
     """``estimator``: ``stateEstimate.qw..qz``; ``mocap``: ``quat_wxyz`` of ``mocap_key``."""
     mocap_key: str | None = None

@@ -13,7 +13,7 @@ variable                   unit         Telemetry field
 ``gyro.x/y/z``             deg/s        ``gyro_rps`` (× π/180), body frame
 ``stateEstimate.qw..qz``   –            ``quat_wxyz`` (body → world, normalised)
 ``motor.m1..m4``           0..65535     ``thrust_n`` via ``thrust_map``, summed
-``pwm.m1_pwm..m4_pwm``     0..65535     (the same, after battery compensation)
+``pwm.m1_pwm..m4_pwm``     0..65535     (the same; the duty after battery compensation)
 ``pm.vbat``                V            ``vbat_v``
 ``supervisor.info``        bit field    ``armed`` (bit 1, "is armed")
 =========================  ===========  =========================================
