@@ -25,8 +25,6 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
-
 from groundstation.bridges.crazyflie.bridge import (
     Aligner,
     CommandGate,
@@ -41,44 +39,20 @@ from groundstation.bridges.crazyflie.bridge import (
 from groundstation.bridges.crazyflie.link import Link, LinkError
 from groundstation.bus import Bus, Sample, Subscription
 from groundstation.config import CrazyflieSection
-from groundstation.messages import InvalidMessage, SetpointIn, StopIn
+from groundstation.messages import (
+    InvalidMessage,
+    LandIn,
+    MocapPoseIn,
+    SetpointIn,
+    StopIn,
+    TakeoffIn,
+)
 
-__all__ = ["CrazyflieBridge", "MocapIn", "bridge_keys"]
+__all__ = ["CrazyflieBridge", "bridge_keys"]
 
 _log = logging.getLogger("groundstation.crazyflie")
 
 _BACKOFF_START_S = 0.25
-
-
-class MocapIn(BaseModel):
-    """A motion-capture pose on the configured bus key (added beside the contract)."""
-
-    model_config = ConfigDict(frozen=True, extra="ignore", allow_inf_nan=False)
-
-    position_m: tuple[float, float, float]
-    """World frame (the contract's), metres."""
-    quat_wxyz: tuple[float, float, float, float] | None = None
-    """Body → world, scalar first; needed when ``attitude_source = "mocap"``."""
-    stamp_s: float | None = Field(default=None)
-    """The motion-capture system's clock (not used: the age is taken on arrival)."""
-
-
-class TakeoffIn(BaseModel):
-    """``tether/{drone}/cmd/takeoff`` (added): climb straight up from where the drone is."""
-
-    model_config = ConfigDict(frozen=True, extra="ignore", allow_inf_nan=False)
-
-    height_m: float = Field(gt=0.0, le=3.0)
-    """Target height, world z, metres."""
-    speed_mps: float = Field(0.25, gt=0.0, le=1.0)
-
-
-class LandIn(BaseModel):
-    """``tether/{drone}/cmd/land`` (added): descend straight down to the floor, motors off."""
-
-    model_config = ConfigDict(frozen=True, extra="ignore", allow_inf_nan=False)
-
-    speed_mps: float = Field(0.25, gt=0.0, le=1.0)
 
 
 def bridge_keys(drone: str) -> dict[str, str]:
@@ -170,12 +144,12 @@ class CrazyflieBridge:
                     raise InvalidMessage("invalid", "rearm payload is not a JSON object")
                 self._put("rearm")
             elif key == self.keys["takeoff"]:
-                self._put("takeoff", TakeoffIn.model_validate_json(sample.payload))
+                self._put("takeoff", TakeoffIn.parse(sample.payload))
             elif key == self.keys["land"]:
-                self._put("land", LandIn.model_validate_json(sample.payload))
+                self._put("land", LandIn.parse(sample.payload))
             elif key == self.mocap_key:
-                self._put("mocap", MocapIn.model_validate_json(sample.payload))
-        except (InvalidMessage, ValidationError, ValueError) as exc:
+                self._put("mocap", MocapPoseIn.parse(sample.payload))
+        except (InvalidMessage, ValueError) as exc:
             self._put("bad_input", f"{key}: {exc}")
 
     # ------------------------------------------------------------------ lifecycle
@@ -342,7 +316,7 @@ class CrazyflieBridge:
         elif kind in ("takeoff", "land"):
             self._ramp(kind, event.payload)
         elif kind == "mocap":
-            pose: MocapIn = event.payload
+            pose: MocapPoseIn = event.payload
             self._mocap = MocapPose(pose.position_m, pose.quat_wxyz, self._clock())
             if self.section.send_extpos and self.connected:
                 self._send("send_extpos", pose.position_m, pose.quat_wxyz)
