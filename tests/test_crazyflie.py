@@ -328,7 +328,8 @@ class Harness:
         assert plan is not None
         for _ in range(n):
             sample = self.link.values()
-            for i, block in enumerate((*plan.fast, *plan.slow)):
+            # the slow block first: the bridge waits for its first sample (armed state)
+            for i, block in enumerate((*plan.slow, *plan.fast)):
                 values = {v: sample[v] for v in block.variables}
                 self.link.emit(block.name, self.clock_ms + i, values)
             self.clock_ms += 10
@@ -392,6 +393,18 @@ def test_runner_publishes_si_telemetry_with_increasing_seq(harness: Any) -> None
     assert h.close() == 0
     assert _names(h.link)[-1] == "close"
     assert "send_stop_setpoint" not in _names(h.link), "never commanded: nothing to stop"
+
+
+def test_runner_waits_for_the_armed_state_before_publishing(harness: Any) -> None:
+    h = harness()
+    plan = h.bridge._plan
+    sample = h.link.values()
+    for block in plan.fast:  # fast blocks only: no armed state yet
+        h.link.emit(block.name, 900, {v: sample[v] for v in block.variables})
+    h.period(3)
+    wait_for(lambda: len(h.telemetry) >= 3, "telemetry")
+    assert h.bridge.counts["before_slow_block"] == 1
+    assert all(t["armed"] is True and t["stamp_s"] > 0.95 for t in h.telemetry)
 
 
 def test_runner_drops_out_of_order_packets(harness: Any) -> None:

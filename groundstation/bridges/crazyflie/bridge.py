@@ -245,8 +245,9 @@ class _Unwrap:
 class Aligner:
     """Joins the fast blocks of one period by their firmware timestamps.
 
-    The firmware runs a timer per block, so blocks of the same period carry timestamps a few
-    ms apart; samples within half a period of the first block's are one period. A block
+    The firmware runs a timer per block, started when the block is, so blocks of the same
+    period carry timestamps offset by a fixed phase; the samples nearest the first block's
+    (within half a period) are one period. A block
     sample whose timestamp is not after its block's previous one is dropped
     (``out_of_order``); a first-block sample whose partners were lost is dropped
     (``unmatched``). Counters say how many.

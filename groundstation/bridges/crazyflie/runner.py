@@ -121,6 +121,7 @@ class CrazyflieBridge:
         self._mocap: MocapPose | None = None
         self._last_stamp_s: float | None = None
         self._last_data_s = 0.0
+        self._connected_s = 0.0
         self._last_yaw_deg: float | None = None
         self._pending_stop = False
         self._commanding = False
@@ -216,7 +217,7 @@ class CrazyflieBridge:
             self.link.close()
             raise
         self.connected = True
-        self._last_data_s = self._clock()
+        self._last_data_s = self._connected_s = self._clock()
         self._logged.discard("connect_failed")
         self._logged.discard("lost")
         if self._pending_stop:
@@ -365,7 +366,17 @@ class CrazyflieBridge:
             self._slow.update(values)
             return
         before = aligner.out_of_order
+        # Until the slow block's first sample (armed, battery), a Telemetry would say "armed"
+        # by the contract's default: wait for it, a few of its periods at most.
+        waiting = (
+            plan.slow
+            and not self._slow
+            and self._clock() - self._connected_s < 3 * self.section.slow_period_ms / 1000.0
+        )
         for aligned in aligner.push(block, raw_ms, values):
+            if waiting:
+                self._count("before_slow_block")
+                continue
             try:
                 tel = build_telemetry(
                     aligned, plan, self.section, self.seq, self._slow, self._mocap, self._clock()
