@@ -377,6 +377,12 @@ def cmd_crazyflie(args: argparse.Namespace) -> int:
     if args.rate_hz is not None:
         args.crazyflie_overrides = {"rate_hz": args.rate_hz}
     settings = _load(args)
+    # cflib logs every connection step at INFO, and warns on each connection that it has no
+    # TOC cache directory (an optional [crazyflie] toc_cache_dir).
+    cflib_level = logging.DEBUG if settings.service.log_level == "DEBUG" else logging.WARNING
+    logging.getLogger("cflib").setLevel(cflib_level)
+    if settings.crazyflie.toc_cache_dir is None:
+        logging.getLogger("cflib.crazyflie.toccache").setLevel(max(cflib_level, logging.ERROR))
     try:
         link = make_link(args.uri, settings, args.drone)
     except LinkError as exc:

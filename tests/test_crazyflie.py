@@ -685,3 +685,77 @@ def test_cflib_link_refuses_a_uri_it_cannot_open() -> None:
     with pytest.raises(LinkError, match="not a cflib URI"):
         CflibLink("radio:/0/80")
     assert CflibLink("udp://127.0.0.1:19850").uri == "udp://127.0.0.1:19850"
+
+
+# ------------------------------------------------------------------ over cflib's UDP driver
+
+
+@pytest.fixture
+def firmware() -> Iterator[Any]:
+    from tests.crtp_firmware import CrtpFirmware
+
+    fw = CrtpFirmware(FAKE_TOC)
+    yield fw
+    fw.close()
+
+
+def test_cflib_link_connects_over_udp_and_streams_the_planned_blocks(firmware: Any) -> None:
+    """CflibLink end to end through cflib 0.1.34 (connect, TOC, blocks, data, commands) against
+    a minimal CRTP responder standing in for firmware (tests/crtp_firmware.py)."""
+    from groundstation.bridges.crazyflie.link import CflibLink
+
+    link = CflibLink(firmware.uri)
+    lost: list[str] = []
+    toc = link.open(lost.append, timeout_s=10.0)
+    try:
+        assert toc == dict(FAKE_TOC)
+        plan = plan_variables(CrazyflieSection(), toc, link.uri)
+        got: list[tuple[str, int, dict[str, float]]] = []
+        lock = threading.Lock()
+
+        def on_data(block: str, ts: int, values: Any) -> None:
+            with lock:
+                got.append((block, ts, dict(values)))
+
+        link.start_logging([*plan.fast, *plan.slow], on_data)
+        names = {b.name for b in (*plan.fast, *plan.slow)}
+        wait_for(lambda: {b for b, _, _ in list(got)} == names, "data of every block", 10.0)
+        with lock:
+            by_block = {b: v for b, _, v in got}
+        assert by_block["tel0"]["acc.z"] == pytest.approx(1.0)
+        assert by_block["tel1"]["motor.m3"] == 40000, "fetched as uint16"
+        assert by_block["slow0"]["supervisor.info"] == 0b1011
+        link.send_position_setpoint(0.1, 0.2, 0.5, 0.0)
+        link.stop_motors()
+        wait_for(lambda: any(d == b"\x03" for _, d in firmware.packets(0x09)), "emergency stop")
+        assert lost == []
+    finally:
+        link.close()
+
+
+def test_the_bridge_runs_on_cflib_over_udp(firmware: Any) -> None:
+    from groundstation.bridges.crazyflie.link import CflibLink
+
+    bus = InMemoryBus()
+    telemetry: list[dict[str, Any]] = []
+    bus.subscribe("tether/cf1/telemetry", lambda s: telemetry.append(_j(s)))
+    bridge = CrazyflieBridge(CrazyflieSection(), bus, "cf1", CflibLink(firmware.uri))
+    stop = threading.Event()
+    rc: list[int] = []
+    thread = threading.Thread(target=lambda: rc.append(bridge.run(stop)))
+    thread.start()
+    try:
+        wait_for(lambda: len(telemetry) >= 20, "20 telemetry over cflib", 15.0)
+    finally:
+        stop.set()
+        thread.join(10.0)
+        bus.close()
+    assert rc == [0]
+    seqs = [t["seq"] for t in telemetry]
+    assert seqs == list(range(len(seqs)))
+    last = telemetry[-1]
+    assert last["accel_mps2"] == pytest.approx([0.0, 0.0, G_MPS2])
+    assert last["thrust_n"] == pytest.approx(thrust_n([40000.0] * 4, DEFAULT_MAP))
+    assert last["armed"] is True and last["vbat_v"] == pytest.approx(3.9)
+    stamps = [t["stamp_s"] for t in telemetry]
+    assert all(b > a for a, b in itertools.pairwise(stamps))
