@@ -227,3 +227,36 @@ def test_a_uri_that_is_not_cflib_fails_at_start() -> None:
         timeout=60,
     )
     assert out.returncode == 2 and "not a cflib URI" in out.stderr
+
+
+def test_the_bridge_over_cflib_udp_to_a_crtp_responder(procs: Procs, make_probe: Any) -> None:
+    """The real cflib path (``--uri udp://``) against tests/crtp_firmware.py, which stands in
+    for a software-in-the-loop firmware: estimates come, and a Stop reaches it once."""
+    from groundstation.bridges.crazyflie.fake import FAKE_TOC, pwm_for_thrust
+    from tests.crtp_firmware import CrtpFirmware
+
+    hover_pwm = pwm_for_thrust((0.030 * 9.81 + 0.05) / 4, (2.130295e-11, 1.032633e-6, 5.484560e-4))
+    firmware = CrtpFirmware(FAKE_TOC, motor_pwm=round(hover_pwm))
+    try:
+        probe, service, bridge, _ = _start(procs, make_probe, firmware.uri)
+        probe.wait_for(
+            lambda: sum(1 for e in probe.json("tether/cf1/estimate") if e["converged"]) > 100,
+            timeout_s=40,
+            what="converged estimates through cflib",
+        )
+        late = [e for e in probe.json("tether/cf1/estimate") if e["converged"]][-50:]
+        assert np.median([e["vertical_n"] for e in late]) == pytest.approx(0.05, abs=0.01)
+        probe.publish_json("tether/cf1/cmd/stop", {"stamp_s": 0.0, "reason": "test"})
+
+        def stops() -> int:
+            return sum(1 for ch, d in firmware.packets(0x09) if ch == 1 and d == b"\x03")
+
+        probe.wait_for(lambda: stops() >= 1, 10, "the supervisor's emergency stop")
+        probe.wait_for(
+            lambda: any(s["latched"] for s in probe.json("tether/cf1/bridge")), 10, "latched"
+        )
+        assert stops() == 1
+        assert bridge.stop(signal.SIGTERM) == 0
+        assert service.stop(signal.SIGTERM) == 0
+    finally:
+        firmware.close()
