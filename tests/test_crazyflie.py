@@ -441,6 +441,7 @@ def test_runner_streams_setpoints_and_a_stop_latches(harness: Any) -> None:
     wait_for(lambda: any(s["latched"] for s in h.status), "status says latched")
     # the operator re-arms; the next setpoint flies again
     h.publish("tether/cf1/cmd/rearm", {})
+    wait_for(lambda: "arm" in _names(h.link), "the arming request")
     h.publish("tether/cf1/cmd/setpoint", {"stamp_s": stamp + 0.02, "position_m": [0.3, 0, 0.5]})
     wait_for(
         lambda: any(n == "send_position_setpoint" and a[0] == 0.3 for n, a in h.link.commands),
@@ -617,6 +618,9 @@ def test_cflib_commands_go_out_on_the_right_ports() -> None:
     link.stop_motors()
     assert (CRTPPort.SUPERVISOR, 1, bytes([0x03])) in driver.sent, "supervisor emergency stop"
     assert (CRTPPort.COMMANDER_GENERIC, 0, bytes([0])) in driver.sent, "and a stop setpoint"
+    driver.sent.clear()
+    link.arm()
+    assert driver.sent == [(CRTPPort.SUPERVISOR, 1, bytes([0x01, 1]))], "arming request"
 
 
 def test_runner_takeoff_and_land_from_the_mocap_position(harness: Any) -> None:

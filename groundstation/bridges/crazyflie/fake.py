@@ -154,6 +154,10 @@ class FakeLink:
     def send_stop_setpoint(self) -> None:
         self._record("send_stop_setpoint")
 
+    def arm(self) -> None:
+        self.motors_stopped = False
+        self._record("arm")
+
     def send_extpos(self, position_m: Sequence[float], quat_wxyz: Sequence[float] | None) -> None:
         self._record("send_extpos", *position_m)
 

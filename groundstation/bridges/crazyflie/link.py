@@ -99,6 +99,10 @@ class Link(Protocol):
         """A stop setpoint only (``commander.send_stop_setpoint``)."""
         ...
 
+    def arm(self) -> None:
+        """Ask the supervisor to arm the motors (``supervisor.send_arming_request(True)``)."""
+        ...
+
     def send_extpos(self, position_m: Sequence[float], quat_wxyz: Sequence[float] | None) -> None:
         """Forward a motion-capture pose to the drone's estimator."""
         ...
@@ -221,6 +225,10 @@ class CflibLink:
 
     def send_stop_setpoint(self) -> None:
         self._require().commander.send_stop_setpoint()
+
+    def arm(self) -> None:
+        # cflib 0.1.34 uses the legacy platform-port request on firmware before protocol 12.
+        self._require().supervisor.send_arming_request(True)
 
     def send_extpos(self, position_m: Sequence[float], quat_wxyz: Sequence[float] | None) -> None:
         cf = self._require()

@@ -7,7 +7,8 @@ events is the order they are acted on. Bus keys (``{drone}`` is the drone id):
 * publishes ``tether/{drone}/telemetry`` (contract) and ``tether/{drone}/bridge`` (added:
   status, once per ``status_period_s`` and on every change of connection or latch);
 * reads ``tether/{drone}/cmd/setpoint`` and ``tether/{drone}/cmd/stop`` (contract),
-  ``tether/{drone}/cmd/rearm`` (added: lifts the stop latch, any JSON object),
+  ``tether/{drone}/cmd/rearm`` (added: lifts the stop latch and asks the supervisor to arm,
+  any JSON object),
   ``tether/{drone}/cmd/takeoff`` ``{"height_m": h, "speed_mps": v}`` and
   ``tether/{drone}/cmd/land`` ``{"speed_mps": v}`` (added: straight vertical ramps of position
   setpoints from the motion-capture position; landing ends with the motors off) and the
@@ -313,6 +314,8 @@ class CrazyflieBridge:
             if self.gate.latched:
                 _log.warning("re-armed by the operator: setpoints are accepted again")
             self.gate.rearm()
+            if self.connected:
+                self._send("arm")
             self._publish_status()
         elif kind in ("takeoff", "land"):
             self._ramp(kind, event.payload)
