@@ -388,6 +388,7 @@ def cmd_crazyflie(args: argparse.Namespace) -> int:
     except LinkError as exc:
         print(f"groundstation: {exc}", file=sys.stderr)
         return 2
+    params = settings.for_drone(args.drone)
     stop = _stop_on_signals()
     with ZenohBus(settings.zenoh) as bus:
         bridge = CrazyflieBridge(
@@ -395,7 +396,8 @@ def cmd_crazyflie(args: argparse.Namespace) -> int:
             bus,
             args.drone,
             link,
-            floor_z_m=settings.for_drone(args.drone).base.floor_z_m,
+            floor_z_m=params.base.floor_z_m,
+            reach=(params.base.position_m, params.tether.length_m),
         )
         print(
             f"groundstation crazyflie: {args.uri} as tether/{args.drone} "

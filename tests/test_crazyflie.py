@@ -307,7 +307,10 @@ class Harness:
     def __init__(self, link: FakeLink, section: CrazyflieSection | None = None) -> None:
         self.bus = InMemoryBus()
         self.link = link
-        self.bridge = CrazyflieBridge(section or CrazyflieSection(), self.bus, "cf1", link)
+        reach = ((0.0, 0.0, 0.754), 1.6)  # the default base and tether
+        self.bridge = CrazyflieBridge(
+            section or CrazyflieSection(), self.bus, "cf1", link, reach=reach
+        )
         self.telemetry: list[dict[str, Any]] = []
         self.status: list[dict[str, Any]] = []
         self.bus.subscribe("tether/cf1/telemetry", lambda s: self.telemetry.append(_j(s)))
@@ -631,6 +634,8 @@ def test_runner_takeoff_and_land_from_the_mocap_position(harness: Any) -> None:
     wait_for(lambda: h.bridge.counts.get("takeoff_refused", 0) == 1, "refused without mocap")
     assert "send_position_setpoint" not in _names(h.link)
     h.publish("mocap/cf1", {"position_m": [0.3, 0.1, 0.02]})
+    h.publish("tether/cf1/cmd/takeoff", {"height_m": 2.5})  # 1.75 m above a 1.6 m tether
+    wait_for(lambda: h.bridge.counts.get("takeoff_refused", 0) == 2, "refused beyond reach")
     h.publish("tether/cf1/cmd/takeoff", {"height_m": 0.4, "speed_mps": 1.0})
     wait_for(
         lambda: any(

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 import queue
 import threading
 import time
@@ -54,6 +55,8 @@ __all__ = ["CrazyflieBridge", "bridge_keys"]
 _log = logging.getLogger("groundstation.crazyflie")
 
 _BACKOFF_START_S = 0.25
+REACH_MARGIN_M = 0.05
+"""A take-off target stays this much inside the tether's length from the base."""
 
 
 def bridge_keys(drone: str) -> dict[str, str]:
@@ -90,6 +93,8 @@ class CrazyflieBridge:
             test fake).
         clock: monotonic host clock, s.
         floor_z_m: where a landing ramp ends, world z (``[base] floor_z_m``).
+        reach: ``(base exit point, tether length)``, world frame, m: a take-off whose target
+            lies beyond ``length - 0.05`` m of the base is refused. None: not checked.
     """
 
     def __init__(
@@ -100,6 +105,7 @@ class CrazyflieBridge:
         link: Link,
         clock: Callable[[], float] = time.monotonic,
         floor_z_m: float = 0.0,
+        reach: tuple[tuple[float, float, float], float] | None = None,
     ) -> None:
         self.section = section
         self.bus = bus
@@ -109,6 +115,7 @@ class CrazyflieBridge:
         self.mocap_key = section.mocap_key.replace("{drone}", drone) if section.mocap_key else None
         self._clock = clock
         self.floor_z_m = floor_z_m
+        self.reach = reach
         self._events: queue.Queue[_Event] = queue.Queue()
         self.gate = CommandGate(section.watchdog_s, section.yaw_deg)
         self.seq = 0
@@ -345,6 +352,19 @@ class CrazyflieBridge:
             return
         x, y, _ = start
         z = cmd.height_m if isinstance(cmd, TakeoffIn) else self.floor_z_m
+        if kind == "takeoff" and self.reach is not None:
+            base_m, length_m = self.reach
+            if math.dist(base_m, (x, y, z)) > length_m - REACH_MARGIN_M:
+                self._count("takeoff_refused")
+                _log.warning(
+                    "takeoff refused: (%.2f, %.2f, %.2f) m is beyond the tether's reach "
+                    "(%.2f m from the base)",
+                    x,
+                    y,
+                    z,
+                    length_m,
+                )
+                return
         verdict = self.gate.ramp(
             start, (x, y, z), cmd.speed_mps, now, self._last_yaw_deg, land=kind == "land"
         )
