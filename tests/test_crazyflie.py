@@ -214,6 +214,9 @@ def test_mocap_position_and_attitude() -> None:
     assert tel.position_m == (0.3, -0.2, 0.5)
     assert tel.quat_wxyz == pytest.approx(quat)
     assert yaw_deg_from_quat(tel.quat_wxyz) == pytest.approx(math.degrees(1.0))
+    zero = MocapPose((0.3, -0.2, 0.5), (0.0, 0.0, 0.0, 0.0), received_s=10.0)
+    with pytest.raises(Skip, match="bad_reading"):
+        build_telemetry(Aligned(0, _values()), plan, section, 0, {}, zero, 10.05)
     with pytest.raises(Skip, match="no_attitude"):  # stale pose: no attitude at all
         build_telemetry(Aligned(0, _values()), plan, section, 0, {}, pose, 10.2)
     est = CrazyflieSection(attitude_source="estimator")

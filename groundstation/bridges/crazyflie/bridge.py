@@ -367,9 +367,12 @@ def build_telemetry(
     stale_s = section.mocap_stale_s
     fresh = mocap if mocap is not None and now_s - mocap.received_s <= stale_s else None
     if section.attitude_source == "mocap":
-        quat = fresh.quat_wxyz if fresh is not None else None
-        if quat is None:
+        raw = fresh.quat_wxyz if fresh is not None else None
+        if raw is None:
             raise Skip("no_attitude", f"no motion-capture attitude within {stale_s} s")
+        quat = normalise_quat(raw)
+        if quat is None:
+            raise Skip("bad_reading", "motion-capture quaternion not of unit norm")
     else:
         quat = normalise_quat([float(v[k]) for k in plan.attitude])
         if quat is None:
