@@ -21,10 +21,13 @@ __all__ = [
     "FollowCommand",
     "FollowInfo",
     "InvalidMessage",
+    "LandIn",
+    "MocapPoseIn",
     "Reel",
     "Setpoint",
     "Status",
     "Stop",
+    "TakeoffIn",
     "Telemetry",
     "TetherParams",
     "Truth",
@@ -316,3 +319,26 @@ class Status(_Out):
     """The answering service instance."""
     peers: int | None = None
     """Zenoh peers and routers the service's session is connected to (0: nobody can reach it)."""
+
+
+class MocapPoseIn(_In):
+    """(added) Motion capture → Crazyflie bridge, on ``[crazyflie] mocap_key``."""
+
+    position_m: Vec3
+    """World frame (the contract's), metres."""
+    quat_wxyz: Vec4 | None = None
+    """Body → world, scalar first (needed with ``attitude_source = "mocap"``)."""
+
+
+class TakeoffIn(_In):
+    """(added) Operator → Crazyflie bridge, ``tether/{drone}/cmd/takeoff``: climb straight up."""
+
+    height_m: Finite = Field(gt=0.0, le=3.0)
+    """Target height, world z, metres."""
+    speed_mps: Finite = Field(default=0.25, gt=0.0, le=1.0)
+
+
+class LandIn(_In):
+    """(added) Operator → Crazyflie bridge, ``tether/{drone}/cmd/land``: down, motors off."""
+
+    speed_mps: Finite = Field(default=0.25, gt=0.0, le=1.0)
