@@ -19,15 +19,15 @@ import re
 import tomllib
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, Self
 
 from pydantic import (
     BaseModel,
     ConfigDict,
     Field,
     ValidationError,
-    ValidationInfo,
     field_validator,
+    model_validator,
 )
 from pydantic_settings import (
     BaseSettings,
@@ -329,13 +329,31 @@ class RealisticSection(_Section):
     """``latest``: every Telemetry carries the latest arrived frame; ``new``: only the first
     Telemetry after a new frame."""
 
-    @field_validator("accel_noise_ar")
-    @classmethod
-    def _ar_covers_lag1(cls, value: float, info: ValidationInfo) -> float:
-        lag1 = info.data.get("accel_noise_lag1", 0.0)
-        if value < lag1:
-            raise ValueError(f"{value!r} must be >= accel_noise_lag1 {lag1!r}")
-        return value
+    @model_validator(mode="after")
+    def _consistent(self) -> Self:
+        # Cross-field rules (field validators do not see defaults); each message names keys.
+        if self.accel_noise_ar < self.accel_noise_lag1:
+            raise ValueError(
+                f"accel_noise_ar {self.accel_noise_ar!r} must be >= accel_noise_lag1 "
+                f"{self.accel_noise_lag1!r}"
+            )
+        nominal = 1.0 / self.imu_rate_hz
+        if not self.imu_spacing_min_s <= nominal <= self.imu_spacing_max_s:
+            raise ValueError(
+                f"imu_spacing_min_s {self.imu_spacing_min_s!r} <= 1/imu_rate_hz {nominal:.4f} "
+                f"<= imu_spacing_max_s {self.imu_spacing_max_s!r} must hold"
+            )
+        if self.mocap_rate_max_hz < self.mocap_rate_min_hz:
+            raise ValueError(
+                f"mocap_rate_max_hz {self.mocap_rate_max_hz!r} must be >= mocap_rate_min_hz "
+                f"{self.mocap_rate_min_hz!r}"
+            )
+        if self.battery_empty_v >= self.battery_full_v:
+            raise ValueError(
+                f"battery_empty_v {self.battery_empty_v!r} must be below battery_full_v "
+                f"{self.battery_full_v!r}"
+            )
+        return self
 
 
 class SimSection(_Section):

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import subprocess
 import sys
 from typing import Any
@@ -489,3 +490,23 @@ def test_the_service_pipeline_runs_in_lock_step_on_the_realistic_profile() -> No
         truth = run.truth_at(e["stamp_s"])
         assert truth["profile"] == "realistic"
         assert all(math.isfinite(v) for v in e["tension_n"])
+
+
+def test_sim_realistic_table_from_a_file_and_its_errors(tmp_path: Any) -> None:
+    from groundstation.config import ConfigError, load_settings
+
+    cfg = tmp_path / "sim.toml"
+    cfg.write_text('[sim]\nprofile = "realistic"\n\n[sim.realistic]\naccel_noise_mps2 = 0.5\n')
+    settings = load_settings(cfg, use_env=False)
+    assert settings.sim.profile == "realistic"
+    assert settings.sim.realistic.accel_noise_mps2 == 0.5
+    assert load_settings(None, use_env=False).sim.profile == "ideal"  # today's default
+    for body, key in (
+        ("accel_noise_lag1 = 0.7", "accel_noise_ar 0.6 must be >= accel_noise_lag1 0.7"),
+        ("imu_spacing_max_s = 0.005", "imu_spacing_max_s 0.005 must hold"),
+        ("mocap_rate_max_hz = 50.0", "mocap_rate_max_hz 50.0 must be >= mocap_rate_min_hz"),
+        ("no_such_key = 1", "sim.realistic.no_such_key"),
+    ):
+        cfg.write_text(f"[sim.realistic]\n{body}\n")
+        with pytest.raises(ConfigError, match=re.escape(key)):
+            load_settings(cfg, use_env=False)
