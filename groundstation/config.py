@@ -254,7 +254,7 @@ class RealisticSection(_Section):
     tether_stretch_stiffness_n: float = Field(100.0, gt=0.0)
     """EA, N (the real tether is stiffer, ~1e4 N; 100 N stretches 0.1 % at 0.1 N and keeps
     the integration cheap; stiffer costs sub-steps, not stability)."""
-    tether_axial_damping_ratio: float = Field(0.1, ge=0.0, le=1.0)
+    tether_axial_damping_ratio: float = Field(0.25, ge=0.0, le=1.0)
     tether_air_damping_n_s_per_m2: float = Field(1e-3, ge=0.0)
     """Effective linear drag per metre of tether (air + internal friction), N·s/m²."""
     floor_friction: float = Field(0.4, ge=0.0)

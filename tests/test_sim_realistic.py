@@ -510,3 +510,21 @@ def test_sim_realistic_table_from_a_file_and_its_errors(tmp_path: Any) -> None:
         cfg.write_text(f"[sim.realistic]\n{body}\n")
         with pytest.raises(ConfigError, match=re.escape(key)):
             load_settings(cfg, use_env=False)
+
+
+def test_truth_calibration_is_a_valid_calibration_table() -> None:
+    from groundstation.config import CalibrationSection
+
+    sim = _realistic_sim("hover")
+    cal = CalibrationSection(**sim.truth_calibration("cf1"))
+    errors = sim.drawn_errors("cf1")
+    assert errors is not None
+    assert cal.thrust_scale == pytest.approx(errors["calibration"]["thrust_scale"])
+    assert cal.thrust_axis_rad == (-0.037, -0.016)
+    flat = CalibrationSection(**sim.truth_calibration("cf1", use_vbat=False))
+    assert flat.thrust_vbat_slope_per_v == 0.0
+    assert flat.thrust_scale == pytest.approx(errors["calibration"]["thrust_scale_hover_start"])
+    ideal = Simulator(settings_for(thrust_bias_ratio=0.1), _Bus(), scenario="hover")  # type: ignore[arg-type]
+    assert CalibrationSection(**ideal.truth_calibration("cf1")).thrust_scale == pytest.approx(
+        1.0 / 1.1
+    )

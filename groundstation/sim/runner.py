@@ -90,6 +90,40 @@ class Simulator:
             return None
         return drone.drawn_errors()  # type: ignore[union-attr]
 
+    def truth_calibration(self, drone_id: str, *, use_vbat: bool = True) -> dict[str, Any]:
+        """``[calibration]`` values equal to this flight's truth ("calibration = truth").
+
+        The keys of :class:`~groundstation.config.CalibrationSection`, ready for
+        ``{"calibration": ...}`` or ``{"drones": {id: {"calibration": ...}}}``. ``use_vbat``
+        False: the exact thrust scale at the first hover voltage and no voltage slope (for an
+        estimator that ignores ``vbat_v``). The ideal profile: the defaults, but
+        ``thrust_scale = 1/(1 + [sim] thrust_bias_ratio)``.
+        """
+        if self.profile != "realistic":
+            return {
+                "thrust_scale": 1.0 / (1.0 + self.settings.sim.thrust_bias_ratio),
+                "source": "sim truth (ideal)",
+            }
+        cal = self._errors_of(drone_id)["calibration"]
+        out = {
+            "thrust_scale": cal["thrust_scale"],
+            "thrust_vbat_slope_per_v": cal["thrust_vbat_slope_per_v"],
+            "thrust_vbat_ref_v": cal["thrust_vbat_ref_v"],
+            "thrust_axis_rad": tuple(cal["thrust_axis_rad"]),
+            "accel_bias_mps2": tuple(cal["accel_bias_mps2"]),
+            "source": f"sim truth (realistic, seed {self.settings.sim.seed}, {drone_id})",
+        }
+        if not use_vbat:
+            out["thrust_scale"] = cal["thrust_scale_hover_start"]
+            out["thrust_vbat_slope_per_v"] = 0.0
+        return out
+
+    def _errors_of(self, drone_id: str) -> dict[str, Any]:
+        errors = self.drawn_errors(drone_id)
+        if errors is None:
+            raise ValueError(f"{drone_id}: the {self.profile} profile draws no errors")
+        return errors
+
     def _placement(
         self, drone_id: str, index: int
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, float]:

@@ -51,7 +51,7 @@ class TetherParams:
     weight_n_per_m: float = 0.05
     n_segments: int = 10
     stretch_stiffness_n: float = 100.0
-    axial_damping_ratio: float = 0.1
+    axial_damping_ratio: float = 0.25
     air_damping_n_s_per_m2: float = 1e-3
     floor_friction: float = 0.4
     friction_speed_mps: float = 0.01
@@ -155,11 +155,13 @@ class LumpedTether:
         dt_s: float,
         drone_world_m: np.ndarray,
         drone_velocity_world_mps: np.ndarray,
+        length_m: float | None = None,
     ) -> np.ndarray:
         """Advance by ``dt_s`` with the drone end at ``drone_world_m``.
 
         The drone end moves linearly from its last position to ``drone_world_m`` over the
-        sub-steps.
+        sub-steps, and the rest length to ``length_m`` (reeling; None: unchanged), so a reel
+        does not jerk the stiff segments once per step.
 
         Returns:
             (3,) force of the tether on the drone at the end of the step, world frame, N.
@@ -173,7 +175,12 @@ class LumpedTether:
         h_per_m = h / self.node_mass_kg
         inner_x, inner_v = self.x_world_m[1:-1], self.v_world_mps[1:-1]
         step_m = (end - start) / n_sub
-        for _ in range(n_sub):
+        length0 = self.length_m
+        reel_m = 0.0 if length_m is None else (float(length_m) - length0) / n_sub
+        for i in range(n_sub):
+            if reel_m != 0.0:
+                self.set_length(length0 + reel_m * (i + 1))
+                h_per_m = h / self.node_mass_kg
             self.x_world_m[-1] += step_m
             force = self._update_forces()
             # semi-implicit Euler: v += F/m·h, then x += v·h (interior nodes only)
