@@ -14,14 +14,22 @@ caller passes it on.
 
 from __future__ import annotations
 
+import json
 import math
 import re
 import tomllib
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, get_args
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    ValidationInfo,
+    field_validator,
+)
 from pydantic_settings import (
     BaseSettings,
     PydanticBaseSettingsSource,
@@ -56,8 +64,67 @@ class ConfigError(ValueError):
     """A configuration value is invalid; the message names the key and the value."""
 
 
+_STRICT = {"strict_scalars": True}
+"""Validation context of values from a file or the command line (see :class:`_Section`)."""
+
+
+def _scalar_kinds(annotation: Any) -> set[type]:
+    """The scalar types (float, int, bool) an annotation accepts, through Optional/tuple."""
+    if annotation in (float, int, bool):
+        return {annotation}
+    kinds: set[type] = set()
+    for arg in get_args(annotation):
+        if arg is not Ellipsis:
+            kinds |= _scalar_kinds(arg)
+    return kinds
+
+
+def _loose_scalar(kinds: set[type], value: Any) -> str | None:
+    """Why ``value`` is not a real number/bool where ``kinds`` are expected (None if it is)."""
+    if value is None:
+        return None
+    if isinstance(value, list | tuple):
+        for item in value:
+            why = _loose_scalar(kinds, item)
+            if why is not None:
+                return why
+        return None
+    if isinstance(value, str) and kinds:
+        kind = "true or false" if kinds == {bool} else "a number"
+        return f"{kind} is required, not the string {value!r} (write it without quotes)"
+    if bool in kinds and kinds <= {bool} and not isinstance(value, bool):
+        return f"true or false is required, not {value!r}"
+    if isinstance(value, bool) and kinds and bool not in kinds:
+        return f"a number is required, not the boolean {value!r}"
+    return None
+
+
 class _Section(BaseModel):
+    """A config table: frozen, no unknown keys, finite floats.
+
+    Values from a TOML file or the command line are validated with the context
+    ``{"strict_scalars": True}``: a number or a bool written as a string (``length_m =
+    "1.6"``, ``mocap = "false"``) is an error, as is a bool where a number belongs. Values
+    from the environment are strings by nature and are converted first (lax), then laid over
+    the file as numbers.
+    """
+
     model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
+
+    @field_validator("*", mode="before")
+    @classmethod
+    def _strict_scalars(cls, value: Any, info: ValidationInfo) -> Any:
+        if not (info.context or {}).get("strict_scalars") or info.field_name is None:
+            return value
+        kinds = _scalar_kinds(cls.model_fields[info.field_name].annotation)
+        why = _loose_scalar(kinds, value)
+        if why is not None:
+            raise ValueError(why)
+        return value
+
+
+_ENDPOINT_RE = re.compile(r"[A-Za-z0-9_+-]+/[^\s/?#][^\s]*")
+"""zenoh's endpoint form ``<protocol>/<address>[?<metadata>][#<config>]``, loosely."""
 
 
 class ZenohSection(_Section):
@@ -74,6 +141,17 @@ class ZenohSection(_Section):
     """Optional zenoh JSON5 config (TLS, access control) loaded before the keys above."""
     raw: dict[str, Any] = Field(default_factory=dict)
     """Extra zenoh config entries, ``{"path/in/config": value}``, inserted as JSON5."""
+
+    @field_validator("connect", "listen")
+    @classmethod
+    def _endpoints(cls, value: tuple[str, ...]) -> tuple[str, ...]:
+        for endpoint in value:
+            if not _ENDPOINT_RE.fullmatch(endpoint):
+                raise ValueError(
+                    f"{endpoint!r} is not a zenoh endpoint <protocol>/<address> "
+                    "(e.g. tcp/127.0.0.1:7447)"
+                )
+        return value
 
 
 class DroneSection(_Section):
@@ -184,6 +262,10 @@ class ServiceSection(_Section):
     log_json: bool = False
     record: str | None = None
     """Record every bus sample to this MCAP file while serving."""
+    follow_threshold_min_n: float = Field(0.02, gt=0.0)
+    """(added) The smallest follow threshold the service accepts, N: a FollowCommand with a
+    lower ``threshold_n`` is refused (and said so on ``tether/{drone}/events``), as is a
+    ``[follow] threshold_n`` below it."""
 
     @field_validator("drones")
     @classmethod
@@ -306,7 +388,9 @@ class Settings(BaseSettings):
                 merged[name] = section
                 continue
             try:
-                merged[name] = type(section).model_validate(section.model_dump() | patch)
+                merged[name] = type(section).model_validate(
+                    section.model_dump() | patch, context=_STRICT
+                )
             except ValidationError as exc:
                 raise ConfigError(
                     _describe(exc, prefix=f"drones.{drone_id}.{name}", data=patch)
@@ -335,8 +419,34 @@ def _describe(exc: ValidationError, *, prefix: str = "", data: Any = None) -> st
         value = err.get("input", _lookup(data, loc))
         if isinstance(value, float) and not math.isfinite(value):
             value = repr(value)
-        lines.append(f"{key} = {value!r}: {err['msg']}")
+        lines.append(f"{key} = {value!r}: {err['msg'].removeprefix('Value error, ')}")
     return "invalid configuration: " + "; ".join(lines)
+
+
+def _check_tables_strictly(layered: Mapping[str, Any]) -> None:
+    """Validate each table with the strict-scalars context (``BaseSettings`` drops contexts).
+
+    Raises:
+        ConfigError: names the key and the value.
+    """
+    for name, field in Settings.model_fields.items():
+        section_type, value = field.annotation, layered.get(name)
+        if not (isinstance(value, Mapping) and isinstance(section_type, type)):
+            continue
+        if issubclass(section_type, _Section):
+            try:
+                section_type.model_validate(value, context=_STRICT)
+            except ValidationError as exc:
+                raise ConfigError(_describe(exc, prefix=name, data=value)) from None
+
+
+def _decode_env(raw: Any) -> Any:
+    if not isinstance(raw, str):
+        return raw
+    try:
+        return json.loads(raw)
+    except ValueError:
+        return raw
 
 
 def _deep_merge(base: dict[str, Any], patch: Mapping[str, Any]) -> dict[str, Any]:
@@ -385,12 +495,28 @@ def load_settings(
             # Environment beats the file: validate env alone, then lay it over the file.
             env_only = Settings()
             env_set = env_only.model_dump(exclude_unset=True)
+            # Per-drone overrides stay untyped dicts until resolved: decode their strings
+            # here (a number or a list in JSON), as the typed tables were decoded above.
+            for override in env_set.get("drones", {}).values():
+                for table in override.values():
+                    if isinstance(table, dict):
+                        for key, raw in table.items():
+                            table[key] = _decode_env(raw)
             layered = _deep_merge(layered, env_set)
         layered = _deep_merge(layered, dict(cli_overrides or {}))
+        _check_tables_strictly(layered)
         settings = Settings.model_validate(layered)
     except ValidationError as exc:
         raise ConfigError(_describe(exc, data=layered)) from None
     # Resolve every override once at start-up so a bad per-drone value fails now.
-    for drone_id in settings.drones:
-        settings.for_drone(drone_id)
+    floor_n = settings.service.follow_threshold_min_n
+    for key, follow in [("follow", settings.follow)] + [
+        (f"drones.{d}.follow", settings.for_drone(d).follow) for d in settings.drones
+    ]:
+        if follow.threshold_n < floor_n:
+            raise ConfigError(
+                f"invalid configuration: {key}.threshold_n = {follow.threshold_n!r}: below "
+                f"service.follow_threshold_min_n = {floor_n!r} (a threshold that low follows "
+                "the tether's own pull)"
+            )
     return settings

@@ -28,6 +28,7 @@ from groundstation.config import DroneParams, Settings
 from groundstation.localization import PositionEstimate, localize
 from groundstation.messages import (
     Estimate,
+    Event,
     FollowCommand,
     FollowInfo,
     InvalidMessage,
@@ -63,6 +64,8 @@ _KEY_CACHE_SIZE = 4 * MAX_DRONES
 """Parsed keys remembered (each drone has four input kinds)."""
 _MAX_GAP_S = 1.0
 """A telemetry gap longer than this restarts the filter (the tension may have changed)."""
+_COMMAND_KINDS = frozenset({"follow", "params"})
+"""Inputs from operators: every rejection of one is told on ``tether/{drone}/events``."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -73,6 +76,10 @@ class Parsed:
     kind: str
     message: Telemetry | Reel | FollowCommand | TetherParams
     received_s: float
+    source: str | None = None
+    """The sender's zenoh session id, where the sample carried it."""
+    ignored: tuple[str, ...] = ()
+    """Unknown fields of a follow/params command (ignored, but told to the sender)."""
 
 
 class _Rate:
@@ -135,14 +142,30 @@ class Pipeline:
         settings: the root configuration.
         on_drop: called as ``on_drop(drone_or_None, kind, detail)`` for every rejected
             input (the service logs the first of each kind).
+        on_event: called as ``on_event(drone, event)`` with each
+            :class:`~groundstation.messages.Event` for ``tether/{drone}/events`` (the operator
+            action log): every rejected or applied command, follow switched off by staleness,
+            a Stop issued; for rejected telemetry/reel only the first per drone and kind.
+            Called from :meth:`validate`'s thread for rejections at validation, else from
+            :meth:`process`'s / :meth:`tick`'s.
+        wall_clock: UNIX seconds for the events' ``stamp_s``; None stamps them with the
+            receive clock ``now_s`` (offline runs).
     """
 
     def __init__(
         self,
         settings: Settings,
         on_drop: Any = None,
+        *,
+        on_event: Any = None,
+        wall_clock: Any = None,
     ) -> None:
         self.settings = settings
+        self._on_event = on_event
+        self._wall_clock = wall_clock
+        self.self_id = "service"
+        """``who`` of the events about the service's own actions (the service sets its id)."""
+        self._told: set[tuple[str, str]] = set()  # (drone, kind) of rejections told once
         self.drones: dict[str, DroneRuntime] = {}
         self.global_drops: Counter[str] = Counter()
         self.last_received_s: dict[str, float] = {}
@@ -180,12 +203,53 @@ class Pipeline:
             message = model.parse(sample.payload)
         except InvalidMessage as exc:
             self.count_drop(drone, exc.kind, exc.detail)
+            if drone is not None and self._on_event is not None:
+                self._tell_rejection(drone, sample, exc, now_s)
             return None
         if kind == "telemetry" and (
             drone in self.last_received_s or len(self.last_received_s) < MAX_DRONES
         ):
             self.last_received_s[drone] = now_s
-        return Parsed(drone, kind, message, now_s)
+        ignored = model.unknown_fields(sample.payload) if kind in _COMMAND_KINDS else ()
+        return Parsed(drone, kind, message, now_s, sample.source, ignored)
+
+    def _tell_rejection(
+        self, drone: str, sample: Sample, exc: InvalidMessage, now_s: float
+    ) -> None:
+        kind = sample.key[len("tether/") + len(drone) + 1 :]
+        if kind not in _COMMAND_KINDS:
+            with self._lock:
+                if (drone, exc.kind) in self._told or len(self._told) >= 16 * MAX_DRONES:
+                    return
+                self._told.add((drone, exc.kind))
+        reason = exc.detail if kind in _COMMAND_KINDS else f"{exc.detail} (further ones counted)"
+        self._emit(drone, "rejected", kind, now_s, sample.source, reason, field=exc.field)
+
+    def _emit(
+        self,
+        drone: str,
+        kind: str,
+        input_kind: str,
+        now_s: float,
+        who: str | None,
+        reason: str,
+        *,
+        field: str | None = None,
+        changes: dict[str, Any] | None = None,
+    ) -> None:
+        """Hand one operator-log Event to ``on_event`` (nothing when there is no listener)."""
+        if self._on_event is None:
+            return
+        event = Event(
+            stamp_s=self._wall_clock() if self._wall_clock is not None else now_s,
+            kind=kind,
+            input=input_kind,
+            who=who or "unknown",
+            reason=reason[:500],
+            field=field,
+            changes=changes or {},
+        )
+        self._on_event(drone, event)
 
     def count_drop(self, drone: str | None, kind: str, detail: str) -> None:
         """Count a rejected input per drone and kind (thread-safe) and report it."""
@@ -225,18 +289,112 @@ class Pipeline:
                 runtime.base_world_m = np.array(msg.base_m, dtype=float)
             return []
         if isinstance(msg, TetherParams):
+            changes: dict[str, Any] = {}
             if msg.weight_n_per_m is not None:
                 runtime.weight_n_per_m = msg.weight_n_per_m
+                changes["weight_n_per_m"] = msg.weight_n_per_m
             if msg.length_m is not None:
                 if runtime.length_source == "reel":
                     self.count_drop(runtime.drone, "length_from_reel", "a reel reports length")
+                    self._emit(
+                        runtime.drone,
+                        "warning",
+                        "params",
+                        now_s,
+                        parsed.source,
+                        f"length_m {msg.length_m} ignored: a reel reports the length "
+                        f"({runtime.length_m:.3f} m)",
+                        field="length_m",
+                    )
                 else:
                     runtime.length_m = msg.length_m
                     runtime.length_source = "operator"
+                    changes["length_m"] = msg.length_m
+            self._tell_ignored(runtime.drone, parsed, now_s)
+            if changes:
+                self._emit(
+                    runtime.drone,
+                    "params",
+                    "params",
+                    now_s,
+                    parsed.source,
+                    "applied",
+                    changes=changes,
+                )
             return []
         assert isinstance(msg, FollowCommand)
-        self._follow_command(runtime, msg)
+        self._follow_command(runtime, msg, parsed, now_s)
         return []
+
+    def _tell_ignored(self, drone: str, parsed: Parsed, now_s: float) -> None:
+        if parsed.ignored:
+            self._emit(
+                drone,
+                "warning",
+                parsed.kind,
+                now_s,
+                parsed.source,
+                f"unknown fields ignored: {', '.join(map(repr, parsed.ignored))} "
+                f"(a {type(parsed.message).__name__} has {', '.join(type(parsed.message).model_fields)})",
+                field=parsed.ignored[0],
+            )
+
+    def _refuse_follow(
+        self, runtime: DroneRuntime, cmd: FollowCommand, now_s: float
+    ) -> tuple[str, str] | None:
+        """Why a FollowCommand must not be applied, as ``(field, reason)``, or None.
+
+        Checked at the command boundary, before :func:`follow.set_enabled`:
+
+        - a threshold below ``[service] follow_threshold_min_n``;
+        - enabling follow on a drone that is stale or has never sent telemetry (the README's
+          rule: a stale drone drops follow and the operator enables it again; an unknown drone
+          is the most stale of all, and would otherwise fly off in follow mode the moment it
+          starts);
+        - enabling with a threshold at or below the tether's own pull on the drone (with the
+          |T| threshold of :mod:`groundstation.follow` that follows with nobody pulling): the
+          last airborne estimate's |T|, or, before one, the whole tether's weight ω·L, which
+          bounds the pull of a hanging tether.
+        """
+        floor_n = self.settings.service.follow_threshold_min_n
+        threshold_n = (
+            cmd.threshold_n if cmd.threshold_n is not None else runtime.follow_params.threshold_n
+        )
+        if cmd.threshold_n is not None and cmd.threshold_n < floor_n:
+            return "threshold_n", (
+                f"threshold_n {cmd.threshold_n:g} N is below the service's floor {floor_n:g} N "
+                "([service] follow_threshold_min_n): that low a threshold follows the tether's "
+                "own pull with nobody pulling; not applied"
+            )
+        if not cmd.enabled:
+            return None
+        if runtime.last_seen_s is None:
+            return "enabled", (
+                f"{runtime.drone} has sent no telemetry: follow stays off (enable it once the "
+                "drone is flying); not applied"
+            )
+        if runtime.stale:
+            return "enabled", (
+                f"{runtime.drone} is stale (silent for {now_s - runtime.last_seen_s:.1f} s): "
+                "follow stays off until it is heard again; not applied"
+            )
+        pull_n, what = self._own_pull_n(runtime)
+        if threshold_n <= pull_n:
+            return "threshold_n", (
+                f"threshold_n {threshold_n:g} N is at or below {what} ({pull_n:.3f} N): follow "
+                "would engage with nobody pulling; raise it; not applied"
+            )
+        return None
+
+    @staticmethod
+    def _own_pull_n(runtime: DroneRuntime) -> tuple[float, str]:
+        est = runtime.last_estimate
+        if est is not None and est.converged and not est.on_ground:
+            return _norm3(est.tension_n), "the tether's own pull now (|T| of the last estimate)"
+        return (
+            runtime.weight_n_per_m * runtime.length_m,
+            "the whole tether's weight ω·L (no airborne estimate yet)",
+        )
 
     def tick(self, now_s: float) -> list[Sample]:
         """Mark drones silent for ``stale_after_s`` as stale; disengage their follow mode."""
@@ -247,7 +405,19 @@ class Pipeline:
             heard_s = max(runtime.last_seen_s, self.last_received_s.get(runtime.drone, -math.inf))
             if now_s - heard_s > stale_after:
                 runtime.stale = True
+                was_on = runtime.follow_state.enabled
                 runtime.follow_state = follow_mod.mark_stale(runtime.follow_state)
+                if was_on:
+                    self._emit(
+                        runtime.drone,
+                        "follow",
+                        "service",
+                        now_s,
+                        self.self_id,
+                        f"{runtime.drone} silent for {now_s - heard_s:.2f} s: follow off; "
+                        "enable it again once the drone is heard",
+                        changes={"enabled": False},
+                    )
         return []
 
     # ---------------------------------------------------------------- internals
@@ -275,7 +445,32 @@ class Pipeline:
             self.drones[drone] = runtime
         return runtime
 
-    def _follow_command(self, runtime: DroneRuntime, cmd: FollowCommand) -> None:
+    def _follow_command(
+        self, runtime: DroneRuntime, cmd: FollowCommand, parsed: Parsed, now_s: float
+    ) -> None:
+        self._tell_ignored(runtime.drone, parsed, now_s)
+        refusal = self._refuse_follow(runtime, cmd, now_s)
+        if refusal is not None:
+            field, reason = refusal
+            self.count_drop(runtime.drone, "follow_refused", reason)
+            self._emit(
+                runtime.drone, "rejected", "follow", now_s, parsed.source, reason, field=field
+            )
+            return
+        before = self._follow_info(runtime)
+        self._apply_follow(runtime, cmd)
+        after = self._follow_info(runtime)
+        changes: dict[str, Any] = {"enabled": after.enabled}
+        for name in ("threshold_n", "land_below_m"):
+            if getattr(after, name) != getattr(before, name):
+                changes[name] = getattr(after, name)
+        if before.enabled == after.enabled and len(changes) == 1:
+            reason = "no change"
+        else:
+            reason = "follow on" if after.enabled else "follow off"
+        self._emit(runtime.drone, "follow", "follow", now_s, parsed.source, reason, changes=changes)
+
+    def _apply_follow(self, runtime: DroneRuntime, cmd: FollowCommand) -> None:
         fp = runtime.follow_params
         if cmd.threshold_n is not None:
             fp = replace(fp, threshold_n=cmd.threshold_n)
@@ -399,6 +594,7 @@ class Pipeline:
             runtime.stops += 1
             stop = Stop(stamp_s=msg.stamp_s, reason=decision.stop_reason)
             out.append(Sample(f"tether/{runtime.drone}/cmd/stop", stop.to_json()))
+            self._emit(runtime.drone, "stop", "service", now_s, self.self_id, decision.stop_reason)
         return out
 
     def _estimate(

@@ -97,6 +97,9 @@ def _schema_models() -> dict[str, type[BaseModel]]:
     params = getattr(messages, "TetherParams", None)
     if isinstance(params, type) and issubclass(params, BaseModel):
         models["params"] = params
+    events = getattr(messages, "Event", None)  # the operator action log, likewise
+    if isinstance(events, type) and issubclass(events, BaseModel):
+        models["events"] = events
     return models
 
 
