@@ -81,6 +81,8 @@ class PeerWatch:
         what: the process, e.g. ``"groundstation serve"``.
         logger: where to log.
         grace_s: how long connecting may take before "no peer" is said, s.
+        alone_ok: being alone is normal (``demo``: everything in one process): the "no
+            peer" message is only a debug line.
     """
 
     def __init__(
@@ -90,7 +92,10 @@ class PeerWatch:
         what: str,
         logger: logging.Logger,
         grace_s: float = 2.0,
+        *,
+        alone_ok: bool = False,
     ) -> None:
+        self._alone_level = logging.DEBUG if alone_ok else logging.WARNING
         self._count = count
         self.where = where
         self.what = what
@@ -120,7 +125,7 @@ class PeerWatch:
             self._log.warning("%s: lost every zenoh peer and router; %s", self.what, self.where)
             self._warned = True
         elif not self._warned and now_s - self._started_s >= self.grace_s:
-            self._log.warning("%s: %s", self.what, self.where)
+            self._log.log(self._alone_level, "%s: %s", self.what, self.where)
             self._warned = True
         return peers
 
@@ -136,6 +141,7 @@ def describe_endpoints(mode: str, connect: tuple[str, ...], listen: tuple[str, .
     return (
         f"no peer / no router connected: nothing to connect to ([zenoh] connect is empty, "
         f"mode {mode}{heard}); pass --connect tcp/HOST:7447 to reach a router"
+        + (", or connect the others to the listen endpoint" if listen else "")
     )
 
 

@@ -328,6 +328,7 @@ class Pipeline:
 
     def _tell_ignored(self, drone: str, parsed: Parsed, now_s: float) -> None:
         if parsed.ignored:
+            model = type(parsed.message)
             self._emit(
                 drone,
                 "warning",
@@ -335,7 +336,7 @@ class Pipeline:
                 now_s,
                 parsed.source,
                 f"unknown fields ignored: {', '.join(map(repr, parsed.ignored))} "
-                f"(a {type(parsed.message).__name__} has {', '.join(type(parsed.message).model_fields)})",
+                f"(a {model.__name__} has {', '.join(model.model_fields)})",
                 field=parsed.ignored[0],
             )
 

@@ -54,6 +54,8 @@ class Service:
         settings: the root configuration.
         bus: the bus to serve on (the service does not close it).
         clock: monotonic seconds (a parameter so tests can drive time).
+        instance: the instance id (default: random).
+        alone_ok: no peer is normal (``demo``): "no peer / no router" is only a debug line.
     """
 
     def __init__(
@@ -63,6 +65,7 @@ class Service:
         *,
         clock: Callable[[], float] = time.monotonic,
         instance: str | None = None,
+        alone_ok: bool = False,
     ) -> None:
         self.settings = settings
         self.bus = bus
@@ -86,6 +89,7 @@ class Service:
                 describe_endpoints(z.mode, z.connect, z.listen),
                 "groundstation serve",
                 _log,
+                alone_ok=alone_ok,
             )
             if callable(count)
             else None

@@ -251,16 +251,14 @@ def test_events_are_recorded(tmp_path: Path) -> None:
 def test_peer_watch_says_no_peer_then_each_change(caplog: pytest.LogCaptureFixture) -> None:
     caplog.set_level(logging.INFO, logger="test.peers")
     counts = iter([0, 0, 0, 2, 2, 0, 1])
-    watch = PeerWatch(
-        lambda: next(counts), "no peer / no router reachable at tcp/x:1", "serve",
-        logging.getLogger("test.peers"), grace_s=1.0,
-    )  # fmt: skip
+    where = "no peer / no router reachable at tcp/x:1"
+    watch = PeerWatch(lambda: next(counts), where, "serve", logging.getLogger("test.peers"), 1.0)
     for t in (0.0, 0.5, 1.2, 2.0, 3.0, 4.0, 5.0):
         watch.poll(t)
     assert [(r.levelname, r.getMessage()) for r in caplog.records] == [
-        ("WARNING", "serve: no peer / no router reachable at tcp/x:1"),
+        ("WARNING", f"serve: {where}"),
         ("INFO", "serve: connected to 2 zenoh peer(s)/router(s)"),
-        ("WARNING", "serve: lost every zenoh peer and router; no peer / no router reachable at tcp/x:1"),
+        ("WARNING", f"serve: lost every zenoh peer and router; {where}"),
         ("INFO", "serve: connected to 1 zenoh peer(s)/router(s)"),
-    ]  # fmt: skip
+    ]
     assert watch.peers == 1 and watch.ever_connected
