@@ -330,7 +330,7 @@ class Truth(_Out):
     """Scenario phase label."""
 
 
-EVENT_KINDS = ("rejected", "warning", "follow", "params", "stop")
+EVENT_KINDS = ("rejected", "warning", "follow", "params", "stop", "rearm")
 """Kinds of :class:`Event`."""
 
 
@@ -341,17 +341,19 @@ class Event(_Out):
     One per action: a command refused (``rejected``, with the reason and the offending
     field) or applied with a caveat (``warning``, e.g. unknown fields ignored), follow
     switched on/off or re-tuned (``follow``), tether parameters changed (``params``), a Stop
-    seen or issued (``stop``). Not per sample: rejected telemetry or reel messages give one
+    seen or issued (``stop``), a re-arm requested (``rearm``, on the Crazyflie bridge's
+    ``tether/{drone}/cmd/rearm``). Not per sample: rejected telemetry or reel messages give one
     event per drone and kind, then are only counted (``status``).
     """
 
     stamp_s: float
     """When, UNIX time (the service's wall clock), seconds."""
-    kind: Literal["rejected", "warning", "follow", "params", "stop"]
+    kind: Literal["rejected", "warning", "follow", "params", "stop", "rearm"]
     """What happened (see above)."""
     input: str
     """The key the action came in on, after ``tether/{drone}/``: ``follow``, ``params``,
-    ``cmd/stop``, ``telemetry``, ``reel``; ``service`` for the service's own decisions."""
+    ``cmd/stop``, ``cmd/rearm``, ``telemetry``, ``reel``; ``service`` for the service's own
+    decisions."""
     who: str = "unknown"
     """Who: the zenoh session id (hex) of the sender where the sample carries it (groundstation
     tools attach it), the service's own id for its own actions, else ``unknown``."""

@@ -35,6 +35,7 @@ from groundstation.messages import (
     Reel,
     Setpoint,
     Stop,
+    StopIn,
     Telemetry,
     TetherParams,
     parse_key,
@@ -74,7 +75,7 @@ class Parsed:
 
     drone: str
     kind: str
-    message: Telemetry | Reel | FollowCommand | TetherParams
+    message: Telemetry | Reel | FollowCommand | TetherParams | StopIn
     received_s: float
     source: str | None = None
     """The sender's zenoh session id, where the sample carried it."""
@@ -322,9 +323,27 @@ class Pipeline:
                     changes=changes,
                 )
             return []
+        if isinstance(msg, StopIn):
+            self._seen_stop(runtime, msg, parsed, now_s)
+            return []
         assert isinstance(msg, FollowCommand)
         self._follow_command(runtime, msg, parsed, now_s)
         return []
+
+    def _seen_stop(self, runtime: DroneRuntime, stop: StopIn, parsed: Parsed, now_s: float) -> None:
+        """Someone else's Stop on ``cmd/stop``: switch follow off, log who stopped the drone.
+
+        Follow must not be on when the drone flies again after a Stop (re-armed, taken off):
+        the operator enables it again, as after a stale drone.
+        """
+        changes: dict[str, Any] = {}
+        if runtime.follow_state.enabled:
+            state = follow_mod.set_enabled(runtime.follow_state, False)
+            runtime.follow_state = replace(state, reason=f"Stop ({stop.reason}): follow off")
+            changes["enabled"] = False
+        self._emit(
+            runtime.drone, "stop", "cmd/stop", now_s, parsed.source, stop.reason, changes=changes
+        )
 
     def _tell_ignored(self, drone: str, parsed: Parsed, now_s: float) -> None:
         if parsed.ignored:

@@ -119,6 +119,7 @@ class Service:
         for kind in _INPUT_KINDS:
             self._handles.append(self.bus.subscribe(f"tether/{drones}/{kind}", self._on_sample))
         self._handles.append(self.bus.subscribe(f"tether/{drones}/cmd/stop", self._on_stop))
+        self._handles.append(self.bus.subscribe(f"tether/{drones}/cmd/rearm", self._on_rearm))
         self._handles.append(self.bus.queryable(f"tether/{drones}/status", self._on_status))
         self._handles.append(self.bus.liveliness_token(f"groundstation/service/{self.instance}"))
         _log.info(
@@ -188,20 +189,35 @@ class Service:
         )
 
     def _on_stop(self, sample: Sample) -> None:
-        # Anyone's Stop, for the action log; our own were logged when issued.
+        # Anyone's Stop (ours were logged when issued): the worker switches follow off for
+        # that drone and logs it. A Stop nobody can read stops no drone either: only told.
         with self._event_lock:
             if sample.payload in self._own_stops:
                 return
         drone = sample.key.split("/")[1]
         try:
-            reason = StopIn.parse(sample.payload).reason
+            stop = StopIn.parse(sample.payload)
         except InvalidMessage as exc:
-            reason = f"a Stop the service cannot read ({exc.detail}); the drone decides"
+            reason = f"a Stop nobody can read ({exc.detail}): the drone ignores it too"
+            self._tell(drone, "stop", "cmd/stop", sample.source, reason)
+            return
+        parsed = Parsed(drone, "cmd/stop", stop, self.clock(), sample.source)
+        try:
+            self._queue.put_nowait(parsed)
+        except queue.Full:
+            self.pipeline.count_drop(drone, "queue_overflow", "processing queue full")
+
+    def _on_rearm(self, sample: Sample) -> None:
+        # ``cmd/rearm`` (the Crazyflie bridge's, added) lifts a drone's stop latch: logged.
+        drone = sample.key.split("/")[1]
+        self._tell(drone, "rearm", "cmd/rearm", sample.source, "re-arm requested")
+
+    def _tell(self, drone: str, kind: str, input_kind: str, who: str | None, reason: str) -> None:
         event = Event(
             stamp_s=time.time(),
-            kind="stop",
-            input="cmd/stop",
-            who=sample.source or "unknown",
+            kind=kind,
+            input=input_kind,
+            who=who or "unknown",
             reason=reason[:500],
         )
         self._on_event(drone, event)
@@ -220,7 +236,7 @@ class Service:
                 return  # bounded memory against a flood of drone ids
             self._event_budget[drone] = (tokens - 1.0, now_s)
             self.events += 1
-        level = logging.WARNING if event.kind in ("rejected", "warning", "stop") else logging.INFO
+        level = logging.INFO if event.kind in ("follow", "params") else logging.WARNING
         _actions.log(
             level,
             "%s %s on %s from %s: %s%s%s",

@@ -262,3 +262,18 @@ def test_peer_watch_says_no_peer_then_each_change(caplog: pytest.LogCaptureFixtu
         ("INFO", "serve: connected to 1 zenoh peer(s)/router(s)"),
     ]
     assert watch.peers == 1 and watch.ever_connected
+
+
+def test_an_operators_stop_switches_follow_off(h: Harness) -> None:
+    h.fly("cf1", 300)
+    assert h.command("cf1", {"enabled": True}).changes["enabled"] is True
+    event = h.command("cf1", {"stamp_s": 1.0, "reason": "operator"}, kind="cmd/stop")
+    assert event.kind == "stop" and event.changes == {"enabled": False}
+    h.fly("cf1", 10)
+    status = h.status("cf1")
+    assert status is not None and status["follow"]["enabled"] is False
+    assert "Stop (operator)" in status["follow"]["reason"]
+    unreadable = h.command("cf1", b'{"reason": 3}', kind="cmd/stop")
+    assert unreadable.kind == "stop" and "nobody can read" in unreadable.reason
+    rearm = h.command("cf1", b"{}", kind="cmd/rearm")
+    assert rearm.kind == "rearm" and rearm.input == "cmd/rearm"
