@@ -1,9 +1,9 @@
 """The one root configuration: defaults, then a TOML file, then the environment, then the CLI.
 
-The TOML layout is the public contract (``../shared/INTERFACE.md``, "Configuration file"):
+The TOML layout is the public contract (``docs/contract.md``, "Configuration file"):
 ``[zenoh]``, ``[drone]``, ``[tether]``, ``[base]`` and per-drone overrides under
 ``[drones.<id>]`` with the same sub-tables. Tables added beside the contract: ``[follow]``,
-``[filter]``, ``[web]``, ``[service]``, ``[sim]`` (documented in README.md).
+``[filter]``, ``[calibration]``, ``[web]``, ``[service]``, ``[sim]`` (``docs/contract.md``).
 
 Environment overrides use the prefix ``GROUNDSTATION_`` and ``__`` between levels, e.g.
 ``GROUNDSTATION_TETHER__WEIGHT_N_PER_M=0.04`` or ``GROUNDSTATION_ZENOH__CONNECT='["tcp/..."]'``.
@@ -109,7 +109,9 @@ class _Section(BaseModel):
     the file as numbers.
     """
 
-    model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
+    model_config = ConfigDict(
+        frozen=True, extra="forbid", allow_inf_nan=False, use_attribute_docstrings=True
+    )
 
     @field_validator("*", mode="before")
     @classmethod
@@ -131,6 +133,7 @@ class ZenohSection(_Section):
     """``[zenoh]``: how the service joins the bus."""
 
     mode: Literal["peer", "client", "router"] = "peer"
+    """Zenoh mode: a peer, a client of a router, or a router."""
     connect: tuple[str, ...] = ()
     """Endpoints to connect to, e.g. ``tcp/127.0.0.1:7447``."""
     listen: tuple[str, ...] = ()
@@ -158,6 +161,7 @@ class DroneSection(_Section):
     """``[drone]``: the vehicle."""
 
     mass_kg: float = Field(0.030, gt=0.0, le=100.0)
+    """Drone mass, kg (m of eq:NE_tether)."""
     accel_noise_mps2: float = Field(0.3, gt=0.0)
     """Accelerometer white-noise standard deviation per axis (filter tuning)."""
     thrust_noise_n: float = Field(0.003, gt=0.0)
@@ -168,6 +172,7 @@ class TetherSection(_Section):
     """``[tether]``: the tether's weight per length (ω) and its default length."""
 
     weight_n_per_m: float = Field(0.05, gt=0.0)
+    """ω, the tether's weight per unit length, N/m (weigh it: docs/troubleshooting.md)."""
     length_m: float = Field(1.6, gt=0.0)
     """Used until a Reel message arrives."""
 
@@ -176,7 +181,9 @@ class BaseSection(_Section):
     """``[base]``: where the tether leaves the base, and the floor a slack tether rests on."""
 
     position_m: Vec3 = (0.0, 0.0, 0.754)
+    """World position of the base exit point, metres (until a Reel message gives it)."""
     floor_z_m: float = 0.0
+    """Height of the floor a slack tether rests on, metres."""
 
 
 class FollowSection(_Section):
@@ -186,10 +193,15 @@ class FollowSection(_Section):
     """|T| above which the drone follows the pull, N. Above the whole default tether's
     weight (ω·L = 0.08 N) so a hanging tether alone never engages it."""
     hysteresis_ratio: float = Field(0.2, ge=0.0, lt=1.0)
+    """Following releases below threshold_n · (1 − hysteresis_ratio)."""
     land_below_m: float | None = None
+    """Tug-to-land height (world z), metres; none: tug-to-land off."""
     max_speed_mps: float = Field(0.5, gt=0.0)
+    """Largest setpoint speed, m/s."""
     reach_margin_m: float = Field(0.05, ge=0.0)
+    """Setpoints stay this much inside the tether's reach from the base, metres."""
     stale_after_s: float = Field(0.5, gt=0.0)
+    """Input older than this disengages following, s."""
     admittance_mps_per_n: float = Field(2.0, gt=0.0)
     """Without motion capture the goal moves along the pull at this speed per newton."""
 
@@ -241,8 +253,11 @@ class WebSection(_Section):
     """``[web]``: the dashboard."""
 
     host: str = "127.0.0.1"
+    """Dashboard bind address (``0.0.0.0``: every interface)."""
     port: int = Field(8080, ge=0, le=65535)
+    """Dashboard TCP port."""
     scene_rate_hz: float = Field(20.0, gt=0.0, le=30.0)
+    """Scene and chart updates per second."""
     scene_budget_hz: float = Field(80.0, gt=0.0)
     """Drone redraws per second in all: with many drones each is drawn less often, so the
     dashboard's cost stays bounded and estimation keeps its capacity."""
@@ -255,11 +270,17 @@ class ServiceSection(_Section):
     """Drones this instance owns: one key-expression chunk such as ``lab-a-*`` (``tether/``
     in front is accepted); ``*`` inside a chunk is zenoh's ``$*``."""
     queue_size: int = Field(8192, ge=16)
+    """Inputs waiting for the worker at most; beyond, dropped as ``queue_overflow``."""
     max_payload_bytes: int = Field(65536, ge=256)
+    """Larger payloads are dropped as ``too_large``."""
     stale_after_s: float = Field(0.5, gt=0.0)
+    """A drone silent this long is stale: no estimates, follow off, s."""
     status_period_s: float = Field(1.0, gt=0.0)
+    """Health bookkeeping period, s."""
     log_level: Literal["DEBUG", "INFO", "WARNING", "ERROR"] = "INFO"
+    """Log level."""
     log_json: bool = False
+    """Log one JSON object per line on stderr."""
     record: str | None = None
     """Record every bus sample to this MCAP file while serving."""
     follow_threshold_min_n: float = Field(0.02, gt=0.0)
@@ -290,17 +311,25 @@ class SimSection(_Section):
     """``[sim]``: the simulator."""
 
     scenario: str = "hover"
+    """Scenario (``groundstation sim --list``)."""
     rate_hz: float = Field(250.0, gt=0.0, le=2000.0)
+    """Telemetry rate, Hz."""
     drones: tuple[str, ...] = ("cf1",)
+    """Drone ids to simulate."""
     accel_noise_mps2: float = Field(0.3, ge=0.0)
+    """Simulated accelerometer noise per axis, m/s²."""
     thrust_noise_n: float = Field(0.003, ge=0.0)
+    """Simulated thrust noise, N."""
     thrust_bias_ratio: float = Field(0.0, ge=-0.5, le=0.5)
+    """Relative error of the reported thrust (0.02: reports 2 % too much)."""
     mocap: bool = True
     """Publish the motion-capture ``position_m`` in Telemetry."""
     seed: int = 0
+    """Random seed of the simulated sensor noise."""
     speed: float = Field(1.0, gt=0.0)
     """Real-time factor (1 = wall clock)."""
     duration_s: float | None = None
+    """Stop after this many simulated seconds; none: the scenario's own end, or never."""
 
 
 class DroneOverride(_Section):
