@@ -95,6 +95,9 @@ class ZenohBus:
     def __init__(self, section: ZenohSection | None = None, session: zenoh.Session | None = None):
         self._owns_session = session is None
         self.session = session if session is not None else open_session(section or ZenohSection())
+        if self._owns_session:
+            # The id other processes see as ``who`` in the service's action log.
+            _log.info("zenoh session %s", self.session.info.zid())
         self._publishers: dict[str, zenoh.Publisher] = {}
         self._source_info: dict[str, Any] = {}
         self._lock = threading.Lock()
