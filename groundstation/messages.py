@@ -27,10 +27,13 @@ __all__ = [
     "FollowCommand",
     "FollowInfo",
     "InvalidMessage",
+    "LandIn",
+    "MocapPoseIn",
     "Reel",
     "Setpoint",
     "Status",
     "Stop",
+    "TakeoffIn",
     "Telemetry",
     "TetherParams",
     "Truth",
@@ -118,19 +121,7 @@ class _In(BaseModel):
         try:
             return cls.model_validate_json(payload)
         except ValidationError as exc:
-            errors = exc.errors(include_url=False, include_input=False)
-            if errors and errors[0]["type"] in {"json_invalid", "json_type"}:
-                raise InvalidMessage("not_json", errors[0]["msg"]) from None
-            detail = "; ".join(
-                f"{'.'.join(str(p) for p in e['loc']) or '<root>'}: {e['msg']}" for e in errors[:4]
-            )
-            ignored = cls.unknown_fields(payload)
-            if ignored:
-                detail += f" (unknown fields ignored: {', '.join(map(repr, ignored))})"
-            field = ".".join(str(p) for p in errors[0]["loc"]) if errors else ""
-            raise InvalidMessage(
-                "invalid", f"{cls.__name__}: {detail}", field=field or None, ignored=ignored
-            ) from None
+            raise _invalid(cls.__name__, exc, ignored=cls.unknown_fields(payload)) from None
 
     @classmethod
     def unknown_fields(cls, payload: bytes) -> tuple[str, ...]:
@@ -148,6 +139,21 @@ class _In(BaseModel):
         return tuple(sorted(str(k) for k in obj if k not in cls.model_fields))[:8]
 
 
+def _invalid(model: str, exc: ValidationError, *, ignored: tuple[str, ...] = ()) -> InvalidMessage:
+    """The InvalidMessage for a failed validation: pydantic's reasons, the first offending
+    field, and the unknown fields the payload carried (``ignored``)."""
+    errors = exc.errors(include_url=False, include_input=False)
+    if errors and errors[0]["type"] in {"json_invalid", "json_type"}:
+        return InvalidMessage("not_json", errors[0]["msg"])
+    detail = "; ".join(
+        f"{'.'.join(str(p) for p in e['loc']) or '<root>'}: {e['msg']}" for e in errors[:4]
+    )
+    if ignored:
+        detail += f" (unknown fields ignored: {', '.join(map(repr, ignored))})"
+    field = ".".join(str(p) for p in errors[0]["loc"]) if errors else ""
+    return InvalidMessage("invalid", f"{model}: {detail}", field=field or None, ignored=ignored)
+
+
 class _Out(BaseModel):
     model_config = ConfigDict(
         frozen=True, allow_inf_nan=False, extra="forbid", use_attribute_docstrings=True
@@ -156,6 +162,21 @@ class _Out(BaseModel):
     def to_json(self) -> bytes:
         """Compact UTF-8 JSON."""
         return self.model_dump_json().encode()
+
+    @classmethod
+    def read(cls, payload: bytes) -> Self:
+        """(added) Validate a payload another process published (the dashboard reads
+        Estimates, Truth, status): strict and finite as an input, unknown fields ignored at
+        every level, as the contract says, so a newer publisher's additions do not break a
+        reader. What this process publishes is still checked with ``extra="forbid"``.
+
+        Raises:
+            InvalidMessage: ``not_json`` or ``invalid`` with pydantic's reasons.
+        """
+        try:
+            return cls.model_validate_json(payload, strict=True, extra="ignore")
+        except ValidationError as exc:
+            raise _invalid(cls.__name__, exc) from None
 
 
 class Telemetry(_In):
@@ -365,64 +386,6 @@ class Event(_Out):
     """What changed, with the new values (``{"enabled": true, "threshold_n": 0.15}``)."""
 
 
-class Status(_Out):
-    """(added) The reply to a ``tether/{drone}/status`` query (zenoh ``get``): health of one drone.
-
-    Services may add fields; clients ignore what they do not know.
-    """
-
-    model_config = ConfigDict(extra="allow")
-
-    drone: str
-    """The drone id."""
-    stale: bool
-    """No telemetry for ``[service] stale_after_s`` (follow mode is then off)."""
-    telemetry_hz: float
-    """Accepted telemetry per second (2 s window)."""
-    estimate_hz: float
-    """Estimates published per second (2 s window)."""
-    last_seen_age_s: float | None
-    """Seconds since the last accepted telemetry, or None before the first."""
-    received: int
-    """Telemetry messages received (valid JSON of the right shape)."""
-    accepted: int
-    """Telemetry messages accepted (in order, a sound observation)."""
-    estimates: int
-    """Estimates published."""
-    setpoints: int
-    """Setpoints published."""
-    stops: int
-    """Stops published by the service (tug-to-land)."""
-    seq_gaps: int
-    """Telemetry messages missing from the ``seq`` sequence."""
-    drops: dict[str, int]
-    """Rejected inputs per kind (``invalid``, ``not_json``, ``seq_backwards``,
-    ``follow_refused``, ...)."""
-    invalid: int
-    """Sum of ``drops`` except ``queue_overflow``."""
-    queue_overflow: int
-    """Inputs dropped because the processing queue was full."""
-    filter: dict[str, Any]
-    """Tension filter: ``initialized`` (bool), ``change_detections`` (int)."""
-    follow: FollowInfo
-    """Follow mode, as in the Estimate."""
-    length_m: float
-    """Tether length in use, metres."""
-    length_source: Literal["config", "reel", "operator"]
-    """Where the length comes from."""
-    base_m: tuple[float, float, float]
-    """Base exit point in use, world frame, metres."""
-    weight_n_per_m: float
-    """Tether weight per length ω in use, N/m."""
-    service: str
-    """Instance id of the answering service (its liveliness token
-    ``groundstation/service/{instance}``)."""
-    peers: int | None = None
-    """Zenoh peers and routers the service is connected to (None on an in-memory bus)."""
-    events_suppressed: int = 0
-    """Events for this drone not published because of the per-drone cap (a flood)."""
-
-
 class StopIn(_In):
     """A Stop read back from the bus (simulator side)."""
 
@@ -435,3 +398,82 @@ class SetpointIn(_In):
 
     stamp_s: Finite
     position_m: Vec3
+
+
+class Status(_Out):
+    """(added) Ground station → anyone, the queryable ``tether/{drone}/status`` (zenoh ``get``):
+    health of one drone. Every field but ``drone`` may be absent (older or newer services)."""
+
+    drone: str
+    """The drone id."""
+    stale: bool | None = None
+    """No telemetry for longer than ``[service] stale_after_s`` (follow mode is then off)."""
+    telemetry_hz: float | None = None
+    """Accepted telemetry per second (2 s window)."""
+    estimate_hz: float | None = None
+    """Estimates published per second (2 s window)."""
+    last_seen_age_s: float | None = None
+    """Seconds since the last telemetry; None: never."""
+    received: int | None = None
+    """Telemetry messages received (valid JSON of the right shape)."""
+    accepted: int | None = None
+    """Telemetry messages accepted (in order, a sound observation)."""
+    estimates: int | None = None
+    """Estimates published."""
+    setpoints: int | None = None
+    """Setpoints published."""
+    stops: int | None = None
+    """Stops published by the service (tug-to-land)."""
+    seq_gaps: int | None = None
+    """Telemetry messages missing from the ``seq`` sequence."""
+    drops: dict[str, int] | None = None
+    """Rejected inputs per kind (``invalid``, ``not_json``, ``seq_backwards``,
+    ``follow_refused``, ...)."""
+    invalid: int | None = None
+    """Sum of ``drops`` except ``queue_overflow``."""
+    queue_overflow: int | None = None
+    """Inputs dropped because the processing queue was full."""
+    filter: dict[str, Any] | None = None
+    """Filter state (``initialized``, ``change_detections``)."""
+    follow: FollowInfo | None = None
+    """Follow mode, as in the Estimate."""
+    length_m: float | None = None
+    """Tether length in use, metres."""
+    length_source: str | None = None
+    """``config``, ``reel`` or ``operator``."""
+    base_m: tuple[float, float, float] | None = None
+    """Base exit point in use, world frame, metres."""
+    weight_n_per_m: float | None = None
+    """Tether weight per length ω in use, N/m."""
+    service: str | None = None
+    """The answering service instance (liveliness token ``groundstation/service/{instance}``)."""
+    peers: int | None = None
+    """Zenoh peers and routers the service's session is connected to (0: nobody can reach it;
+    None on an in-memory bus)."""
+    events_suppressed: int | None = None
+    """Events for this drone not published because of the per-drone cap (a flood)."""
+
+
+class MocapPoseIn(_In):
+    """(added) Motion capture → Crazyflie bridge, on ``[crazyflie] mocap_key``."""
+
+    position_m: Vec3
+    """World frame (the contract's), metres."""
+    quat_wxyz: Vec4 | None = None
+    """Body → world, scalar first (needed with ``attitude_source = "mocap"``)."""
+
+
+class TakeoffIn(_In):
+    """(added) Operator → Crazyflie bridge, ``tether/{drone}/cmd/takeoff``: climb straight up."""
+
+    height_m: Finite = Field(gt=0.0, le=3.0)
+    """Target height, world z, metres."""
+    speed_mps: Finite = Field(default=0.25, gt=0.0, le=1.0)
+    """Climb speed, m/s."""
+
+
+class LandIn(_In):
+    """(added) Operator → Crazyflie bridge, ``tether/{drone}/cmd/land``: down, motors off."""
+
+    speed_mps: Finite = Field(default=0.25, gt=0.0, le=1.0)
+    """Descent speed, m/s."""

@@ -48,10 +48,15 @@ PAYLOADS: tuple[tuple[str, type[BaseModel], str], ...] = (
     ("`tether/{drone}/events`", messages.Event, "ground station → anyone (added)"),
     ("`tether/{drone}/status`", messages.Status, "query (zenoh get) → ground station (added)"),
     ("`tether/{drone}/truth`", messages.Truth, "simulator → anyone (added)"),
+    ("`tether/{drone}/cmd/takeoff`", messages.TakeoffIn, "operator → Crazyflie bridge (added)"),
+    ("`tether/{drone}/cmd/land`", messages.LandIn, "operator → Crazyflie bridge (added)"),
+    ("`[crazyflie] mocap_key`", messages.MocapPoseIn, "motion capture → Crazyflie bridge (added)"),
 )
 """Each payload: where it travels, its model, who sends it to whom."""
 
-ADDED_MODELS = frozenset({"TetherParams", "Event", "Status", "Truth"})
+ADDED_MODELS = frozenset(
+    {"TetherParams", "Event", "Status", "Truth", "TakeoffIn", "LandIn", "MocapPoseIn"}
+)
 """Payloads that are added beside the contract as a whole (every field is added)."""
 
 CONTRACT_CONFIG = {
