@@ -370,21 +370,17 @@ class Pipeline:
         - enabling follow on a drone that is stale or has never sent telemetry (the README's
           rule: a stale drone drops follow and the operator enables it again; an unknown drone
           is the most stale of all, and would otherwise fly off in follow mode the moment it
-          starts);
-        - enabling with a threshold at or below the tether's own pull on the drone (with the
-          |T| threshold of :mod:`groundstation.follow` that follows with nobody pulling): the
-          last airborne estimate's |T|, or, before one, the whole tether's weight ω·L, which
-          bounds the pull of a hanging tether.
+          starts).
+
+        That a threshold is not below the tether's own pull is :mod:`groundstation.follow`'s
+        business: the threshold applies to the pull beyond the tether's own tension there.
         """
         floor_n = self.settings.service.follow_threshold_min_n
-        threshold_n = (
-            cmd.threshold_n if cmd.threshold_n is not None else runtime.follow_params.threshold_n
-        )
         if cmd.threshold_n is not None and cmd.threshold_n < floor_n:
             return "threshold_n", (
                 f"threshold_n {cmd.threshold_n:g} N is below the service's floor {floor_n:g} N "
-                "([service] follow_threshold_min_n): that low a threshold follows the tether's "
-                "own pull with nobody pulling; not applied"
+                "([service] follow_threshold_min_n): that low a threshold follows the sensor "
+                "noise and any error in the tether's own tension; not applied"
             )
         if not cmd.enabled:
             return None
@@ -398,23 +394,7 @@ class Pipeline:
                 f"{runtime.drone} is stale (silent for {now_s - runtime.last_seen_s:.1f} s): "
                 "follow stays off until it is heard again; not applied"
             )
-        pull_n, what = self._own_pull_n(runtime)
-        if threshold_n <= pull_n:
-            return "threshold_n", (
-                f"threshold_n {threshold_n:g} N is at or below {what} ({pull_n:.3f} N): follow "
-                "would engage with nobody pulling; raise it; not applied"
-            )
         return None
-
-    @staticmethod
-    def _own_pull_n(runtime: DroneRuntime) -> tuple[float, str]:
-        est = runtime.last_estimate
-        if est is not None and est.converged and not est.on_ground:
-            return _norm3(est.tension_n), "the tether's own pull now (|T| of the last estimate)"
-        return (
-            runtime.weight_n_per_m * runtime.length_m,
-            "the whole tether's weight ω·L (no airborne estimate yet)",
-        )
 
     def tick(self, now_s: float) -> list[Sample]:
         """Mark drones silent for ``stale_after_s`` as stale; disengage their follow mode."""
@@ -484,10 +464,10 @@ class Pipeline:
         for name in ("threshold_n", "land_below_m"):
             if getattr(after, name) != getattr(before, name):
                 changes[name] = getattr(after, name)
-        if before.enabled == after.enabled and len(changes) == 1:
-            reason = "no change"
-        else:
+        if before.enabled != after.enabled:
             reason = "follow on" if after.enabled else "follow off"
+        else:
+            reason = "re-tuned" if len(changes) > 1 else "no change"
         self._emit(runtime.drone, "follow", "follow", now_s, parsed.source, reason, changes=changes)
 
     def _apply_follow(self, runtime: DroneRuntime, cmd: FollowCommand) -> None:

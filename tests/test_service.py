@@ -141,18 +141,14 @@ def test_bad_follow_commands_are_rejected_with_the_reason(
     assert after["follow"]["threshold_n"] == 0.10
 
 
-def test_a_threshold_below_the_tethers_own_pull_is_refused(h: Harness) -> None:
-    # Before an airborne estimate the bound is the whole tether's weight, ω·L = 0.08 N.
-    h.fly("cf1", 1, pull_down_n=0.05)
-    event = h.command("cf1", {"enabled": True, "threshold_n": 0.06})
-    assert event.kind == "rejected" and "ω·L" in event.reason
-    # Flying with |T| = 0.05 N: 0.04 N would follow with nobody pulling, 0.07 N is fine.
-    h.fly("cf1", 400, pull_down_n=0.05)
-    event = h.command("cf1", {"enabled": True, "threshold_n": 0.04})
-    assert event.kind == "rejected" and event.field == "threshold_n"
-    assert "own pull now" in event.reason and "0.050 N" in event.reason
+def test_a_valid_threshold_is_applied_and_told(h: Harness) -> None:
+    h.fly("cf1", 300, pull_down_n=0.05)
     event = h.command("cf1", {"enabled": True, "threshold_n": 0.07})
     assert event.kind == "follow" and event.changes == {"enabled": True, "threshold_n": 0.07}
+    assert event.reason == "follow on"
+    event = h.command("cf1", {"enabled": True, "threshold_n": 0.02})  # the floor itself
+    assert event.kind == "follow" and event.changes == {"enabled": True, "threshold_n": 0.02}
+    assert event.reason == "re-tuned", "already on: only the threshold changed"
 
 
 def test_unknown_fields_of_an_accepted_command_are_told(h: Harness) -> None:
