@@ -105,8 +105,9 @@ class FollowSection(_Section):
     """``[follow]``: tension following and tug-to-land defaults (off until enabled)."""
 
     threshold_n: float = Field(0.10, gt=0.0)
-    """|T| above which the drone follows the pull, N. Above the whole default tether's
-    weight (ω·L = 0.08 N) so a hanging tether alone never engages it."""
+    """Pull above which the drone follows it, N: the tension beyond the tether's own in quiet
+    hover at the drone's position (catenary there, plus a slowly tracked offset), so a
+    hanging tether alone never engages it, near taut neither."""
     hysteresis_ratio: float = Field(0.2, ge=0.0, lt=1.0)
     land_below_m: float | None = None
     max_speed_mps: float = Field(0.5, gt=0.0)

@@ -382,6 +382,8 @@ class Pipeline:
             floor_z_m=runtime.params.base.floor_z_m,
             tension_world_n=tension if converged else None,
             position_is_external=msg.position_m is not None,
+            weight_n_per_m=runtime.weight_n_per_m,
+            on_ground=obs.on_ground,
         )
         runtime.follow_state = decision.state
         out: list[Sample] = []

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from groundstation.bus import Sample
+from groundstation.config import load_settings
 from groundstation.evaluation import closed_loop, settings_for
 from groundstation.pipeline import Pipeline
 
@@ -165,3 +166,43 @@ def test_no_nan_ever_published() -> None:
         values = [*e["tension_n"], *e["tension_std_n"], e["horizontal_n"], e["vertical_n"]]
         values += e["position_m"] or []
         assert np.all(np.isfinite(values))
+
+
+@pytest.mark.parametrize("mocap", [True, False], ids=["mocap", "no-mocap"])
+@pytest.mark.parametrize(("length_m", "fraction"), [(1.6, 0.97), (3.0, 0.90)])
+def test_near_taut_hover_with_follow_enabled_never_engages_until_pulled(
+    monkeypatch: pytest.MonkeyPatch, length_m: float, fraction: float, mocap: bool
+) -> None:
+    """Issue 11 §2 through the pipeline and the simulator: near taut the tether alone pulls
+    with more than the 0.10 N threshold; with follow and tug-to-land enabled and nobody
+    pulling nothing engages, no setpoint, landing not armed; a 0.12 N pull at 6 s engages."""
+    from groundstation.sim.scenarios import SCENARIOS, Pull, Scenario, Waypoint
+
+    base = (0.0, 0.0, 0.754)
+    chord = fraction * length_m
+    spot = (float(np.sqrt(chord**2 - 0.3**2)), 0.0, base[2] + 0.3)
+    monkeypatch.setitem(
+        SCENARIOS,
+        "near_taut_test",
+        Scenario(
+            "near_taut_test",
+            "hover near taut; follow on at 1 s; a 0.12 N pull toward the base at 6 s",
+            start_m=spot,
+            waypoints=(Waypoint(0.0, spot),),
+            length_m=length_m,
+            pulls=(Pull(6.0, 8.0, (-0.12, 0.0, 0.0)),),
+            operator=((1.0, {"enabled": True, "land_below_m": 0.5}),),
+        ),
+    )
+    settings = load_settings(
+        None, {"sim": {"mocap": mocap, "seed": 5}, "tether": {"length_m": length_m}}, use_env=False
+    )
+    run, _, _ = closed_loop(settings, "near_taut_test", 8.0)
+    quiet = [e for e in run.estimates if 1.1 < e["stamp_s"] < 6.0]
+    assert quiet and all(e["follow"]["enabled"] for e in quiet)
+    assert min(np.linalg.norm(e["tension_n"]) for e in quiet) > 0.10, "the premise"
+    assert not any(e["follow"]["active"] or e["follow"]["landing_armed"] for e in quiet)
+    assert all(sp["stamp_s"] >= 6.0 for sp in run.setpoints), "no setpoint before the pull"
+    assert not run.stops
+    pulled = [e for e in run.estimates if 6.0 <= e["stamp_s"] < 6.5]
+    assert any(e["follow"]["active"] for e in pulled), "a real pull engages"
