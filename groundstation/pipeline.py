@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from groundstation import contact as contact_mod
 from groundstation import follow as follow_mod
 from groundstation.bus import Sample
 from groundstation.config import DroneParams, Settings
@@ -107,6 +108,9 @@ class DroneRuntime:
     base_world_m: np.ndarray
     weight_n_per_m: float
     length_source: str = "config"
+    contact_params: contact_mod.ContactParams = field(default_factory=contact_mod.ContactParams)
+    contact: contact_mod.ContactState = field(default_factory=contact_mod.ContactState)
+    """Ground/air state (groundstation.contact): on the floor no tension is published."""
     last_seq: int | None = None
     last_stamp_s: float | None = None
     last_seen_s: float | None = None
@@ -270,6 +274,9 @@ class Pipeline:
             length_m=params.tether.length_m,
             base_world_m=np.array(params.base.position_m, dtype=float),
             weight_n_per_m=params.tether.weight_n_per_m,
+            contact_params=contact_mod.ContactParams(
+                ground_thrust_ratio=params.filter.ground_thrust_ratio
+            ),
         )
         with self._lock:
             self.drones[drone] = runtime
@@ -300,6 +307,7 @@ class Pipeline:
                 msg.thrust_n,
                 runtime.params.drone.mass_kg,
                 armed=msg.armed,
+                ground_thrust_ratio=runtime.contact_params.ground_thrust_ratio,
             )
         except DegenerateQuaternionError as exc:
             self.count_drop(runtime.drone, "bad_quaternion", str(exc))
@@ -338,11 +346,29 @@ class Pipeline:
         runtime.accepted += 1
         runtime.telemetry_rate.add(now_s)
 
+        # Ground or air, with hysteresis: between ground_thrust_ratio and the weight the
+        # floor may still carry the drone (its push is no tension) until lift-off is seen.
+        runtime.contact = contact_mod.contact_step(
+            runtime.contact,
+            runtime.contact_params,
+            dt_s=dt_s,
+            armed=msg.armed,
+            thrust_n=msg.thrust_n,
+            mass_kg=runtime.params.drone.mass_kg,
+            vertical_accel_mps2=contact_mod.vertical_accel_mps2(msg.accel_mps2, msg.quat_wxyz),
+            upward_force_n=float(obs.tension_world_n[2])
+            if obs.tension_world_n is not None
+            else None,
+            height_m=msg.position_m[2] if msg.position_m is not None else None,
+            floor_z_m=runtime.params.base.floor_z_m,
+        )
+        on_ground = runtime.contact.on_ground or obs.tension_world_n is None
+
         position: PositionEstimate | None = None
         tension: Sequence[float] = _ZEROS3
         std: Sequence[float] = _ZEROS3
         converged = False
-        if obs.tension_world_n is None:
+        if on_ground or obs.tension_world_n is None:
             # On the ground the floor carries the drone: no tension estimate. The filter
             # restarts at lift-off rather than from the floor's reaction, from the prior
             # that a tether resting on the floor pulls on the drone with next to nothing.
@@ -383,11 +409,11 @@ class Pipeline:
             tension_world_n=tension if converged else None,
             position_is_external=msg.position_m is not None,
             weight_n_per_m=runtime.weight_n_per_m,
-            on_ground=obs.on_ground,
+            on_ground=on_ground,
         )
         runtime.follow_state = decision.state
         out: list[Sample] = []
-        estimate = self._estimate(runtime, msg, tension, std, position, obs.on_ground, converged)
+        estimate = self._estimate(runtime, msg, tension, std, position, on_ground, converged)
         if estimate is not None:
             runtime.last_estimate = estimate
             runtime.estimates += 1
@@ -502,6 +528,7 @@ class Pipeline:
                 "change_detections": runtime.change_detections,
             },
             "follow": self._follow_info(runtime).model_dump(),
+            "contact": {"on_ground": runtime.contact.on_ground, "reason": runtime.contact.reason},
             "length_m": runtime.length_m,
             "length_source": runtime.length_source,
             "base_m": list(map(float, runtime.base_world_m)),
