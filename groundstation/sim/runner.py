@@ -78,6 +78,7 @@ class Simulator:
             position_world_m=start,
             target_world_m=start.copy(),
             armed=not sc.start_on_ground,
+            thrust_ramp_s=sc.thrust_ramp_s,
             coin_mass_kg=sc.coin_mass_kg,
             coin_arm_m=np.array(sc.coin_arm_m, float) + offset
             if sc.coin_mass_kg is not None
