@@ -121,7 +121,9 @@ class FilterSection(_Section):
     """``[filter]``: tension-filter knobs beside the noise figures of ``[drone]``."""
 
     ground_thrust_ratio: float = Field(0.5, gt=0.0, lt=1.0)
-    """Below this fraction of the weight the drone is taken to be on the ground."""
+    """Below this fraction of the weight the drone is surely on the ground; at or above it,
+    on the ground until lift-off is seen (groundstation.contact: motion-capture height, the
+    IMU's climb, or the floor no longer carrying it)."""
 
 
 class CalibrationSection(_Section):

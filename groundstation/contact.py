@@ -21,9 +21,12 @@ trusted, and a touch-down is noticed where it can be:
 
   - *climbing*: the vertical acceleration (IMU specific force rotated to the world, minus
     gravity, minus the bias learnt at rest) integrated with a leak of
-    ``speed_time_constant_s`` exceeds ``liftoff_speed_mps``. The leak bounds what a bias
-    left over can build up to (0.1 m/s² gives 0.05 m/s) and the noise (0.3 m/s² per
-    sample at 250 Hz gives 0.01 m/s standard deviation);
+    ``speed_time_constant_s`` exceeds ``liftoff_speed_mps``, while the smoothed upward
+    force is below ``climb_push_max_n`` (50 mN: the floor carries less than a sixth of a
+    30 g drone). The leak bounds what a bias left over can build up to (0.1 m/s² gives
+    0.05 m/s) and the noise (0.3 m/s² per sample at 250 Hz gives 0.01 m/s standard
+    deviation); the push bound keeps a larger bias (vibration at spool-up) from lifting
+    a drone that the floor still visibly carries;
   - *the floor carries nothing*: the observed upward force, smoothed over
     ``push_time_constant_s``, stays below ``push_free_n`` (10 mN) for ``push_hold_s``.
     Whatever rests on the floor then, what is published as tension is below that, which
@@ -73,6 +76,8 @@ class ContactParams:
         liftoff_speed_mps: No motion capture: lift-off when the leaky vertical speed from
             the IMU exceeds this, m/s.
         speed_time_constant_s: Leak of that speed, s.
+        climb_push_max_n: No motion capture: a climb counts only while the smoothed upward
+            force is below this, N.
         push_free_n: No motion capture: lift-off when the smoothed upward force stays below
             this, N ...
         push_hold_s: ... for this long, s.
@@ -85,6 +90,7 @@ class ContactParams:
     touchdown_height_m: float = 0.015
     liftoff_speed_mps: float = 0.1
     speed_time_constant_s: float = 0.5
+    climb_push_max_n: float = 0.050
     push_free_n: float = 0.010
     push_hold_s: float = 0.1
     push_time_constant_s: float = 0.1
@@ -104,6 +110,7 @@ class ContactParams:
         for name in (
             "liftoff_speed_mps",
             "speed_time_constant_s",
+            "climb_push_max_n",
             "push_free_n",
             "push_hold_s",
             "push_time_constant_s",
@@ -249,7 +256,7 @@ def contact_step(
         w = min(1.0, dt / params.push_time_constant_s) if push is not None else 1.0
         push = upward_force_n if push is None else push + w * (upward_force_n - push)
     free_s = state.push_free_s + dt if push is not None and push < params.push_free_n else 0.0
-    if speed > params.liftoff_speed_mps:
+    if speed > params.liftoff_speed_mps and (push is None or push < params.climb_push_max_n):
         return replace(state, on_ground=False, reason="climbing", climb_speed_mps=0.0)
     if push is not None and push < params.push_free_n and free_s >= params.push_hold_s:
         return replace(state, on_ground=False, reason="push_free", climb_speed_mps=0.0)

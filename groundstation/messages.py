@@ -208,7 +208,9 @@ class Estimate(_Out):
     floor_contact: bool | None = None
     """(added) Part of the tether rests on the floor."""
     on_ground: bool = False
-    """(added) Drone disarmed or thrust below half its weight: no tension estimate."""
+    """(added) The floor carries the drone (disarmed, thrust below ``[filter]
+    ground_thrust_ratio`` of its weight, or spooling up before lift-off is seen; see
+    groundstation.contact): no tension estimate, ``tension_n`` zero."""
     converged: bool = False
     """(added) The filter has seen enough samples for its std to be meaningful."""
     length_m: float | None = None

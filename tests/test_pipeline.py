@@ -206,3 +206,61 @@ def test_near_taut_hover_with_follow_enabled_never_engages_until_pulled(
     assert not run.stops
     pulled = [e for e in run.estimates if 6.0 <= e["stamp_s"] < 6.5]
     assert any(e["follow"]["active"] for e in pulled), "a real pull engages"
+
+
+@pytest.mark.parametrize("mocap", [True, False], ids=["mocap", "no-mocap"])
+def test_takeoff_ramp_publishes_no_floor_push_and_sends_no_stop(mocap: bool) -> None:
+    """Issue 11 §3 on the simulator: armed on the floor, the thrust ramps 0 → weight over
+    2 s; follow is on with tug-to-land at 0.3 m from the start. While the drone is on the
+    floor no tension above 20 mN is published and landing is never armed; no Stop at all;
+    the lift-off is seen (on_ground false) by the time the drone is 4 cm up."""
+    follow = Sample("tether/cf1/follow", b'{"enabled": true, "land_below_m": 0.3}')
+    run, _, sim = closed_loop(
+        settings_for(mocap=mocap, seed=11), "takeoff_ramp", 8.0, inject={0: [follow]}
+    )
+    assert not run.stops and sim.drones["cf1"].armed
+    floor = [e for e in run.estimates if run.truth_at(e["stamp_s"])["on_ground"]]
+    ramp = [e for e in floor if e["stamp_s"] >= 2.0]
+    assert ramp, "the ramp is on the floor"
+    assert max(float(np.linalg.norm(e["tension_n"])) for e in floor) <= 0.020
+    assert not any(e["follow"]["landing_armed"] or e["follow"]["active"] for e in floor)
+    up_4cm_s = min(
+        e["stamp_s"] for e in run.estimates if run.truth_at(e["stamp_s"])["position_m"][2] > 0.04
+    )
+    seen_s = min(e["stamp_s"] for e in run.estimates if e["stamp_s"] > 2.0 and not e["on_ground"])
+    assert seen_s <= up_4cm_s, (seen_s, up_4cm_s)
+    assert all(e["follow"]["enabled"] for e in run.estimates[1:]), "follow stayed on throughout"
+
+
+@pytest.mark.parametrize("bias_mps2", [0.0, 0.3])
+@pytest.mark.parametrize("mocap", [True, False], ids=["mocap", "no-mocap"])
+def test_half_weight_on_the_floor_is_not_tension(mocap: bool, bias_mps2: float) -> None:
+    """0.51 of the weight on the floor for 5 s (the floor pushes 144 mN), follow enabled with
+    tug-to-land, 0.3 m/s² accelerometer noise and a vertical bias: every Estimate says
+    on_ground with zero tension; no setpoint, no Stop."""
+    rng = np.random.default_rng(3)
+    pipe = Pipeline(settings_for())
+    weight_n = 0.030 * 9.81
+    pipe.handle(Sample("tether/cf1/follow", b'{"enabled": true, "land_below_m": 0.3}'), 0.0)
+    outputs: list[Sample] = []
+    for seq in range(1250):
+        accel = [*rng.normal(0.0, 0.3, 2), 9.81 + bias_mps2 + rng.normal(0.0, 0.3)]
+        patch: dict[str, object] = {"accel_mps2": accel, "thrust_n": 0.51 * weight_n}
+        if mocap:
+            patch["position_m"] = [0.5, 0.0, float(rng.normal(0.0, 1e-3))]
+        outputs += pipe.handle(_telemetry(seq, **patch), seq * 0.004)
+    estimates = [json.loads(o.payload) for o in outputs if o.key.endswith("/estimate")]
+    assert len(estimates) == len(outputs) == 1250, "no setpoint, no Stop"
+    assert all(e["on_ground"] and e["tension_n"] == [0.0, 0.0, 0.0] for e in estimates)
+    assert not any(e["follow"]["landing_armed"] for e in estimates)
+
+
+def test_ground_thrust_ratio_is_honoured() -> None:
+    weight_n = 0.030 * 9.81
+    for ratio, thrust_ratio, reason in [(0.6, 0.55, "low_thrust"), (0.4, 0.45, "resting")]:
+        settings = load_settings(None, {"filter": {"ground_thrust_ratio": ratio}}, use_env=False)
+        pipe = Pipeline(settings)
+        (out,) = pipe.handle(_telemetry(0, thrust_n=thrust_ratio * weight_n), 0.0)
+        assert json.loads(out.payload)["on_ground"] is True
+        status = pipe.status("cf1", 0.0)
+        assert status is not None and status["contact"]["reason"] == reason
