@@ -121,38 +121,6 @@ def _frozen(a: ArrayLike) -> FloatArray:
     return out
 
 
-def _locate(
-    horizontal_n: FloatArray,
-    vertical_n: FloatArray,
-    weight_n_per_m: float,
-    length_m: float,
-    base_z_m: float,
-    floor_z_m: float,
-) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
-    """r, z, r_min, r_max, floor_contact (0/1), floor_run for arrays of (H, T_v).
-
-    The free-hanging :func:`catenary.locate` runs first; the floor-aware
-    :func:`catenary.locate_with_floor` (twice the cost) only when some free solution
-    comes within 1 um of the floor. Away from the floor both give the same answer.
-    """
-    r, z = catenary.locate(horizontal_n, vertical_n, weight_n_per_m, length_m, base_z_m)
-    r = np.asarray(r, dtype=np.float64)
-    z = np.asarray(z, dtype=np.float64)
-    if floor_z_m != -math.inf:
-        # Lowest point of the free curve (NOTES): the drone when s2 < 0, the base when
-        # s2 > L, else the vertex, sqrt(a^2 + s2^2) - a below the drone.
-        a = horizontal_n / weight_n_per_m
-        s2 = vertical_n / weight_n_per_m
-        vertex = z - (np.hypot(a, s2) - a)
-        lowest = np.where(s2 < 0.0, z, np.where(s2 > length_m, base_z_m, vertex))
-        if not (lowest > floor_z_m + 1e-6).all():
-            return _locate_floor(
-                horizontal_n, vertical_n, weight_n_per_m, length_m, base_z_m, floor_z_m
-            )
-    zeros = np.zeros_like(r)
-    return r, z, r, r, zeros, zeros
-
-
 def _locate_floor(
     horizontal_n: FloatArray,
     vertical_n: FloatArray,
@@ -246,9 +214,13 @@ def _locate_points(
     base_z_m: float,
     floor_z_m: float,
 ) -> tuple[list[float], list[float], list[float], list[float], list[float], list[float]]:
-    """:func:`_locate` for the few points of one estimate, returned as lists of floats.
+    """r, z, r_min, r_max, floor_contact (0/1), floor_run for the few points of one
+    estimate, as lists of floats.
 
-    The free-hanging solution comes from ``catenary.locate_free``, the body of
+    The free-hanging solution comes first, and the floor-aware
+    :func:`catenary.locate_with_floor` (twice the cost) only when some free solution comes
+    within 1 um of the floor; away from the floor both give the same answer. The
+    free-hanging solution comes from ``catenary.locate_free``, the body of
     :func:`catenary.locate` after its input checks: ``try_localize`` has already checked
     omega, L and z_i, and the caller checks H >= 0 and T_v finite for every point, so the
     checks (about two thirds of ``locate``'s cost on 7 points) would only repeat them.
