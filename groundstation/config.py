@@ -3,7 +3,7 @@
 The TOML layout is the public contract (``../shared/INTERFACE.md``, "Configuration file"):
 ``[zenoh]``, ``[drone]``, ``[tether]``, ``[base]`` and per-drone overrides under
 ``[drones.<id>]`` with the same sub-tables. Tables added beside the contract: ``[follow]``,
-``[filter]``, ``[web]``, ``[service]``, ``[sim]`` (documented in README.md).
+``[filter]``, ``[web]``, ``[service]``, ``[sim]``, ``[localization]`` (documented in README.md).
 
 Environment overrides use the prefix ``GROUNDSTATION_`` and ``__`` between levels, e.g.
 ``GROUNDSTATION_TETHER__WEIGHT_N_PER_M=0.04`` or ``GROUNDSTATION_ZENOH__CONNECT='["tcp/..."]'``.
@@ -39,6 +39,7 @@ __all__ = [
     "DroneSection",
     "FilterSection",
     "FollowSection",
+    "LocalizationSection",
     "ServiceSection",
     "Settings",
     "SimSection",
@@ -124,6 +125,27 @@ class FilterSection(_Section):
     """Below this fraction of the weight the drone is surely on the ground; at or above it,
     on the ground until lift-off is seen (groundstation.contact: motion-capture height, the
     IMU's climb, or the floor no longer carrying it)."""
+
+
+class LocalizationSection(_Section):
+    """``[localization]`` (added): where the azimuth and the catenary's shape come from."""
+
+    azimuth: Literal["auto", "tension", "reel", "mocap"] = "auto"
+    """``auto`` fuses the tension's direction and the reel's exit azimuth by their
+    uncertainty; ``tension``, ``reel`` or ``mocap`` uses that one alone (``mocap``: the
+    paper's method, β from Telemetry ``position_m``). A source asked for but absent or stale
+    leaves the azimuth undetermined."""
+    elevation: bool = True
+    """Fuse the reel's ``exit_elevation_rad`` with the tension (the base slope constrains
+    the catenary)."""
+    reel_stale_after_s: float = Field(0.5, gt=0.0)
+    """Exit angles older than this (receive time) are not used, s."""
+    exit_azimuth_std_rad: float = Field(0.03, gt=0.0)
+    """σ of ``exit_azimuth_rad`` when the Reel message gives none, rad."""
+    exit_elevation_std_rad: float = Field(0.03, gt=0.0)
+    """σ of ``exit_elevation_rad`` when the Reel message gives none, rad."""
+    mocap_std_m: float = Field(0.002, gt=0.0)
+    """Horizontal σ of the motion-capture position (``azimuth = "mocap"``), m."""
 
 
 class CalibrationSection(_Section):
@@ -262,6 +284,7 @@ class Settings(BaseSettings):
     follow: FollowSection = FollowSection()
     filter: FilterSection = FilterSection()
     calibration: CalibrationSection = CalibrationSection()
+    localization: LocalizationSection = LocalizationSection()
     web: WebSection = WebSection()
     service: ServiceSection = ServiceSection()
     sim: SimSection = SimSection()

@@ -204,7 +204,11 @@ class Estimate(_Out):
     radial_interval_m: tuple[float, float] | None = None
     """(added) Interval of the radial distance (wide when the tether rests slack on the floor)."""
     azimuth_determined: bool | None = None
-    """(added) False when H is within its noise (tether near plumb: azimuth unknown)."""
+    """(added) False when the azimuth's σ exceeds 1/3 rad (e.g. H within its noise, the
+    tether near plumb, with no other source)."""
+    azimuth_source: str | None = None
+    """(added) The most certain source of the azimuth: ``tension``, ``reel``, ``mocap``, or
+    ``none``; null without a position."""
     floor_contact: bool | None = None
     """(added) Part of the tether rests on the floor."""
     on_ground: bool = False

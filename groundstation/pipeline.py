@@ -26,7 +26,7 @@ from groundstation import contact as contact_mod
 from groundstation import follow as follow_mod
 from groundstation.bus import Sample
 from groundstation.config import DroneParams, Settings
-from groundstation.localization import PositionEstimate, localize
+from groundstation.localization import AngleObservation, PositionEstimate, localize
 from groundstation.messages import (
     Estimate,
     FollowCommand,
@@ -111,6 +111,12 @@ class DroneRuntime:
     contact_params: contact_mod.ContactParams = field(default_factory=contact_mod.ContactParams)
     contact: contact_mod.ContactState = field(default_factory=contact_mod.ContactState)
     """Ground/air state (groundstation.contact): on the floor no tension is published."""
+    exit_azimuth: AngleObservation | None = None
+    """The reel's last exit azimuth (with its σ) and when it was received."""
+    exit_azimuth_received_s: float = -math.inf
+    exit_elevation: AngleObservation | None = None
+    """The reel's last exit elevation (with its σ) and when it was received."""
+    exit_elevation_received_s: float = -math.inf
     last_seq: int | None = None
     last_stamp_s: float | None = None
     last_seen_s: float | None = None
@@ -227,6 +233,18 @@ class Pipeline:
             runtime.length_source = "reel"
             if msg.base_m is not None:
                 runtime.base_world_m = np.array(msg.base_m, dtype=float)
+            loc = self.settings.localization
+            if msg.exit_azimuth_rad is not None:
+                runtime.exit_azimuth = AngleObservation(
+                    msg.exit_azimuth_rad, msg.exit_azimuth_std_rad or loc.exit_azimuth_std_rad
+                )
+                runtime.exit_azimuth_received_s = parsed.received_s
+            if msg.exit_elevation_rad is not None:
+                runtime.exit_elevation = AngleObservation(
+                    msg.exit_elevation_rad,
+                    msg.exit_elevation_std_rad or loc.exit_elevation_std_rad,
+                )
+                runtime.exit_elevation_received_s = parsed.received_s
             return []
         if isinstance(msg, TetherParams):
             if msg.weight_n_per_m is not None:
@@ -383,6 +401,9 @@ class Pipeline:
             std = est.std_n.tolist()
             converged = est.converged
             if converged:
+                # Exit angles only while fresh: the reel reports at its own rate.
+                loc = self.settings.localization
+                fresh_s = now_s - loc.reel_stale_after_s
                 position = localize(
                     est.tension_world_n,
                     est.cov_n2,
@@ -390,6 +411,15 @@ class Pipeline:
                     runtime.length_m,
                     runtime.base_world_m,
                     runtime.params.base.floor_z_m,
+                    azimuth=loc.azimuth,
+                    exit_azimuth=runtime.exit_azimuth
+                    if runtime.exit_azimuth_received_s >= fresh_s
+                    else None,
+                    exit_elevation=runtime.exit_elevation
+                    if loc.elevation and runtime.exit_elevation_received_s >= fresh_s
+                    else None,
+                    mocap_world_m=msg.position_m,
+                    mocap_std_m=loc.mocap_std_m,
                 )
 
         follow_position = (
@@ -467,6 +497,7 @@ class Pipeline:
             radial_m=float(position.radial_m) if position is not None else None,
             radial_interval_m=(float(lo_hi[0]), float(lo_hi[1])) if lo_hi is not None else None,
             azimuth_determined=position.azimuth_determined if position is not None else None,
+            azimuth_source=position.azimuth_source if position is not None else None,
             floor_contact=bool(position.floor_contact) if position is not None else None,
             on_ground=on_ground,
             converged=converged,

@@ -77,3 +77,10 @@ def test_bad_env_value(monkeypatch: pytest.MonkeyPatch) -> None:
 def test_missing_file() -> None:
     with pytest.raises(ConfigError, match="cannot read config file"):
         load_settings("/nonexistent/gs.toml", use_env=False)
+
+
+def test_localization_section() -> None:
+    s = load_settings(None, {"localization": {"azimuth": "mocap"}}, use_env=False)
+    assert s.localization.azimuth == "mocap" and s.localization.elevation is True
+    with pytest.raises(ConfigError, match=r"localization\.azimuth = 'compass'"):
+        load_settings(None, {"localization": {"azimuth": "compass"}}, use_env=False)

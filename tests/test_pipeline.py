@@ -264,3 +264,32 @@ def test_ground_thrust_ratio_is_honoured() -> None:
         assert json.loads(out.payload)["on_ground"] is True
         status = pipe.status("cf1", 0.0)
         assert status is not None and status["contact"]["reason"] == reason
+
+
+def test_reel_exit_angles_are_used_while_fresh_and_named_in_the_estimate() -> None:
+    """A plumb-ish hover (H ~ 2 mN: the tension's direction is noise): with the reel's exit
+    azimuth the Estimate says azimuth_source "reel" and the position lies along it; once the
+    reel falls silent for longer than [localization] reel_stale_after_s, the azimuth is
+    the tension's again."""
+    pipe = Pipeline(settings_for())
+    reel = json.dumps(
+        {"stamp_s": 0.0, "length_m": 1.6, "exit_azimuth_rad": 0.7, "exit_azimuth_std_rad": 0.02}
+    ).encode()
+    # The drone 0.3 m above the base, just off plumb: T_v = 0.3 * 0.05 N, H = 2 mN along -x.
+    accel = [0.0, 0.0, 9.81 + (0.33 - 0.03 * 9.81 - 0.015) / 0.030]
+    sources = []
+    for seq in range(500):
+        now = seq * 0.004
+        if seq % 25 == 0 and now < 1.0:  # 10 Hz for 1 s, then silent
+            pipe.handle(Sample("tether/cf1/reel", reel), now)
+        patch = {"accel_mps2": [0.002 / 0.030, 0.0, accel[2]]}
+        (out,) = pipe.handle(_telemetry(seq, **patch), now)
+        est = json.loads(out.payload)
+        sources.append((now, est["azimuth_source"], est["position_m"]))
+    fresh = [s for t, s, p in sources if 0.5 < t < 1.0 and p is not None]
+    stale = [s for t, s, p in sources if t > 1.6 and p is not None]
+    assert fresh and set(fresh) == {"reel"}
+    assert stale and set(stale) == {"tension"}
+    _, _, p = next(x for x in sources if x[0] > 0.9)
+    assert p is not None
+    assert np.arctan2(p[1], p[0]) == pytest.approx(0.7, abs=0.02)  # fused, the reel dominant
