@@ -373,6 +373,14 @@ class SimSection(_Section):
     thrust_bias_ratio: float = Field(0.0, ge=-0.5, le=0.5)
     mocap: bool = True
     """Publish the motion-capture ``position_m`` in Telemetry."""
+    exit_angles: bool = False
+    """(added) A base sensor: publish the tether's ``exit_azimuth_rad`` / ``exit_elevation_rad``
+    (and their σ) in Reel, from the simulated tether's first segment, with the noise below
+    (groundstation/sim/base_sensor.py)."""
+    exit_azimuth_noise_rad: float = Field(0.02, ge=0.0)
+    """Azimuth noise σ of the base sensor for a horizontal exit, rad (grows as 1/cos(elevation))."""
+    exit_elevation_noise_rad: float = Field(0.02, ge=0.0)
+    """Elevation noise σ of the base sensor, rad."""
     seed: int = 0
     speed: float = Field(1.0, gt=0.0)
     """Real-time factor (1 = wall clock)."""
