@@ -21,9 +21,12 @@ __all__ = [
     "FollowCommand",
     "FollowInfo",
     "InvalidMessage",
+    "LandIn",
+    "MocapPoseIn",
     "Reel",
     "Setpoint",
     "Stop",
+    "TakeoffIn",
     "Telemetry",
     "TetherParams",
     "Truth",
@@ -277,3 +280,26 @@ class SetpointIn(_In):
 
     stamp_s: Finite
     position_m: Vec3
+
+
+class MocapPoseIn(_In):
+    """(added) Motion capture → Crazyflie bridge, on ``[crazyflie] mocap_key``."""
+
+    position_m: Vec3
+    """World frame (the contract's), metres."""
+    quat_wxyz: Vec4 | None = None
+    """Body → world, scalar first (needed with ``attitude_source = "mocap"``)."""
+
+
+class TakeoffIn(_In):
+    """(added) Operator → Crazyflie bridge, ``tether/{drone}/cmd/takeoff``: climb straight up."""
+
+    height_m: Finite = Field(gt=0.0, le=3.0)
+    """Target height, world z, metres."""
+    speed_mps: Finite = Field(default=0.25, gt=0.0, le=1.0)
+
+
+class LandIn(_In):
+    """(added) Operator → Crazyflie bridge, ``tether/{drone}/cmd/land``: down, motors off."""
+
+    speed_mps: Finite = Field(default=0.25, gt=0.0, le=1.0)
