@@ -142,9 +142,9 @@ class LocalizationSection(_Section):
 
     azimuth: Literal["auto", "tension", "reel", "mocap"] = "auto"
     """``auto`` fuses the tension's direction and the reel's exit azimuth by their
-    uncertainty; ``tension``, ``reel`` or ``mocap`` uses that one alone (``mocap``: the
-    paper's method, β from Telemetry ``position_m``). A source asked for but absent or stale
-    leaves the azimuth undetermined."""
+    uncertainty; ``tension``, ``reel`` or ``mocap`` uses that one alone (``mocap`` with
+    ``elevation = false`` is the paper's method: β from Telemetry ``position_m``, r and z from
+    the tension). A source asked for but absent or stale leaves the azimuth undetermined."""
     elevation: bool = True
     """Fuse the reel's ``exit_elevation_rad`` with the tension (the base slope constrains
     the catenary)."""
