@@ -1,4 +1,4 @@
-"""3-D drone position from the estimated tether tension (paper sec. pos_est).
+"""3-D drone position from the estimated tether tension and the base (paper sec. pos_est).
 
 Pure physics: numpy and :mod:`groundstation.catenary` only.
 
@@ -13,24 +13,37 @@ the drone's radial distance r and height z relative to the base
 
 Departures from the paper:
 
-* **Azimuth from the estimate.** The paper took beta from motion capture. The
-  horizontal tension on the drone points from the drone to the base, so the drone
-  lies at ``base + r * (-T_xy / |T_xy|)``: the estimate carries its own azimuth.
-* **Near-plumb tether.** When H is within its noise the azimuth is undetermined; the
-  result says so (``azimuth_determined=False``), places the drone straight above or
-  below the base, and widens the horizontal uncertainty to the radius the tether
-  could reach at a horizontal tension ``plumb_k`` standard deviations above zero.
-  The paper's filter, started from T = 0, was always in this case at first and
-  reported z = 0.754 - 1.6 = -0.846 m (``eq:in_instants``); the tension filter of
-  this project starts from the first observation instead.
-* **Uncertainty.** The tension covariance is carried to the position with the
-  unscented transform (7 sigma points, kappa = 0) through one vectorised catenary
-  call, so the large non-linearity of r in H near a taut tether is respected.
+* **Azimuth from every source.** The paper took beta from motion capture. The horizontal
+  tension on the drone points from the drone to the base, so the estimate carries its own
+  azimuth, ``-T_xy / |T_xy|``, with a standard deviation of the sideways tension noise over
+  H. A base that measures the tether's exit azimuth gives another, independent of the
+  drone's sensors. ``azimuth="auto"`` fuses the two by inverse variance; ``"tension"``,
+  ``"reel"`` and ``"mocap"`` (the paper's: beta from the motion-capture position) use one.
+* **Exit elevation.** With L known, the slope where the tether leaves the base,
+  ``theta = atan2(s2 - L, a)``, is one more equation in (a, s2): the base alone fixes the
+  catenary up to its sag, and the tension fixes the rest; both are fused by their
+  covariance (:func:`_fuse_elevation`) while no tether rests on the floor.
+* **Near-plumb tether, continuously.** When the azimuth's standard deviation exceeds
+  ``1 / plumb_k`` rad (for the tension alone: H within ``plumb_k`` standard deviations of
+  its noise) the result says so (``azimuth_determined=False``). The horizontal offset
+  ``r u(beta)`` is blended toward the base's xy as that standard deviation grows (1 at
+  ``1 / (2 k)``, 0 at ``2 / k``, smoothstep between), and the horizontal uncertainty widens
+  with it to the radius the tether could reach at a horizontal tension ``plumb_k``
+  standard deviations above zero: no jump between the two near r = 0.2 m. The paper's
+  filter, started from T = 0, was always in this case at first and reported z = 0.754 -
+  1.6 = -0.846 m (``eq:in_instants``); the tension filter of this project starts from the
+  first observation instead.
+* **Uncertainty.** The tension covariance is carried to (r, z), and with the tension's
+  azimuth to the horizontal position, by the unscented transform (7 sigma points,
+  kappa = 0) through one vectorised catenary call, so the large non-linearity of r in H
+  near a taut tether, and the correlation of r with the direction under an anisotropic
+  noise, are respected; the other azimuth sources add their variance across.
 
 Cost: :func:`try_localize` runs once per telemetry message. Its 3-vector and 3x3
-arithmetic is done in Python floats, and the one catenary call on the 7 (or 9) points
-goes to ``catenary.locate_free``, the body of :func:`catenary.locate` without its input
-checks, which this module has already made (see :func:`_locate_points`).
+arithmetic is done in Python floats, and the one catenary call on 8 points goes to
+``catenary.locate_free``, the body of :func:`catenary.locate` without its input checks,
+which this module has already made (see :func:`_locate_points`); the elevation's fusion
+adds a 2x2 Gauss-Newton and a 5-point call.
 """
 
 from __future__ import annotations
