@@ -318,21 +318,27 @@ READING = """## Reading the tables
   row (the catenary, eq:posfull_radial, eq:posfull_z), and near plumb r is very sensitive to
   H: there r ≈ a·[asinh(s2/a) + asinh((L − s2)/a)] with a = H/ω, so 15 mN of noise on H reads
   as a drone a metre out. The realistic profile's vibration noise (coloured, 1 m/s² per axis)
-  gets through the tension filter at several times the σ the filter reports (its line under
+  gets through the tension filter at several times the σ the filter reports (the line under
   each table): localization from the tension is then off by decimetres to a metre except
   near taut, whatever the azimuth's source, and the fusions, which weigh the tension by its
-  reported σ, trust it too much (the tension filter's tuning for such noise is issue 9's).
-- **The azimuth from the base or motion capture** removes the tension's direction error: the
-  `reel` and `mocap (paper)` rows are at or below the `tension` row from r ≈ 0.35 m out.
-  Nearer the base the reel's azimuth is lost (the tether leaves the base almost vertically,
-  its σ grows as 1/cos(elevation)), and the position blends to the base's xy: the error is
-  then about the true r plus the height error. `auto` takes the better of the two in
-  proportion to their σ.
-- **The exit elevation** constrains (a, s2) independently of the drone's sensors: `+
-  elevation` rows improve on their partners most near taut (97 % of L) and with a biased
-  tension (uncalibrated), less where the tension's σ (wrongly small) outweighs it.
-- On the **ideal** profile (the estimator's own assumptions) the same comparison shows the
-  method's floor.
+  reported σ, trust it too much. Making the filter's σ honest under such noise (issue 9) is
+  what these numbers need first.
+- **An azimuth from the base or from motion capture** removes the tension's direction error:
+  on the realistic profile the `reel` and `mocap (paper)` rows are well below the `tension`
+  row from r ≈ 0.35 m out, and `auto` follows them as far as the (too small) tension σ lets
+  it. Nearer the base the reel's azimuth is lost (the tether leaves the base almost
+  vertically; the sensor's azimuth σ grows as 1/cos(elevation)) and, like the tension's,
+  the position blends to the base's xy, so the error there is about the true r plus the
+  height error; only motion capture keeps the azimuth at r = 0.1–0.2 m.
+- **On the ideal profile** (the estimator's own assumptions: white noise, the catenary's
+  tether) the tension's direction is better than a 0.02 rad base sensor beyond r ≈ 0.35 m
+  (σ ≈ 0.3 mN / H), so `reel` is worse there and `auto` stays with the tension; inside
+  r ≈ 0.2 m the azimuth is unknown to both and the error is r (the blend), which motion
+  capture reduces to a few cm.
+- **The exit elevation** constrains (a, s2) independently of the drone's sensors: the
+  `+ elevation` rows improve on their partners on the realistic profile, most near taut
+  (97 % of L) and with a biased tension (uncalibrated), and change little on the ideal
+  profile, where the tension is already good.
 """
 
 
