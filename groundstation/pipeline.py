@@ -111,6 +111,9 @@ class DroneRuntime:
     contact_params: contact_mod.ContactParams = field(default_factory=contact_mod.ContactParams)
     contact: contact_mod.ContactState = field(default_factory=contact_mod.ContactState)
     """Ground/air state (groundstation.contact): on the floor no tension is published."""
+    rested: bool = False
+    """Seen certainly on the ground (disarmed, low thrust) since the last lift-off: the filter
+    then restarts from the lift-off prior."""
     exit_azimuth: AngleObservation | None = None
     """The reel's last exit azimuth (with its σ) and when it was received."""
     exit_azimuth_received_s: float = -math.inf
@@ -389,9 +392,18 @@ class Pipeline:
         if on_ground or obs.tension_world_n is None:
             # On the ground the floor carries the drone: no tension estimate. The filter
             # restarts at lift-off rather than from the floor's reaction, from the prior
-            # that a tether resting on the floor pulls on the drone with next to nothing.
-            runtime.filter.reset(prior_world_n=(0.0, 0.0, 0.0), prior_std_n=LIFTOFF_PRIOR_STD_N)
+            # that a tether resting on the floor pulls on the drone with next to nothing:
+            # if the drone was seen resting (disarmed or below the thrust ratio). Found in
+            # the air without that (a service started mid-flight) it starts from its first
+            # observation instead.
+            if runtime.contact.reason in ("disarmed", "low_thrust"):
+                runtime.rested = True
+            if runtime.rested:
+                runtime.filter.reset(prior_world_n=(0.0, 0.0, 0.0), prior_std_n=LIFTOFF_PRIOR_STD_N)
+            else:
+                runtime.filter.reset()
         else:
+            runtime.rested = False
             est = runtime.filter.update(obs.tension_world_n, dt_s, msg.quat_wxyz)
             if est.change_detected:
                 runtime.change_detections += 1

@@ -293,3 +293,19 @@ def test_reel_exit_angles_are_used_while_fresh_and_named_in_the_estimate() -> No
     _, _, p = next(x for x in sources if x[0] > 0.9)
     assert p is not None
     assert np.arctan2(p[1], p[0]) == pytest.approx(0.7, abs=0.02)  # fused, the reel dominant
+
+
+def test_service_started_mid_hover_finds_the_drone_in_the_air() -> None:
+    """No rest was seen (the service starts while the drone hovers, no motion capture): the
+    contact state starts on the ground, the floor's push is found absent within ~0.1 s and
+    the filter starts from its first observation, not from the lift-off prior."""
+    run, pipe, _ = closed_loop(settings_for(mocap=False, seed=2), "hover", 2.0)
+    first = next(e for e in run.estimates if e["position_m"] is not None)
+    assert first["stamp_s"] <= 0.25
+    late = [e for e in run.estimates if e["stamp_s"] > 1.0]
+    assert all(not e["on_ground"] for e in late)
+    err = [np.linalg.norm(np.subtract(e["position_m"], run.truth_at(e["stamp_s"])["position_m"]))
+           for e in late]  # fmt: skip
+    assert float(np.median(err)) < 0.05
+    status = pipe.status("cf1", 2.0)
+    assert status is not None and status["contact"]["reason"] == "air"
