@@ -34,8 +34,10 @@ Behaviour, in the order :func:`follow_step` applies it:
    engage following and arm tug-to-land with nobody pulling.
 4a. **The tether's own tension.** ``T_own = F_cat(p_ref) + b``: ``F_cat`` the catenary's
    force (:func:`groundstation.catenary.tether_force`) at the reference position, ``b``
-   the estimate's offset from it, started at the first step after enabling (nobody pulls
-   while following is switched on) and tracked over ``REFERENCE_TIME_CONSTANT_S`` while
+   the estimate's offset from it: 0 at the first step after enabling with motion capture
+   (the catenary at the measured position is independent of the estimate), the whole
+   difference without it (nobody is taken to pull while following is switched on); then
+   tracked over ``REFERENCE_TIME_CONSTANT_S`` while
    not following and the pull is within the quiet band (``QUIET_BAND_RATIO``), so a
    steady model or sensor error (length, thrust scale, mocap offset) is absorbed and a
    tug is not. The reference position is the motion-capture position
@@ -432,12 +434,17 @@ def follow_step(
             quiet_p = _finite_vec3(state.quiet_position_world_m)
             reference = quiet_p if quiet_p is not None else position
         f_cat = _tether_own_force(reference, base_world_m, length_m, weight_n_per_m, floor_z_m)
+        modelled = f_cat is not None
         if f_cat is None:  # keep the last answer where the catenary has none
             last_cat = _finite_vec3(state.catenary_world_n)
             f_cat = last_cat if last_cat is not None else np.zeros(3)
         offset = _finite_vec3(state.own_offset_world_n)
-        if offset is None:  # nobody pulls as following is switched on
-            offset = tension - f_cat
+        if offset is None:
+            # With motion capture the catenary at the measured position is the tether's own
+            # tension, independently of the estimate: b starts at 0 (a hand already pulling
+            # as following is switched on is a pull). Without it the reference position
+            # comes from the tension itself: nobody is taken to pull at the switch-on.
+            offset = np.zeros(3) if (position_is_external and modelled) else tension - f_cat
         pull = tension - (f_cat + offset)
         pull_n = math.sqrt(float(pull @ pull))
         state = replace(state, catenary_world_n=_vec3(f_cat), own_offset_world_n=_vec3(offset))

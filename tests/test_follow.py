@@ -443,17 +443,17 @@ def test_near_taut_nobody_pulling_never_engages_and_a_pull_does(
 
 def test_pull_is_measured_from_the_catenary_at_the_motion_capture_position() -> None:
     """With motion capture the reference moves with the drone: flying slowly from a slack
-    spot to near taut (|T| from 0.02 to 0.10 N) is no pull; the offset b is the model's
-    steady error (here a 5 mN thrust bias) and stays put."""
+    spot to near taut (|T| from 0.02 to 0.10 N) is no pull; a steady model error (here a
+    5 mN thrust bias) is the pull at first and is absorbed into b over a few seconds."""
     from groundstation.catenary import tether_force
 
     params = FollowParams(threshold_n=0.10, hysteresis_ratio=0.2)
     state = set_enabled(FollowState(), True)
     start, end = BASE_M + np.array([0.8, 0.0, 0.3]), _near_taut_spot(1.6, 0.97)
     bias = np.array([0.0, 0.0, 0.005])
-    n = 1000
+    n = 2500
     for k in range(n):
-        p = start + (end - start) * k / (n - 1)  # 0.75 m in 4 s
+        p = start + (end - start) * k / (n - 1)  # 0.75 m in 10 s
         own = np.asarray(tether_force(BASE_M, p, 1.6, 0.05, FLOOR_M).force_world_n)
         d = follow_step(
             state,
@@ -470,8 +470,8 @@ def test_pull_is_measured_from_the_catenary_at_the_motion_capture_position() -> 
         state = d.state
         assert not state.active and d.setpoint_world_m is None
         assert state.pull_world_n is not None
-        assert np.linalg.norm(state.pull_world_n) < 1e-6
-    assert state.own_offset_world_n == pytest.approx(tuple(bias), abs=1e-9)
+        assert np.linalg.norm(state.pull_world_n) <= 0.005 + 1e-9
+    assert state.own_offset_world_n == pytest.approx(tuple(bias), abs=1e-4)
 
 
 def test_on_the_ground_nothing_engages_or_arms_and_the_reference_restarts() -> None:
@@ -496,3 +496,27 @@ def test_on_the_ground_nothing_engages_or_arms_and_the_reference_restarts() -> N
         assert not state.active and not state.landing_armed
         assert d.setpoint_world_m is None and d.stop_reason is None
     assert state.own_offset_world_n is None and "ground" in state.reason
+
+
+def test_with_mocap_a_pull_already_acting_at_switch_on_engages() -> None:
+    """Motion capture says where the drone is, so the catenary there is the tether's own
+    tension: a hand already pulling with 0.2 N when following is switched on is a pull."""
+    from groundstation.catenary import tether_force
+
+    spot = BASE_M + np.array([0.3, 0.0, -0.25])
+    own = np.asarray(tether_force(BASE_M, spot, 1.6, 0.05, FLOOR_M).force_world_n)
+    tension = own + np.array([0.0, 0.0, -0.2])
+    d = follow_step(
+        set_enabled(FollowState(), True),
+        FollowParams(threshold_n=0.1, land_below_m=0.6),
+        stamp_s=0.0,
+        tension_norm_n=float(np.linalg.norm(tension)),
+        position_world_m=spot,
+        base_world_m=BASE_M,
+        length_m=1.6,
+        floor_z_m=FLOOR_M,
+        tension_world_n=tension,
+        weight_n_per_m=0.05,
+    )
+    # The pull engages (and arms landing); z 0.504 m < 0.6 m: the one Stop of tug-to-land.
+    assert d.state.landing_armed and d.state.stopped and d.stop_reason is not None
