@@ -453,6 +453,9 @@ class Status(_Out):
     """Filter state (``initialized``, ``change_detections``)."""
     follow: FollowInfo | None = None
     """Follow mode, as in the Estimate."""
+    contact: dict[str, Any] | None = None
+    """Ground/air state: ``on_ground`` and the ``reason`` that decided it (``disarmed``,
+    ``low_thrust``, ``resting``, ``mocap_height``, ``climbing``, ``push_free``, ``air``)."""
     length_m: float | None = None
     """Tether length in use, metres."""
     length_source: str | None = None
