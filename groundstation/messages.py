@@ -9,10 +9,12 @@ Fields added beside the contract are marked "(added)"; they are documented in RE
 
 from __future__ import annotations
 
+import math
 import re
-from typing import Annotated, Self
+from typing import Annotated, Any, Self
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic_core import to_json
 
 __all__ = [
     "DRONE_ID_RE",
@@ -27,6 +29,7 @@ __all__ = [
     "Telemetry",
     "TetherParams",
     "Truth",
+    "encode_estimate",
     "parse_key",
 ]
 
@@ -261,3 +264,76 @@ class SetpointIn(_In):
 
     stamp_s: Finite
     position_m: Vec3
+
+
+# ---------------------------------------------------------------- fast Estimate encoding
+
+
+def _non_finite(value: object) -> bool:
+    if isinstance(value, float):
+        return not math.isfinite(value)
+    if isinstance(value, (tuple, list)):
+        return any(_non_finite(v) for v in value)
+    if isinstance(value, dict):
+        return any(_non_finite(v) for v in value.values())
+    return False
+
+
+def encode_estimate(
+    *,
+    seq: int,
+    stamp_s: float,
+    tension_n: tuple[float, float, float],
+    tension_std_n: tuple[float, float, float],
+    horizontal_n: float,
+    vertical_n: float,
+    position_m: tuple[float, float, float] | None,
+    follow: dict[str, Any],
+    position_std_m: tuple[float, float, float] | None,
+    radial_m: float | None,
+    radial_interval_m: tuple[float, float] | None,
+    azimuth_determined: bool | None,
+    floor_contact: bool | None,
+    on_ground: bool,
+    converged: bool,
+    length_m: float | None,
+    base_m: tuple[float, float, float] | None,
+) -> bytes:
+    """An :class:`Estimate` as compact JSON without building the model (the per-message path).
+
+    The same bytes as ``Estimate(...).to_json()``: the fields in the model's order, written
+    by pydantic-core's own serializer (``pydantic_core.to_json``, so floats are spelt as the
+    model spells them), without the model's construction and validation, which cost as much
+    again. ``follow`` is the FollowInfo's ``model_dump()`` (it changes only when follow
+    changes state, so the caller keeps it). ``tests/test_messages.py`` checks the bytes on
+    randomized estimates.
+
+    Raises:
+        ValueError: a float is NaN or infinite (the model refuses them; never emitted).
+    """
+    fields = {
+        "seq": seq,
+        "stamp_s": stamp_s,
+        "tension_n": tension_n,
+        "tension_std_n": tension_std_n,
+        "horizontal_n": horizontal_n,
+        "vertical_n": vertical_n,
+        "position_m": position_m,
+        "follow": follow,
+        "position_std_m": position_std_m,
+        "radial_m": radial_m,
+        "radial_interval_m": radial_interval_m,
+        "azimuth_determined": azimuth_determined,
+        "floor_contact": floor_contact,
+        "on_ground": on_ground,
+        "converged": converged,
+        "length_m": length_m,
+        "base_m": base_m,
+    }
+    out = to_json(fields)
+    # pydantic-core writes NaN and Infinity as bare words; look closer only if one appears
+    # (a follow reason may contain the word).
+    if (b"NaN" in out or b"Infinity" in out) and _non_finite(fields):
+        bad = [k for k, v in fields.items() if _non_finite(v)]
+        raise ValueError(f"non-finite value in Estimate field(s) {', '.join(bad)}")
+    return out

@@ -36,6 +36,7 @@ from groundstation.messages import (
     Stop,
     Telemetry,
     TetherParams,
+    encode_estimate,
     parse_key,
 )
 from groundstation.tension import (
@@ -121,11 +122,21 @@ class DroneRuntime:
     drops: Counter[str] = field(default_factory=Counter)
     telemetry_rate: _Rate = field(default_factory=_Rate)
     estimate_rate: _Rate = field(default_factory=_Rate)
-    last_estimate: Estimate | None = None
+    last_estimate_fields: dict[str, Any] | None = None
+    """The last Estimate's fields but ``follow`` (see :attr:`last_estimate`)."""
+    follow_json_cache: tuple[FollowInfo, dict[str, Any]] | None = None
+    """The last FollowInfo and its ``model_dump()`` (FollowInfo is frozen and reused)."""
     land_below_m_memory: float | None = None
     """Last tug-to-land height, restored when tug-to-land is switched back on."""
     follow_info_cache: tuple[follow_mod.FollowParams, tuple[Any, ...], FollowInfo] | None = None
     """The last Estimate's FollowInfo, with the params and flags it was made from."""
+
+    @property
+    def last_estimate(self) -> Estimate | None:
+        """The last published Estimate as a model (built on demand, not per message)."""
+        if self.last_estimate_fields is None or self.follow_json_cache is None:
+            return None
+        return Estimate(follow=self.follow_json_cache[0], **self.last_estimate_fields)
 
 
 class Pipeline:
@@ -387,10 +398,9 @@ class Pipeline:
         out: list[Sample] = []
         estimate = self._estimate(runtime, msg, tension, std, position, obs.on_ground, converged)
         if estimate is not None:
-            runtime.last_estimate = estimate
             runtime.estimates += 1
             runtime.estimate_rate.add(now_s)
-            out.append(Sample(f"tether/{runtime.drone}/estimate", estimate.to_json()))
+            out.append(Sample(f"tether/{runtime.drone}/estimate", estimate))
         if decision.setpoint_world_m is not None and _finite(decision.setpoint_world_m):
             sp = Setpoint(stamp_s=msg.stamp_s, position_m=_vec3(decision.setpoint_world_m))
             runtime.setpoints += 1
@@ -410,7 +420,8 @@ class Pipeline:
         position: PositionEstimate | None,
         on_ground: bool,
         converged: bool,
-    ) -> Estimate | None:
+    ) -> bytes | None:
+        """The Estimate's JSON (:func:`encode_estimate`: no model per message), or None."""
         if not (_finite(tension) and _finite(std)):
             self.count_drop(runtime.drone, "non_finite_estimate", "filter produced NaN/inf")
             runtime.filter.reset()
@@ -425,8 +436,11 @@ class Pipeline:
             else:
                 position = None
         follow = self._follow_info(runtime)
+        cached = runtime.follow_json_cache
+        if cached is None or cached[0] is not follow:
+            cached = runtime.follow_json_cache = (follow, follow.model_dump())
         lo_hi = position.radial_interval_m if position is not None else None
-        return Estimate(
+        fields: dict[str, Any] = dict(
             seq=msg.seq,
             stamp_s=msg.stamp_s,
             tension_n=tension,
@@ -434,7 +448,6 @@ class Pipeline:
             horizontal_n=math.hypot(tension[0], tension[1]),
             vertical_n=-tension[2],
             position_m=position_m,
-            follow=follow,
             position_std_m=position_std_m,
             radial_m=float(position.radial_m) if position is not None else None,
             radial_interval_m=(float(lo_hi[0]), float(lo_hi[1])) if lo_hi is not None else None,
@@ -445,6 +458,13 @@ class Pipeline:
             length_m=runtime.length_m,
             base_m=_vec3(runtime.base_world_m),
         )
+        try:
+            payload = encode_estimate(follow=cached[1], **fields)
+        except ValueError as exc:  # a non-finite field the checks above did not cover
+            self.count_drop(runtime.drone, "non_finite_estimate", str(exc))
+            return None
+        runtime.last_estimate_fields = fields
+        return payload
 
     def _follow_info(self, runtime: DroneRuntime) -> FollowInfo:
         """The Estimate's ``follow`` object (also the status's)."""
