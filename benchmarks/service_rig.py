@@ -52,8 +52,10 @@ REPO = Path(__file__).resolve().parents[1]
 ROUTER = REPO / "tests" / "integration" / "router.py"
 RATE_HZ = 250.0
 PERIOD_S = 1.0 / RATE_HZ
-SUTS = ("service", "echo")
-"""Systems under test: ``groundstation serve --headless`` and the bare echo floor."""
+SUTS = ("service", "echo", "baseline")
+"""Systems under test: ``groundstation serve --headless``, the bare echo floor, and ``serve``
+from another source tree (``BENCH_BASELINE_TREE``: e.g. ``git archive <commit>`` unpacked),
+for a before/after comparison in one run."""
 
 
 def free_port() -> int:
@@ -128,22 +130,21 @@ def telemetry_payloads(n_drones: int, steps: int, seed: int) -> list[list[bytes]
     f_body = rotation_world_body(np.array(q)).T @ np.array([0.0, 0.0, 9.81])
     out: list[list[bytes]] = []
     for step in range(steps):
+        row = []
         noise = rng.normal(0.0, 0.3, (n_drones, 3))
-        thrusts = thrust + rng.normal(0.0, 0.003, n_drones)
-        out.append(
-            [
+        for d in range(n_drones):
+            row.append(
                 json.dumps(
                     {
                         "seq": step,
                         "stamp_s": step / RATE_HZ,
                         "accel_mps2": (f_body + noise[d]).tolist(),
                         "quat_wxyz": q,
-                        "thrust_n": float(thrusts[d]),
+                        "thrust_n": thrust + float(rng.normal(0.0, 0.003)),
                     }
                 ).encode()
-                for d in range(n_drones)
-            ]
-        )
+            )
+        out.append(row)
     return out
 
 
@@ -172,9 +173,12 @@ class Rig:
             )
         )
         wait_port(port)
-        if self.sut == "service":
+        env = dict(os.environ, PYTHONUNBUFFERED="1")
+        if self.sut in ("service", "baseline"):
             args = [sys.executable, "-m", "groundstation", "serve", "--connect", self.endpoint]
             args += ["--web-port", str(free_port())] if self.dashboard else ["--headless"]
+            if self.sut == "baseline":
+                env["PYTHONPATH"] = os.environ["BENCH_BASELINE_TREE"]
         elif self.sut == "echo":
             args = [sys.executable, "-m", "benchmarks.echo_service", self.endpoint]
         else:
@@ -183,7 +187,6 @@ class Rig:
             pyspy = os.environ.get("BENCH_PYSPY", "py-spy")
             spy = [pyspy, "record", "--nonblocking", "--threads", "--format", "raw"]
             args = [*spy, "--rate", "200", "-o", self.profile, "--", *args]
-        env = dict(os.environ, PYTHONUNBUFFERED="1")
         proc = subprocess.Popen(
             args,
             stdout=subprocess.DEVNULL,
@@ -390,11 +393,23 @@ def _pct(x: np.ndarray, q: float) -> float:
 
 
 def capacity(
-    endpoint: str, sut_pid: int, n_drones: int, backlog: int, seed: int = 0
+    endpoint: str,
+    sut_pid: int,
+    n_drones: int,
+    backlog: int,
+    warmup_steps: int = 125,
+    seed: int = 0,
 ) -> dict[str, Any]:
-    """Drain rate while a backlog exists: ``backlog`` messages over ``n_drones`` published
-    back to back; rate = estimates / (last − first estimate's arrival)."""
-    steps = backlog // n_drones + 1
+    """Drain rate while a backlog exists.
+
+    Each drone first gets ``warmup_steps`` ticks at 250 Hz (its filter converges, so the
+    backlog runs the whole path: filter, localization, follow, Estimate); then ``backlog``
+    messages over the ``n_drones`` are published back to back. Rate = estimates of the
+    backlog / (last − first one's arrival at the client); CPU per message over the same span
+    from ``/proc``. ``backlog`` must stay below the service's queue (8192 by default).
+    """
+    steps_b = backlog // n_drones
+    steps = warmup_steps + steps_b
     payloads = telemetry_payloads(n_drones, steps, seed)
     recv: list[list[int]] = [[0] * steps for _ in range(n_drones)]
     index = {f"tether/d{d}/estimate": d for d in range(n_drones)}
@@ -411,14 +426,26 @@ def capacity(
                 if seq == 0 and d == 0:
                     first.set()
 
+    def arrived() -> int:
+        return sum(1 for row in recv for v in row[warmup_steps:] if v)
+
     bus = ZenohBus(ZenohSection(mode="client", connect=(endpoint,)))
     try:
         bus.subscribe("tether/*/estimate", on_estimate)
         keys = [f"tether/d{d}/telemetry" for d in range(n_drones)]
-        for d in range(n_drones):  # every drone known before the backlog
-            bus.publish(keys[d], payloads[0][d])
-        if not first.wait(30):
+        deadline = time.monotonic() + 30
+        while not first.is_set() and time.monotonic() < deadline:
+            bus.publish(keys[0], payloads[0][0])
+            first.wait(0.2)
+        if not first.is_set():
             raise TimeoutError(f"no estimate from the SUT on {endpoint}")
+        t_start = time.monotonic()
+        for k in range(warmup_steps):
+            delay = t_start + k * PERIOD_S - time.monotonic()
+            if delay > 0:
+                time.sleep(delay)
+            for d in range(n_drones):
+                bus.publish(keys[d], payloads[k][d])
         time.sleep(1.0)
         threads0 = thread_cpu_s(sut_pid)
         gc.collect()
@@ -426,29 +453,25 @@ def capacity(
         gc.disable()
         try:
             t0 = clock()
-            for k in range(1, steps):
+            for k in range(warmup_steps, steps):
                 row = payloads[k]
                 for d in range(n_drones):
                     bus.publish(keys[d], row[d])
             t_published = clock()
-            # wait until the estimates stop arriving
-            last_count = -1
-            while True:
+            last = -1
+            while (count := arrived()) != last:  # until the estimates stop arriving
+                last = count
                 time.sleep(0.5)
-                count = sum(1 for row in recv for v in row[1:] if v)
-                if count == last_count:
-                    break
-                last_count = count
         finally:
             gc.enable()
             gc.unfreeze()
         threads1 = thread_cpu_s(sut_pid)
     finally:
         bus.close()
-    times = np.array([v for row in recv for v in row[1:] if v], dtype=np.int64)
+    times = np.array([v for row in recv for v in row[warmup_steps:] if v], dtype=np.int64)
     n = int(times.size)
-    sent = (steps - 1) * n_drones
-    span_s = (times.max() - times.min()) / 1e9 if n > 1 else float("nan")
+    sent = steps_b * n_drones
+    span_s = float(times.max() - times.min()) / 1e9 if n > 1 else float("nan")
     threads = {k: threads1.get(k, 0.0) - threads0.get(k, 0.0) for k in threads1}
     cpu = sum(threads.values())
     return {
@@ -463,3 +486,32 @@ def capacity(
         "worker_us_per_msg": threads.get("python", 0.0) / max(n, 1) * 1e6,
         "threads_cpu_s": {k: round(v, 3) for k, v in sorted(threads.items()) if v > 0},
     }
+
+
+def offline_us_per_msg(n_drones: int, messages: int = 4000, seed: int = 0) -> dict[str, float]:
+    """The same messages through :meth:`Pipeline.handle` in this process, no bus: CPU µs per
+    message after each drone's filter has converged (the maths alone, for comparison with
+    the service's worker in the same run)."""
+    from groundstation.evaluation import settings_for
+    from groundstation.pipeline import Pipeline
+
+    warm = 125
+    steps = warm + messages // n_drones
+    payloads = telemetry_payloads(n_drones, steps, seed)
+    keys = [f"tether/d{d}/telemetry" for d in range(n_drones)]
+    samples = [Sample(keys[d], payloads[k][d]) for k in range(steps) for d in range(n_drones)]
+    pipe = Pipeline(settings_for())
+    for sample in samples[: warm * n_drones]:
+        pipe.handle(sample, 0.0)
+    timed = samples[warm * n_drones :]
+    gc.collect()
+    gc.disable()
+    try:
+        c0, t0 = time.thread_time(), time.perf_counter()
+        for sample in timed:
+            pipe.handle(sample, 0.0)
+        c1, t1 = time.thread_time(), time.perf_counter()
+    finally:
+        gc.enable()
+    n = len(timed)
+    return {"cpu_us_per_msg": (c1 - c0) / n * 1e6, "wall_us_per_msg": (t1 - t0) / n * 1e6}
