@@ -13,8 +13,7 @@ import math
 import re
 from typing import Annotated, Any, Self
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
-from pydantic_core import to_json
+from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError
 
 __all__ = [
     "DRONE_ID_RE",
@@ -269,6 +268,12 @@ class SetpointIn(_In):
 # ---------------------------------------------------------------- fast Estimate encoding
 
 
+_ANY_JSON: TypeAdapter[Any] = TypeAdapter(Any, config=ConfigDict(ser_json_inf_nan="constants"))
+"""pydantic's serializer for plain values: the bytes ``model_dump_json`` writes for them (NaN
+and infinities as the words ``NaN``/``Infinity``, for :func:`encode_estimate` to catch,
+rather than a silent ``null``)."""
+
+
 def _non_finite(value: object) -> bool:
     if isinstance(value, float):
         return not math.isfinite(value)
@@ -302,8 +307,8 @@ def encode_estimate(
     """An :class:`Estimate` as compact JSON without building the model (the per-message path).
 
     The same bytes as ``Estimate(...).to_json()``: the fields in the model's order, written
-    by pydantic-core's own serializer (``pydantic_core.to_json``, so floats are spelt as the
-    model spells them), without the model's construction and validation, which cost as much
+    by pydantic's own serializer (a ``TypeAdapter(Any)``, so floats are spelt as the model
+    spells them), without the model's construction and validation, which cost as much
     again. ``follow`` is the FollowInfo's ``model_dump()`` (it changes only when follow
     changes state, so the caller keeps it). ``tests/test_messages.py`` checks the bytes on
     randomized estimates.
@@ -330,8 +335,8 @@ def encode_estimate(
         "length_m": length_m,
         "base_m": base_m,
     }
-    out = to_json(fields)
-    # pydantic-core writes NaN and Infinity as bare words; look closer only if one appears
+    out = _ANY_JSON.dump_json(fields)
+    # pydantic writes NaN and Infinity as bare words; look closer only if one appears
     # (a follow reason may contain the word).
     if (b"NaN" in out or b"Infinity" in out) and _non_finite(fields):
         bad = [k for k, v in fields.items() if _non_finite(v)]
