@@ -180,7 +180,9 @@ def run(quick: bool, out_dir: Path, workers: int) -> Outcome:
     # 3. Service at scale (c), then the dashboard's cost.
     t = time.perf_counter()
     if quick:
-        svc = rpeers.service((8,), 3.0, (), progress=lambda m: _log(m, t0), backlog=1000)
+        svc = rpeers.service(
+            (8,), 3.0, (), progress=lambda m: _log(m, t0), backlog=1000, capacity_suts=("service",)
+        )
     else:
         # 30 s windows: a 10 s window ended just before the load client's first full garbage
         # collection and so hid it (issue 13); the rig now keeps the client's collector out.

@@ -177,6 +177,7 @@ def service(
     floor_drones: tuple[int, ...] = (8,),
     burst_drones: int = 8,
     backlog: int = 6000,
+    capacity_suts: tuple[str, ...] = ("echo", "service"),
 ) -> ServiceResult:
     """``run_case`` per drone count; then, if every count delivered, larger counts (doubling
     up to ``extend_to``) to find where it saturates; then the dashboard cases; the echo
@@ -218,7 +219,7 @@ def service(
             bursts[sut] = sr.drive(rig.endpoint, burst_drones, schedule, payloads, rig.pid)
         if progress:
             progress(f"bursts, {sut}: {_row_brief(bursts[sut])}")
-    for sut in ("echo", "service"):
+    for sut in capacity_suts:
         with sr.rig(sut) as rig:
             capacity[sut] = sr.capacity(rig.endpoint, rig.pid, burst_drones, backlog)
         if progress:
