@@ -174,11 +174,13 @@ class Rig:
         )
         wait_port(port)
         env = dict(os.environ, PYTHONUNBUFFERED="1")
+        cwd = REPO  # `python -m` puts the working directory first on sys.path
         if self.sut in ("service", "baseline"):
             args = [sys.executable, "-m", "groundstation", "serve", "--connect", self.endpoint]
             args += ["--web-port", str(free_port())] if self.dashboard else ["--headless"]
             if self.sut == "baseline":
-                env["PYTHONPATH"] = os.environ["BENCH_BASELINE_TREE"]
+                cwd = Path(os.environ["BENCH_BASELINE_TREE"])
+                env["PYTHONPATH"] = str(cwd)
         elif self.sut == "echo":
             args = [sys.executable, "-m", "benchmarks.echo_service", self.endpoint]
         else:
@@ -192,7 +194,7 @@ class Rig:
             stdout=subprocess.DEVNULL,
             stderr=None if self.profile else subprocess.DEVNULL,
             env=env,
-            cwd=REPO,
+            cwd=cwd,
         )
         self.procs.append(proc)
         self.pid = proc.pid

@@ -195,7 +195,7 @@ class Service:
         self.published += len(outputs)
 
 
-_MAX_BATCH = 64
+_MAX_BATCH = 16
 """Messages stepped before their outputs are published (bounds the first one's wait)."""
 
 
