@@ -17,7 +17,7 @@ message runs the whole path: observation, filter, localization, follow, Estimate
 * Stages: each stage alone over the same converged messages (mean per call, best of the
   repeats): ``validate`` (key + JSON → Telemetry), ``observe_tension``,
   ``TensionFilter.update`` (a copy of the converged filter fed the stream),
-  ``localize``, ``follow_step``, ``estimate`` (the Estimate model and its JSON).
+  ``localize``, ``follow_step``, ``estimate`` (the Estimate's JSON, ``messages.encode_estimate``).
 
 As :mod:`timeit` does, the garbage collector is off while timing. The machine is shared:
 compare runs made close together, and trust the best repeat more than one run.
