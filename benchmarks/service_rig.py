@@ -460,10 +460,17 @@ def capacity(
                 for d in range(n_drones):
                     bus.publish(keys[d], row[d])
             t_published = clock()
-            last = -1
-            while (count := arrived()) != last:  # until the estimates stop arriving
-                last = count
-                time.sleep(0.5)
+            # until every estimate is in, or none came for 3 s (a starved machine can stall
+            # the service for a second), at most 120 s
+            want = steps_b * n_drones
+            last, last_change = -1, time.monotonic()
+            deadline = last_change + 120.0
+            while (count := arrived()) < want and time.monotonic() < deadline:
+                if count != last:
+                    last, last_change = count, time.monotonic()
+                elif time.monotonic() - last_change > 3.0:
+                    break
+                time.sleep(0.1)
         finally:
             gc.enable()
             gc.unfreeze()
