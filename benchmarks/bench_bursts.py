@@ -187,6 +187,12 @@ def main() -> None:
     parser.add_argument("--out", default=None, help=f"markdown file (default {DOC})")
     parser.add_argument("--json", default=None, help="also write the raw results here")
     parser.add_argument(
+        "--capacity-repeat",
+        type=int,
+        metavar="N",
+        help="only the drain rate: N rounds, the systems alternating (prints only)",
+    )
+    parser.add_argument(
         "--baseline",
         metavar="TREE",
         help="also run `serve` from this source tree (e.g. `git archive <commit>` unpacked)",

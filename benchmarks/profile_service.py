@@ -10,6 +10,10 @@ the service's CPU per thread group from /proc, and the same messages' CPU cost o
 (``Pipeline.handle`` in this process) measured right before, for comparison.
 ``--baseline TREE`` profiles ``serve`` from another source tree (e.g. ``git archive`` of an
 older commit) instead.
+
+``--micro`` prints two costs without py-spy instead: a zenoh ``put`` in a tight loop through
+a router (CPU and wall per put), and the Estimate's JSON with and without the model
+(``messages.encode_estimate`` against ``Estimate(...).to_json()``, interleaved, 5 rounds).
 """
 
 from __future__ import annotations
@@ -60,13 +64,83 @@ def summarize(raw: Path) -> tuple[dict[str, int], dict[str, float]]:
     return dict(per_thread), {f: inclusive[f] / total for f in FUNCTIONS if inclusive[f]}
 
 
+def put_cost_us(n: int = 20_000) -> dict[str, float]:
+    """A publisher's ``put`` of a 700-byte payload in a tight loop, through a router to a
+    subscriber in another process (the echo): µs of this thread's CPU and of wall time."""
+    import time
+
+    from groundstation.config import ZenohSection
+    from groundstation.zenoh_bus import ZenohBus
+
+    with sr.rig("echo") as rig:
+        bus = ZenohBus(ZenohSection(mode="client", connect=(rig.endpoint,)))
+        try:
+            bus.subscribe("bench/**", lambda s: None)
+            time.sleep(0.5)
+            payload = b"x" * 700
+            for _ in range(1000):
+                bus.publish("bench/put", payload)
+            c0, t0 = time.thread_time(), time.perf_counter()
+            for _ in range(n):
+                bus.publish("bench/put", payload)
+            c1, t1 = time.thread_time(), time.perf_counter()
+        finally:
+            bus.close()
+    return {"cpu_us": (c1 - c0) / n * 1e6, "wall_us": (t1 - t0) / n * 1e6}
+
+
+def encoder_cost_us(rounds: int = 5, n: int = 20_000) -> list[tuple[float, float]]:
+    """(model + to_json, encode_estimate) µs per Estimate, per round, interleaved."""
+    import timeit
+
+    from groundstation.messages import Estimate, FollowInfo, encode_estimate
+
+    follow = FollowInfo(enabled=False, active=False, threshold_n=0.15)
+    follow_dict = follow.model_dump()
+    fields = {
+        "seq": 123,
+        "stamp_s": 12.345,
+        "tension_n": (-0.0201234, 0.00012345, -0.0612345),
+        "tension_std_n": (0.00031, 0.00032, 0.00029),
+        "horizontal_n": 0.0201,
+        "vertical_n": 0.0612,
+        "position_m": (0.81234, 0.0123, 1.0123),
+        "position_std_m": (0.01, 0.02, 0.03),
+        "radial_m": 0.8123,
+        "radial_interval_m": (0.8, 0.82),
+        "azimuth_determined": True,
+        "floor_contact": False,
+        "on_ground": False,
+        "converged": True,
+        "length_m": 1.6,
+        "base_m": (0.0, 0.0, 0.754),
+    }
+    assert Estimate(follow=follow, **fields).to_json() == encode_estimate(
+        follow=follow_dict, **fields
+    )
+    out = []
+    for _ in range(rounds):
+        model = timeit.timeit(lambda: Estimate(follow=follow, **fields).to_json(), number=n)
+        fast = timeit.timeit(lambda: encode_estimate(follow=follow_dict, **fields), number=n)
+        out.append((model / n * 1e6, fast / n * 1e6))
+    return out
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=10.0)
     parser.add_argument("--drones", type=int, default=8)
     parser.add_argument("--baseline", metavar="TREE", help="profile serve from this tree")
     parser.add_argument("--pyspy", default=shutil.which("py-spy") or "py-spy")
+    parser.add_argument("--micro", action="store_true", help="put and encoder costs only")
     args = parser.parse_args()
+    if args.micro:
+        put = put_cost_us()
+        print(f"load average {os.getloadavg()[0]:.1f}")
+        print(f"zenoh put, tight loop: {put['cpu_us']:.1f} µs CPU, {put['wall_us']:.1f} µs wall")
+        for model, fast in encoder_cost_us():
+            print(f"Estimate JSON: model {model:.2f} µs, encode_estimate {fast:.2f} µs")
+        return
     os.environ["BENCH_PYSPY"] = args.pyspy
     sut = "service"
     if args.baseline:
