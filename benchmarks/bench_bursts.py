@@ -205,6 +205,20 @@ def main() -> None:
     if args.baseline:
         os.environ["BENCH_BASELINE_TREE"] = str(Path(args.baseline).resolve())
         suts += ("baseline",)
+    if args.capacity_repeat:
+        rates: dict[str, list[int]] = {sut: [] for sut in suts if sut != "echo"}
+        for _ in range(args.capacity_repeat):
+            for sut in rates:
+                with sr.rig(sut) as rig:
+                    c = sr.capacity(rig.endpoint, rig.pid, args.drones, args.backlog)
+                rates[sut].append(round(c["msgs_per_s"]))
+                print(
+                    f"{sut:8s} {c['msgs_per_s']:.0f} msg/s, {c['cpu_us_per_msg']:.0f} µs CPU/msg, "
+                    f"delivered {100 * c['delivered']:.1f} %, load {os.getloadavg()[0]:.1f}",
+                    flush=True,
+                )
+        print(json.dumps(rates))
+        return
     res = run(args.drones, args.seconds, args.backlog, args.pause_ms / 1000.0, args.every_s, suts)
     command = ("python -m benchmarks.bench_bursts " + " ".join(sys.argv[1:])).strip()
     text = to_markdown(res, command)
