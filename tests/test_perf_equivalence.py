@@ -128,10 +128,15 @@ def _hover(rng: np.random.Generator) -> Iterator[Sample]:
         yield _telemetry(k, HOVER_N, rng)
 
 
+THRESHOLD_N = 0.07
+
+
 def _step(rng: np.random.Generator) -> Iterator[Sample]:
-    # Follow engaged below the post-step tension (0.078 N) so setpoints flow after the tug.
-    yield _follow(enabled=True, threshold_n=0.07)
+    # Follow switched on once the drone is flying (the service refuses it for a drone it has
+    # not heard), with a threshold below the 30 mN tug, so setpoints flow after the tug.
     for k in range(250):
+        if k == 20:
+            yield _follow(enabled=True, threshold_n=THRESHOLD_N)
         tension = HOVER_N + (np.array([-0.030, 0.0, 0.0]) if k >= 125 else 0.0)
         yield _telemetry(k, tension, rng)
 
@@ -257,7 +262,9 @@ def test_batched_drain_publishes_what_the_plain_path_publishes(seed: int) -> Non
         n = int(rng.choice([1, 2, 3, 8, 17, 64, 256]))
         service._step_batch(valid[i : i + n])
         i += n
-    got = bus.published
+    # The service also tells rejected inputs on tether/{drone}/events (wall-clock stamped,
+    # from the bus side, not the pipeline's outputs): not part of this comparison.
+    got = [s for s in bus.published if not s.key.endswith("/events")]
 
     assert len(want) > 1000 and {s.key.split("/", 2)[2] for s in want} >= {
         "estimate",
@@ -267,7 +274,7 @@ def test_batched_drain_publishes_what_the_plain_path_publishes(seed: int) -> Non
     assert sorted(got, key=lambda s: (s.key, s.payload)) == sorted(
         want, key=lambda s: (s.key, s.payload)
     )
-    assert service.published == len(want)
+    assert service.published == len(want)  # events are counted apart
 
     # the same drops counted (validated ahead of processing, as the service does, a drone's
     # first bad samples may count before its runtime exists: compare the totals per kind)
