@@ -218,6 +218,7 @@ def observe_tension(
     mass_kg: float,
     armed: bool = True,
     gravity_mps2: float = GRAVITY_MPS2,
+    ground_thrust_ratio: float = 0.5,
 ) -> TensionObservation:
     """Raw tension observation from one IMU + thrust sample (``eq:NE_tether``).
 
@@ -232,8 +233,10 @@ def observe_tension(
     the paper: at hover they are far below the noise.
 
     On the ground the floor's reaction (about the weight, ~0.3 N) would show up as
-    upward "tension". So a sample from a disarmed drone, or with thrust below half the
-    weight ``m * gravity / 2``, yields no tension, flagged with the reason.
+    upward "tension". So a sample from a disarmed drone, or with thrust below
+    ``ground_thrust_ratio`` of the weight (``[filter] ground_thrust_ratio``, 0.5), yields
+    no tension, flagged with the reason. Between that and the weight the floor may still
+    carry the drone: :mod:`groundstation.contact` decides that, with hysteresis.
 
     Args:
         accel_body_mps2: IMU specific force in the body frame, m/s^2, shape (3,)
@@ -243,6 +246,8 @@ def observe_tension(
         mass_kg: Drone mass, kg, > 0.
         armed: Whether the motors are armed.
         gravity_mps2: Magnitude of gravity, m/s^2.
+        ground_thrust_ratio: Below this fraction of the weight the floor carries the
+            drone, in (0, 1).
 
     Returns:
         The observation (tension in the world frame, N) or the ground-contact reason.
@@ -264,7 +269,7 @@ def observe_tension(
         raise InvalidObservationError(f"gravity_mps2 must be finite and > 0, got {gravity_mps2!r}")
     if not armed:
         return TensionObservation(None, True, "disarmed")
-    if thrust_n < 0.5 * mass_kg * gravity_mps2:
+    if thrust_n < ground_thrust_ratio * mass_kg * gravity_mps2:
         return TensionObservation(None, True, "low_thrust")
     # T = R (m f - e3 F): one rotation instead of two; R as in rotation_world_body,
     # multiplied out in scalars (numpy's overhead is most of the cost for a 3-vector).
