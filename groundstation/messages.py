@@ -519,57 +519,38 @@ def _non_finite(value: object) -> bool:
     return False
 
 
-def encode_estimate(
-    *,
-    seq: int,
-    stamp_s: float,
-    tension_n: tuple[float, float, float],
-    tension_std_n: tuple[float, float, float],
-    horizontal_n: float,
-    vertical_n: float,
-    position_m: tuple[float, float, float] | None,
-    follow: dict[str, Any],
-    position_std_m: tuple[float, float, float] | None,
-    radial_m: float | None,
-    radial_interval_m: tuple[float, float] | None,
-    azimuth_determined: bool | None,
-    floor_contact: bool | None,
-    on_ground: bool,
-    converged: bool,
-    length_m: float | None,
-    base_m: tuple[float, float, float] | None,
-) -> bytes:
+_REQUIRED = object()
+_ESTIMATE_FIELDS: dict[str, Any] = {
+    name: _REQUIRED if info.is_required() else info.default
+    for name, info in Estimate.model_fields.items()
+}
+"""Estimate's fields in its order, with their defaults (``_REQUIRED`` where none)."""
+
+
+def encode_estimate(**given: Any) -> bytes:
     """An :class:`Estimate` as compact JSON without building the model (the per-message path).
 
-    The same bytes as ``Estimate(...).to_json()``: the fields in the model's order, written
-    by pydantic's own serializer (a ``TypeAdapter(Any)``, so floats are spelt as the model
-    spells them), without the model's construction and validation, which cost as much
-    again. ``follow`` is the FollowInfo's ``model_dump()`` (it changes only when follow
-    changes state, so the caller keeps it). ``tests/test_messages.py`` checks the bytes on
+    Takes the model's fields as keywords (``follow`` as the FollowInfo's ``model_dump()``: it
+    changes only when follow changes state, so the caller keeps it). The same bytes as
+    ``Estimate(...).to_json()``: the fields in the model's order (one the call leaves out
+    takes the model's default), written by pydantic's own serializer (a ``TypeAdapter(Any)``,
+    so floats are spelt as the model spells them), without the model's construction and
+    validation, which cost as much again. ``tests/test_messages.py`` checks the bytes on
     randomized estimates.
 
     Raises:
+        TypeError: a field the model does not have, or a required one missing.
         ValueError: a float is NaN or infinite (the model refuses them; never emitted).
     """
-    fields = {
-        "seq": seq,
-        "stamp_s": stamp_s,
-        "tension_n": tension_n,
-        "tension_std_n": tension_std_n,
-        "horizontal_n": horizontal_n,
-        "vertical_n": vertical_n,
-        "position_m": position_m,
-        "follow": follow,
-        "position_std_m": position_std_m,
-        "radial_m": radial_m,
-        "radial_interval_m": radial_interval_m,
-        "azimuth_determined": azimuth_determined,
-        "floor_contact": floor_contact,
-        "on_ground": on_ground,
-        "converged": converged,
-        "length_m": length_m,
-        "base_m": base_m,
-    }
+    unknown = given.keys() - _ESTIMATE_FIELDS.keys()
+    if unknown:
+        raise TypeError(f"encode_estimate: Estimate has no field(s) {sorted(unknown)}")
+    fields = {}
+    for name, default in _ESTIMATE_FIELDS.items():
+        value = given.get(name, default)
+        if value is _REQUIRED:
+            raise TypeError(f"encode_estimate: required field {name!r} missing")
+        fields[name] = value
     out = _ANY_JSON.dump_json(fields)
     # pydantic writes NaN and Infinity as bare words; look closer only if one appears
     # (a follow reason may contain the word).

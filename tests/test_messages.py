@@ -168,6 +168,7 @@ def _random_estimate_fields(rng: np.random.Generator) -> dict[str, Any]:
         "radial_m": maybe(f()),
         "radial_interval_m": maybe((f(), f())),
         "azimuth_determined": maybe_bool(),
+        "azimuth_source": maybe(str(rng.choice(["tension", "reel", "mocap", "fused"]))),
         "floor_contact": maybe_bool(),
         "on_ground": bool(rng.integers(2)),
         "converged": bool(rng.integers(2)),
@@ -194,6 +195,9 @@ def test_fast_encoder_agrees_with_the_model_on_random_estimates() -> None:
     rng = np.random.default_rng(42)
     for _ in range(3000):
         fields = _random_estimate_fields(rng)
+        if rng.random() < 0.2:  # a field left out takes the model's default
+            optional = [k for k, f in Estimate.model_fields.items() if not f.is_required()]
+            fields.pop(str(rng.choice(optional)), None)
         follow = _random_follow(rng)
         want = Estimate(follow=follow, **fields).to_json()
         got = encode_estimate(follow=follow.model_dump(), **fields)
@@ -217,3 +221,14 @@ def test_fast_encoder_never_emits_nan() -> None:
                 fields[name] = bad
             with pytest.raises(ValueError, match="non-finite"):
                 encode_estimate(follow=follow, **fields)
+
+
+def test_fast_encoder_refuses_unknown_and_missing_fields() -> None:
+    rng = np.random.default_rng(5)
+    fields = _random_estimate_fields(rng)
+    follow = _random_follow(rng).model_dump()
+    with pytest.raises(TypeError, match="no field"):
+        encode_estimate(follow=follow, not_a_field=1.0, **fields)
+    del fields["seq"]
+    with pytest.raises(TypeError, match="'seq' missing"):
+        encode_estimate(follow=follow, **fields)
