@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from groundstation.calibration import CalibrationData, thrust_axis_body
+from groundstation.calibration import CalibrationData
 from groundstation.catenary import tether_force
 
 G = 9.81
@@ -71,7 +71,6 @@ def flight(
     base = np.array(base_m)
     rows: dict[str, list] = {k: [] for k in ("t", "a", "q", "thr", "arm", "p", "g", "v")}
     bias = np.array(truth.bias_mps2)
-    u_true = thrust_axis_body(truth.about_x_rad, truth.about_y_rad)
     Q = Rotation.from_euler("xy", [truth.about_x_rad, truth.about_y_rad]).as_matrix()
     n_rest = int(rest_s * rate_hz)
     R_floor = Rotation.from_euler("xy", floor_tilt_rad).as_matrix()
@@ -91,15 +90,18 @@ def flight(
     prev = None
     for spot in spots:
         p_spot = np.array(spot)
-        n_move = int(move_s * rate_hz) if prev is not None else int(move_s * rate_hz)
+        n_move = int(move_s * rate_hz)
         n_hov = int(hover_s * rate_hz)
         start = prev if prev is not None else np.array([spot[0], spot[1], 0.3])
         for i in range(n_move + n_hov):
             if i < n_move:
                 s = 0.5 - 0.5 * math.cos(math.pi * i / n_move)
                 p = start + s * (p_spot - start)
-                acc = (p_spot - start) * 0.5 * (math.pi / move_s) ** 2 * math.cos(
-                    math.pi * i / n_move
+                acc = (
+                    (p_spot - start)
+                    * 0.5
+                    * (math.pi / move_s) ** 2
+                    * math.cos(math.pi * i / n_move)
                 )
                 moving = True
             else:
@@ -122,9 +124,7 @@ def flight(
             f = R.T @ (acc + np.array([0, 0, G]))
             frac = (t - t_fly0) / total
             v = None if vbat_v is None else vbat_v[0] + frac * (vbat_v[1] - vbat_v[0])
-            scale = truth.thrust_scale + (
-                0.0 if v is None else truth.vbat_slope_per_v * (v - 3.9)
-            )
+            scale = truth.thrust_scale + (0.0 if v is None else truth.vbat_slope_per_v * (v - 3.9))
             rows["t"].append(t)
             rows["a"].append(f + bias)
             rows["q"].append(_quat_wxyz(R))
