@@ -672,6 +672,7 @@ def fit_calibration(
     rest: ArrayLike | None = None,
     rest_bias_xy: bool = True,
     min_hover_s: float = 3.0,
+    fix: dict[str, str] | None = None,
 ) -> CalibrationFit:
     """Fit the calibration of one drone (module doc; eq:NE_tether against the catenary).
 
@@ -684,10 +685,10 @@ def fit_calibration(
     rest sample ``r = R·m·(a − o − b) − (0, 0, m·g)``. Each world axis is whitened by its
     robust scale (hover and rest apart, around each run's mean), fitted with scipy's
     ``least_squares`` (Huber loss), re-whitened with the fit's residuals and fitted again.
-    Standard errors: ``σ̂²·(JᵀWJ)⁻¹·τ``, W the Huber weights, τ the residuals' integrated
-    autocorrelation time (vibration and wobble are not white: n_eff = n/τ). A combination of
-    parameters whose standard error exceeds half its typical magnitude is undetermined: the
-    first parameter of :data:`CONVENTIONS` in it is fixed and the fit repeated.
+    Standard errors: Huber's ``(Σψ²/(n−p))/(mean ψ')²·(JᵀJ)⁻¹``, times τ, the residuals'
+    integrated autocorrelation time (vibration and wobble are not white: n_eff = n/τ). A
+    combination of parameters whose standard error exceeds half its typical magnitude is
+    undetermined: the first parameter of :data:`CONVENTIONS` in it is fixed and the fit repeated.
 
     Args:
         data: the samples (see :class:`CalibrationData`).
@@ -707,6 +708,8 @@ def fit_calibration(
         rest_bias_xy: use the rest samples' x/y too (False when the service's rest
             calibration supplies x/y at every power-on: then only their z is used).
         min_hover_s: less hover than this is refused, s.
+        fix: parameters to keep at their ``initial`` value from the start, name → reason
+            (reported among :attr:`CalibrationFit.fixed`).
 
     Returns:
         The :class:`CalibrationFit`.
@@ -852,7 +855,7 @@ def fit_calibration(
     def covariance(
         theta: FloatArray, mask: NDArray[np.bool_]
     ) -> tuple[FloatArray, FloatArray, float, float]:
-        """(JᵀWJ of the free parameters, σ̂²·(JᵀWJ)⁻¹·τ, σ̂²·τ, τ)."""
+        """(JᵀJ of the free parameters, σ̂²·(JᵀJ)⁻¹·τ, σ̂²·τ, τ)."""
         z0 = whitened(theta)
         idx = np.flatnonzero(mask)
         J = np.zeros((z0.size, idx.size))
@@ -862,10 +865,13 @@ def fit_calibration(
             tp[i] += step
             tm[i] -= step
             J[:, c] = (whitened(tp) - whitened(tm)) / (2 * step)
-        w = np.minimum(1.0, huber / np.maximum(np.abs(z0), 1e-12))  # Huber's IRLS weights
-        info = J.T @ (J * w[:, None])
-        dof = max(float(w.sum()) - idx.size, 1.0)
-        sigma2 = float((w * z0 * z0).sum() / dof)
+        # Huber's M-estimator covariance: (Σψ²/(n − p)) / (mean ψ')² · (JᵀJ)⁻¹, with
+        # ψ(z) = clip(z, ±k) (Huber 1981, sec. 7.6; statsmodels RLM "H1").
+        psi = np.clip(z0, -huber, huber)
+        dpsi = float(np.mean(np.abs(z0) <= huber))
+        info = J.T @ J
+        dof = max(z0.size - idx.size, 1)
+        sigma2 = float((psi * psi).sum() / dof) / max(dpsi, 1e-3) ** 2
         zh = z0[: h_idx.size * 3].reshape(-1, 3)
         tau = max(_integrated_autocorr_time(zh[:, k], runs) for k in range(3))
         var = sigma2 * tau
@@ -876,6 +882,12 @@ def fit_calibration(
         return info, cov, var, tau
 
     fixed: list[FixedParameter] = []
+    for name, why in (fix or {}).items():
+        if name not in PARAMETERS:
+            raise CalibrationError(f"unknown parameter {name!r}")
+        if free[PARAMETERS.index(name)]:
+            fixed.append(FixedParameter(name, init[name], why))
+            free[PARAMETERS.index(name)] = False
     theta = theta0.copy()
     for _ in range(len(PARAMETERS)):
         theta = theta0.copy()

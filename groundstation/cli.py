@@ -1,4 +1,4 @@
-"""Command line: ``groundstation serve | sim | demo | record | replay``.
+"""Command line: ``groundstation serve | sim | demo | record | replay | calibrate``.
 
 Flags of the public contract are kept exactly (``../shared/INTERFACE.md``); the ones added
 beside them are listed in README.md. Every long-running command stops on SIGINT or SIGTERM,
@@ -363,6 +363,20 @@ def cmd_replay(args: argparse.Namespace) -> int:
     return int(recording.run_replay(settings, args.file, speed=args.speed, stop_event=stop))
 
 
+def cmd_calibrate(args: argparse.Namespace) -> int:
+    from groundstation.recording.calibrate import run_calibrate
+
+    settings = _load(args)
+    return run_calibrate(
+        settings,
+        args.config,
+        args.files,
+        args.out,
+        drone=args.drone,
+        fit_tether=args.fit_tether,
+    )
+
+
 # --------------------------------------------------------------------------- parser
 
 
@@ -430,6 +444,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", metavar="OUT.mcap")
     p.add_argument("--figures", metavar="DIR", help="with --offline: draw figures here")
     p.set_defaults(func=cmd_replay)
+
+    p = sub.add_parser(
+        "calibrate", help="fit thrust scale, thrust axis, accelerometer bias from recordings"
+    )
+    p.add_argument("files", metavar="FILE.mcap", nargs="+", help="recordings with motion capture")
+    p.add_argument("--config", metavar="PATH", help="TOML configuration (the output's base)")
+    p.add_argument("--drone", metavar="ID", help="calibrate this drone only")
+    p.add_argument("--out", required=True, metavar="PATH.toml", help="configuration to write")
+    p.add_argument(
+        "--fit-tether", action="store_true", help="also fit the tether's ω and the base position"
+    )
+    p.add_argument("--log-level", choices=["DEBUG", "INFO", "WARNING", "ERROR"])
+    p.set_defaults(func=cmd_calibrate)
     return parser
 
 

@@ -161,3 +161,44 @@ def concat(*parts: CalibrationData) -> CalibrationData:
             for name in CalibrationData.__dataclass_fields__
         }
     )
+
+
+def write_mcap(
+    path: str,
+    data: CalibrationData,
+    *,
+    drone: str = "cf1",
+    mocap: bool = True,
+    reel_length_m: float | None = 1.6,
+    reel_base_m: tuple[float, float, float] | None = (0.0, 0.0, 0.754),
+) -> None:
+    """A recording as ``groundstation record`` writes it: Telemetry (and a Reel) as JSON."""
+    import json
+
+    from groundstation.recording.mcap_io import RecordedMessage, _copy_messages
+
+    msgs = []
+    t_ns = 1_700_000_000_000_000_000
+    if reel_length_m is not None:
+        reel = {"stamp_s": 0.0, "length_m": reel_length_m}
+        if reel_base_m is not None:
+            reel["base_m"] = list(reel_base_m)
+        msgs.append(RecordedMessage(f"tether/{drone}/reel", json.dumps(reel).encode(), t_ns, t_ns))
+    for i in range(len(data)):
+        tel = {
+            "seq": i,
+            "stamp_s": float(data.stamp_s[i]),
+            "accel_mps2": data.accel_body_mps2[i].tolist(),
+            "quat_wxyz": data.quat_wxyz[i].tolist(),
+            "thrust_n": float(data.thrust_n[i]),
+            "armed": bool(data.armed[i]),
+        }
+        if np.all(np.isfinite(data.gyro_rps[i])):
+            tel["gyro_rps"] = data.gyro_rps[i].tolist()
+        if mocap and np.all(np.isfinite(data.position_world_m[i])):
+            tel["position_m"] = data.position_world_m[i].tolist()
+        if math.isfinite(data.vbat_v[i]):
+            tel["vbat_v"] = float(data.vbat_v[i])
+        t = t_ns + int((float(data.stamp_s[i]) + 1.0) * 1e9)
+        msgs.append(RecordedMessage(f"tether/{drone}/telemetry", json.dumps(tel).encode(), t, t))
+    _copy_messages(msgs, __import__("pathlib").Path(path))
