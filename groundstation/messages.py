@@ -215,6 +215,9 @@ class Estimate(_Out):
     """(added) Tether length used."""
     base_m: tuple[float, float, float] | None = None
     """(added) Base exit point used."""
+    calibration: str = "none"
+    """(added) Which sensor calibration the observation applied (``[calibration] source``,
+    ``config`` for unlabelled values), or ``none``."""
 
 
 class Setpoint(_Out):

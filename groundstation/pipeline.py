@@ -24,7 +24,7 @@ import numpy as np
 
 from groundstation import follow as follow_mod
 from groundstation.bus import Sample
-from groundstation.config import DroneParams, Settings
+from groundstation.config import CalibrationSection, DroneParams, Settings
 from groundstation.localization import PositionEstimate, localize
 from groundstation.messages import (
     Estimate,
@@ -40,13 +40,14 @@ from groundstation.messages import (
 )
 from groundstation.tension import (
     DegenerateQuaternionError,
+    ObservationCalibration,
     TensionError,
     TensionFilter,
     TensionFilterParams,
     observe_tension,
 )
 
-__all__ = ["DroneRuntime", "Parsed", "Pipeline"]
+__all__ = ["DroneRuntime", "Parsed", "Pipeline", "calibration_from_config"]
 
 _INPUT_MODELS: dict[str, type[Telemetry] | type[Reel] | type[FollowCommand] | type[TetherParams]]
 _INPUT_MODELS = {
@@ -126,6 +127,33 @@ class DroneRuntime:
     """Last tug-to-land height, restored when tug-to-land is switched back on."""
     follow_info_cache: tuple[follow_mod.FollowParams, tuple[Any, ...], FollowInfo] | None = None
     """The last Estimate's FollowInfo, with the params and flags it was made from."""
+    calibration: ObservationCalibration | None = None
+    """Sensor corrections applied in the observation (None: none in force)."""
+    calibration_source: str = "none"
+    """Which calibration is in force (Estimate and status ``calibration``)."""
+
+
+def calibration_from_config(
+    section: CalibrationSection,
+) -> tuple[ObservationCalibration | None, str]:
+    """The observation's corrections from ``[calibration]``, and the label reported for them.
+
+    The label is the section's ``source``; values that differ from the defaults without a
+    source are labelled ``config`` (never ``none`` while something is applied).
+
+    Returns:
+        ``(calibration or None when it changes nothing, label)``.
+    """
+    cal = ObservationCalibration(
+        thrust_scale=section.thrust_scale,
+        thrust_axis_rad=section.thrust_axis_rad,
+        accel_bias_mps2=section.accel_bias_mps2,
+        thrust_vbat_slope_per_v=section.thrust_vbat_slope_per_v,
+        thrust_vbat_ref_v=section.thrust_vbat_ref_v,
+    )
+    if cal.is_identity:
+        return None, section.source
+    return cal, section.source if section.source != "none" else "config"
 
 
 class Pipeline:
@@ -260,6 +288,7 @@ class Pipeline:
             thrust_noise_n=params.drone.thrust_noise_n,
         )
         fcfg = params.follow
+        calibration, calibration_source = calibration_from_config(params.calibration)
         runtime = DroneRuntime(
             drone=drone,
             params=params,
@@ -270,6 +299,8 @@ class Pipeline:
             length_m=params.tether.length_m,
             base_world_m=np.array(params.base.position_m, dtype=float),
             weight_n_per_m=params.tether.weight_n_per_m,
+            calibration=calibration,
+            calibration_source=calibration_source,
         )
         with self._lock:
             self.drones[drone] = runtime
@@ -300,6 +331,8 @@ class Pipeline:
                 msg.thrust_n,
                 runtime.params.drone.mass_kg,
                 armed=msg.armed,
+                calibration=runtime.calibration,
+                vbat_v=msg.vbat_v,
             )
         except DegenerateQuaternionError as exc:
             self.count_drop(runtime.drone, "bad_quaternion", str(exc))
@@ -348,7 +381,9 @@ class Pipeline:
             # that a tether resting on the floor pulls on the drone with next to nothing.
             runtime.filter.reset(prior_world_n=(0.0, 0.0, 0.0), prior_std_n=LIFTOFF_PRIOR_STD_N)
         else:
-            est = runtime.filter.update(obs.tension_world_n, dt_s, msg.quat_wxyz)
+            est = runtime.filter.update(
+                obs.tension_world_n, dt_s, thrust_axis_world=obs.thrust_axis_world
+            )
             if est.change_detected:
                 runtime.change_detections += 1
             # Python floats from here on: a handful of numbers per message, for which
@@ -444,6 +479,7 @@ class Pipeline:
             converged=converged,
             length_m=runtime.length_m,
             base_m=_vec3(runtime.base_world_m),
+            calibration=runtime.calibration_source,
         )
 
     def _follow_info(self, runtime: DroneRuntime) -> FollowInfo:
@@ -504,6 +540,7 @@ class Pipeline:
             "length_source": runtime.length_source,
             "base_m": list(map(float, runtime.base_world_m)),
             "weight_n_per_m": runtime.weight_n_per_m,
+            "calibration": runtime.calibration_source,
         }
 
     def drone_ids(self) -> Iterable[str]:

@@ -30,9 +30,11 @@ from numpy.typing import ArrayLike, NDArray
 
 __all__ = [
     "GRAVITY_MPS2",
+    "NO_CALIBRATION",
     "DegenerateQuaternionError",
     "InvalidObservationError",
     "InvalidTimeStepError",
+    "ObservationCalibration",
     "TensionError",
     "TensionEstimate",
     "TensionFilter",
@@ -111,25 +113,12 @@ def _vector3(value: ArrayLike, name: str) -> FloatArray:
     return arr
 
 
-# The last tuple normalised, and the result: one telemetry sample's attitude is used by
-# observe_tension and again by TensionFilter.update. Only tuples (immutable) are cached,
-# by identity; the cache holds a reference, so the identity cannot be reused meanwhile.
-_last_unit_quaternion: tuple[object, tuple[float, float, float, float]] = (
-    None,
-    (1.0, 0.0, 0.0, 0.0),
-)
-
-
 def _unit_quaternion(quat_wxyz: ArrayLike) -> tuple[float, float, float, float]:
     """``quat_wxyz / |quat_wxyz|`` as floats; raises as :func:`rotation_world_body`.
 
     The sum of squares is taken in the order of numpy's 4-term dot (``q @ q``), so the
     result is the one the array code gives, bit for bit.
     """
-    global _last_unit_quaternion
-    last = _last_unit_quaternion
-    if last[0] is quat_wxyz:
-        return last[1]
     q = _floats(quat_wxyz, 4)
     if q is not None:
         w, x, y, z = q
@@ -137,10 +126,7 @@ def _unit_quaternion(quat_wxyz: ArrayLike) -> tuple[float, float, float, float]:
         if math.isfinite(ss):  # also: every entry is finite
             norm = math.sqrt(ss)
             if norm >= _QUAT_MIN_NORM:
-                unit = (w / norm, x / norm, y / norm, z / norm)
-                if type(quat_wxyz) is tuple:
-                    _last_unit_quaternion = (quat_wxyz, unit)
-                return unit
+                return w / norm, x / norm, y / norm, z / norm
     # Degenerate, overflowing or an unusual type: the array code raises or copes.
     w, x, y, z = _unit_quaternion_array(quat_wxyz).tolist()
     return w, x, y, z
@@ -195,6 +181,97 @@ def rotation_world_body(quat_wxyz: ArrayLike) -> FloatArray:
 
 
 @dataclass(frozen=True)
+class ObservationCalibration:
+    """Sensor corrections applied in :func:`observe_tension` (config ``[calibration]``).
+
+    The model, in the body frame of the attitude that Telemetry reports::
+
+        f   = accel_mps2 - accel_bias_mps2
+        F   = thrust_n * (thrust_scale + thrust_vbat_slope_per_v * (vbat_v - thrust_vbat_ref_v))
+        b   = R_x(about_x) R_y(about_y) e3
+            = (sin about_y, -sin about_x cos about_y, cos about_x cos about_y)
+        T   = m R f - R b F                      # eq:NE_tether with the corrections
+
+    The voltage term applies only when the sample carries ``vbat_v``. The defaults change
+    nothing (``T = m R f - R e3 F``, bit for bit the uncalibrated formula).
+
+    Attributes:
+        thrust_scale: Factor on the reported thrust (the nominal PWM->thrust map's error),
+            dimensionless, > 0.
+        thrust_axis_rad: The thrust axis as a small rotation of body +z,
+            ``(about_x, about_y)``, rad.
+        accel_bias_mps2: Subtracted from the accelerometer reading, body frame, m/s^2,
+            shape (3,).
+        thrust_vbat_slope_per_v: Change of the thrust scale per volt above
+            ``thrust_vbat_ref_v``, 1/V.
+        thrust_vbat_ref_v: Battery voltage at which ``thrust_scale`` holds, V, > 0.
+    """
+
+    thrust_scale: float = 1.0
+    thrust_axis_rad: tuple[float, float] = (0.0, 0.0)
+    accel_bias_mps2: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    thrust_vbat_slope_per_v: float = 0.0
+    thrust_vbat_ref_v: float = 3.9
+    thrust_axis_body: tuple[float, float, float] = field(init=False, repr=False)
+    """``b = R_x(about_x) R_y(about_y) e3``, body frame, unit (derived)."""
+
+    def __post_init__(self) -> None:
+        values = (
+            self.thrust_scale,
+            *self.thrust_axis_rad,
+            *self.accel_bias_mps2,
+            self.thrust_vbat_slope_per_v,
+            self.thrust_vbat_ref_v,
+        )
+        if len(self.thrust_axis_rad) != 2 or len(self.accel_bias_mps2) != 3:
+            raise ValueError(
+                "ObservationCalibration needs thrust_axis_rad of 2 and accel_bias_mps2 of 3 "
+                f"values, got {self.thrust_axis_rad!r} and {self.accel_bias_mps2!r}"
+            )
+        if not all(math.isfinite(v) for v in values):
+            raise ValueError(f"ObservationCalibration values must be finite, got {self!r}")
+        if not (self.thrust_scale > 0.0 and self.thrust_vbat_ref_v > 0.0):
+            raise ValueError(
+                "ObservationCalibration.thrust_scale and thrust_vbat_ref_v must be > 0, got "
+                f"{self.thrust_scale!r} and {self.thrust_vbat_ref_v!r}"
+            )
+        about_x, about_y = self.thrust_axis_rad
+        if about_x == 0.0 and about_y == 0.0:
+            axis = (0.0, 0.0, 1.0)
+        else:
+            axis = (
+                math.sin(about_y),
+                -math.sin(about_x) * math.cos(about_y),
+                math.cos(about_x) * math.cos(about_y),
+            )
+        object.__setattr__(self, "thrust_axis_body", axis)
+
+    @property
+    def is_identity(self) -> bool:
+        """True when the corrections change nothing (the defaults, any ``vbat_v``)."""
+        return (
+            self.thrust_scale == 1.0
+            and self.thrust_axis_rad == (0.0, 0.0)
+            and self.accel_bias_mps2 == (0.0, 0.0, 0.0)
+            and self.thrust_vbat_slope_per_v == 0.0
+        )
+
+    def thrust_factor(self, vbat_v: float | None) -> float:
+        """Factor on ``thrust_n``: ``thrust_scale + slope * (vbat_v - ref)``, dimensionless.
+
+        Args:
+            vbat_v: Battery voltage of the sample, V, or None (then ``thrust_scale``).
+        """
+        if vbat_v is None or self.thrust_vbat_slope_per_v == 0.0:
+            return self.thrust_scale
+        return self.thrust_scale + self.thrust_vbat_slope_per_v * (vbat_v - self.thrust_vbat_ref_v)
+
+
+NO_CALIBRATION = ObservationCalibration()
+"""The identity calibration (immutable)."""
+
+
+@dataclass(frozen=True)
 class TensionObservation:
     """One raw tension observation, or the reason there is none.
 
@@ -204,11 +281,16 @@ class TensionObservation:
         on_ground: True when the sample was taken in ground contact (no estimate).
         reason: ``"ok"``, ``"disarmed"`` (motors not armed) or ``"low_thrust"``
             (thrust below half the weight, so the floor carries the drone).
+        thrust_axis_world: The (calibrated) thrust axis ``R b`` in the world frame, unit,
+            3 floats; orients the thrust-noise part of the observation covariance.
+        thrust_n: The calibrated collective thrust ``F``, N.
     """
 
     tension_world_n: FloatArray | None
     on_ground: bool
     reason: Literal["ok", "disarmed", "low_thrust"]
+    thrust_axis_world: tuple[float, float, float] = (0.0, 0.0, 1.0)
+    thrust_n: float = math.nan
 
 
 def observe_tension(
@@ -218,22 +300,26 @@ def observe_tension(
     mass_kg: float,
     armed: bool = True,
     gravity_mps2: float = GRAVITY_MPS2,
+    calibration: ObservationCalibration | None = None,
+    vbat_v: float | None = None,
 ) -> TensionObservation:
     """Raw tension observation from one IMU + thrust sample (``eq:NE_tether``).
 
     The IMU reads the specific force ``f = R_world_body^T (p'' - g)`` with
     ``g = (0, 0, -gravity)``. Newton-Euler for the drone,
-    ``m p'' = R e3 F + T + m g + F_ext``, then gives::
+    ``m p'' = R b F + T + m g + F_ext``, then gives::
 
-        T = m R f - R e3 F          # eq:NE_tether with F_ext = 0
+        T = m R f - R b F           # eq:NE_tether with F_ext = 0
 
-    The paper writes ``m(a + g) - R F``; with the IMU's specific force this is the same
-    content (NOTES "Tension observation"). External forces (drag) are neglected, as in
-    the paper: at hover they are far below the noise.
+    with ``b = e3`` and ``f``, ``F`` as reported unless a ``calibration`` corrects them
+    (:class:`ObservationCalibration`: accelerometer bias, thrust scale and its battery
+    slope, thrust axis). The paper writes ``m(a + g) - R F``; with the IMU's specific
+    force this is the same content (NOTES "Tension observation"). External forces (drag)
+    are neglected, as in the paper: at hover they are far below the noise.
 
     On the ground the floor's reaction (about the weight, ~0.3 N) would show up as
-    upward "tension". So a sample from a disarmed drone, or with thrust below half the
-    weight ``m * gravity / 2``, yields no tension, flagged with the reason.
+    upward "tension". So a sample from a disarmed drone, or with (calibrated) thrust below
+    half the weight ``m * gravity / 2``, yields no tension, flagged with the reason.
 
     Args:
         accel_body_mps2: IMU specific force in the body frame, m/s^2, shape (3,)
@@ -243,6 +329,9 @@ def observe_tension(
         mass_kg: Drone mass, kg, > 0.
         armed: Whether the motors are armed.
         gravity_mps2: Magnitude of gravity, m/s^2.
+        calibration: Sensor corrections, or None for none.
+        vbat_v: Battery voltage of the sample, V (> 0), or None; used only by the
+            calibration's battery slope.
 
     Returns:
         The observation (tension in the world frame, N) or the ground-contact reason.
@@ -250,7 +339,7 @@ def observe_tension(
     Raises:
         DegenerateQuaternionError: If the quaternion cannot be normalised.
         InvalidObservationError: If the acceleration is not a finite 3-vector, or the
-            thrust, mass or gravity is not finite or out of range.
+            thrust, mass, gravity or battery voltage is not finite or out of range.
     """
     w, x, y, z = _unit_quaternion(quat_wxyz)  # raises first, as rotation_world_body did
     accel = _floats(accel_body_mps2, 3)
@@ -262,26 +351,50 @@ def observe_tension(
         raise InvalidObservationError(f"mass_kg must be finite and > 0, got {mass_kg!r}")
     if not (math.isfinite(gravity_mps2) and gravity_mps2 > 0.0):
         raise InvalidObservationError(f"gravity_mps2 must be finite and > 0, got {gravity_mps2!r}")
-    if not armed:
-        return TensionObservation(None, True, "disarmed")
-    if thrust_n < 0.5 * mass_kg * gravity_mps2:
-        return TensionObservation(None, True, "low_thrust")
-    # T = R (m f - e3 F): one rotation instead of two; R as in rotation_world_body,
-    # multiplied out in scalars (numpy's overhead is most of the cost for a 3-vector).
-    fx = mass_kg * accel[0]
-    fy = mass_kg * accel[1]
-    fz = mass_kg * accel[2] - thrust_n
+    if vbat_v is not None and not (math.isfinite(vbat_v) and vbat_v > 0.0):
+        raise InvalidObservationError(f"vbat_v must be finite and > 0, got {vbat_v!r}")
+    bx, by, bz = 0.0, 0.0, 1.0
+    if calibration is not None:
+        thrust_n = thrust_n * calibration.thrust_factor(vbat_v)
+        ax, ay, az = calibration.accel_bias_mps2
+        accel = [accel[0] - ax, accel[1] - ay, accel[2] - az]
+        bx, by, bz = calibration.thrust_axis_body
     xx, yy, zz = x * x, y * y, z * z
     xy, xz, yz, wx, wy, wz = x * y, x * z, y * z, w * x, w * y, w * z
+    # R as in rotation_world_body, multiplied out in scalars (numpy's per-call overhead is
+    # most of the cost for a 3-vector; docs/pipeline_benchmark.md).
+    r00, r01, r02 = 1.0 - 2.0 * (yy + zz), 2.0 * (xy - wz), 2.0 * (xz + wy)
+    r10, r11, r12 = 2.0 * (xy + wz), 1.0 - 2.0 * (xx + zz), 2.0 * (yz - wx)
+    r20, r21, r22 = 2.0 * (xz - wy), 2.0 * (yz + wx), 1.0 - 2.0 * (xx + yy)
+    if bx == 0.0 and by == 0.0:
+        axis_world = (r02, r12, r22)
+    else:
+        axis_world = (
+            r00 * bx + r01 * by + r02 * bz,
+            r10 * bx + r11 * by + r12 * bz,
+            r20 * bx + r21 * by + r22 * bz,
+        )
+    if not (math.isfinite(thrust_n) and thrust_n >= 0.0):
+        raise InvalidObservationError(
+            f"calibrated thrust must be finite and >= 0, got {thrust_n!r} (vbat_v={vbat_v!r})"
+        )
+    if not armed:
+        return TensionObservation(None, True, "disarmed", axis_world, thrust_n)
+    if thrust_n < 0.5 * mass_kg * gravity_mps2:
+        return TensionObservation(None, True, "low_thrust", axis_world, thrust_n)
+    # T = R (m f - b F): one rotation instead of two.
+    fx = mass_kg * accel[0] - bx * thrust_n
+    fy = mass_kg * accel[1] - by * thrust_n
+    fz = mass_kg * accel[2] - bz * thrust_n
     tension = np.array(
         [
-            (1.0 - 2.0 * (yy + zz)) * fx + 2.0 * (xy - wz) * fy + 2.0 * (xz + wy) * fz,
-            2.0 * (xy + wz) * fx + (1.0 - 2.0 * (xx + zz)) * fy + 2.0 * (yz - wx) * fz,
-            2.0 * (xz - wy) * fx + 2.0 * (yz + wx) * fy + (1.0 - 2.0 * (xx + yy)) * fz,
+            r00 * fx + r01 * fy + r02 * fz,
+            r10 * fx + r11 * fy + r12 * fz,
+            r20 * fx + r21 * fy + r22 * fz,
         ]
     )
     tension.setflags(write=False)
-    return TensionObservation(tension, False, "ok")
+    return TensionObservation(tension, False, "ok", axis_world, thrust_n)
 
 
 def observation_cov_n2(
@@ -639,6 +752,7 @@ class TensionFilter:
         tension_obs_world_n: ArrayLike,
         dt_s: float,
         quat_wxyz: ArrayLike | None = None,
+        thrust_axis_world: tuple[float, float, float] | None = None,
     ) -> TensionEstimate:
         """One filter step with an observation.
 
@@ -649,6 +763,9 @@ class TensionFilter:
                 observation after start or reset).
             quat_wxyz: Attitude of the sample, body->world ``[w, x, y, z]``, to orient
                 the thrust-noise part of R; None takes the thrust axis as world +z.
+            thrust_axis_world: The thrust axis in the world frame, unit, 3 floats
+                (``TensionObservation.thrust_axis_world``); when given it replaces the
+                axis derived from ``quat_wxyz``.
 
         Returns:
             The estimate after this step.
@@ -663,7 +780,7 @@ class TensionFilter:
             self._set_constants()
         y = _vector3(tension_obs_world_n, "tension_obs_world_n")
         dt = _check_dt(dt_s)
-        u = _thrust_axis(quat_wxyz)
+        u = _thrust_axis(quat_wxyz) if thrust_axis_world is None else thrust_axis_world
         R = self._observation_cov(u)
         kf = self._kf
         if not self._initialized and self._prior is None:

@@ -13,9 +13,11 @@ from hypothesis import strategies as st
 
 from groundstation.tension import (
     GRAVITY_MPS2,
+    NO_CALIBRATION,
     DegenerateQuaternionError,
     InvalidObservationError,
     InvalidTimeStepError,
+    ObservationCalibration,
     TensionFilter,
     TensionFilterParams,
     observation_cov_n2,
@@ -204,6 +206,98 @@ def test_invalid_observation_inputs_raise(
 ) -> None:
     with pytest.raises(InvalidObservationError, match=match):
         observe_tension(accel, [1, 0, 0, 0], thrust, mass)
+
+
+def _rot_x(a: float) -> np.ndarray:
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+
+
+def _rot_y(a: float) -> np.ndarray:
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
+@pytest.mark.parametrize("with_vbat", [True, False])
+def test_calibration_recovers_the_true_tension_from_a_corrupted_sample(with_vbat: bool) -> None:
+    """A sample synthesised with known sensor errors, observed with the matching calibration.
+
+    Truth first: attitude, thrust axis b = R_x(about_x) R_y(about_y) e3 in the body frame,
+    thrust F, acceleration p'' and tension T obey m p'' = R b F + T + m g. The sensors then
+    report accel = R^T (p'' - g) + bias and thrust_n = F / (scale + slope (vbat - ref)).
+    """
+    rng = np.random.default_rng(7)
+    for _ in range(200):
+        about = tuple(rng.uniform(-0.1, 0.1, 2))
+        bias = tuple(rng.uniform(-0.8, 0.8, 3))
+        cal = ObservationCalibration(
+            thrust_scale=float(rng.uniform(0.5, 1.9)),
+            thrust_axis_rad=(float(about[0]), float(about[1])),
+            accel_bias_mps2=(float(bias[0]), float(bias[1]), float(bias[2])),
+            thrust_vbat_slope_per_v=float(rng.uniform(-0.3, 0.3)),
+            thrust_vbat_ref_v=3.9,
+        )
+        vbat = float(rng.uniform(3.3, 4.2)) if with_vbat else None
+        quat = rng.normal(size=4)
+        quat /= np.linalg.norm(quat)
+        R = rotation_world_body(quat)
+        b_body = _rot_x(about[0]) @ _rot_y(about[1]) @ E3
+        thrust_true_n = float(rng.uniform(0.35, 0.8))
+        accel_world = rng.normal(0.0, 2.0, 3)
+        tension_true = MASS_KG * accel_world - R @ b_body * thrust_true_n - MASS_KG * G_WORLD_MPS2
+        accel_reported = R.T @ (accel_world - G_WORLD_MPS2) + np.array(bias)
+        factor = cal.thrust_scale + (
+            cal.thrust_vbat_slope_per_v * (vbat - cal.thrust_vbat_ref_v) if vbat else 0.0
+        )
+        thrust_reported = thrust_true_n / factor
+        obs = observe_tension(
+            accel_reported, quat, thrust_reported, MASS_KG, calibration=cal, vbat_v=vbat
+        )
+        assert obs.tension_world_n is not None
+        np.testing.assert_allclose(obs.tension_world_n, tension_true, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(obs.thrust_axis_world, R @ b_body, rtol=0, atol=1e-12)
+        assert obs.thrust_n == pytest.approx(thrust_true_n, rel=1e-12)
+        # Without the calibration the same sample is off (the errors are not negligible).
+        raw = observe_tension(accel_reported, quat, thrust_reported, MASS_KG)
+        assert raw.tension_world_n is not None
+        assert np.linalg.norm(raw.tension_world_n - tension_true) > 1e-3
+
+
+def test_identity_calibration_changes_nothing_bit_for_bit() -> None:
+    rng = np.random.default_rng(8)
+    for _ in range(50):
+        quat = rng.normal(size=4)
+        accel = rng.normal(0.0, 5.0, 3)
+        a = observe_tension(accel, quat, 0.4, MASS_KG)
+        b = observe_tension(accel, quat, 0.4, MASS_KG, calibration=NO_CALIBRATION, vbat_v=3.7)
+        assert a.tension_world_n is not None and b.tension_world_n is not None
+        assert a.tension_world_n.tolist() == b.tension_world_n.tolist()
+        assert a.thrust_axis_world == b.thrust_axis_world
+    assert NO_CALIBRATION.is_identity
+    assert not ObservationCalibration(thrust_scale=1.1).is_identity
+
+
+def test_calibrated_thrust_decides_ground_contact_and_bad_values_raise() -> None:
+    # 0.2 N reported is above half the weight (0.147 N); scaled by 0.5 it is below.
+    level = np.array([1.0, 0.0, 0.0, 0.0])
+    accel = np.array([0.0, 0.0, GRAVITY_MPS2])
+    assert observe_tension(accel, level, 0.2, MASS_KG).reason == "ok"
+    half = ObservationCalibration(thrust_scale=0.5)
+    assert observe_tension(accel, level, 0.2, MASS_KG, calibration=half).reason == "low_thrust"
+    with pytest.raises(InvalidObservationError, match="vbat_v"):
+        observe_tension(accel, level, 0.2, MASS_KG, vbat_v=-1.0)
+    # a battery slope that drives the factor negative is reported, not used
+    steep = ObservationCalibration(thrust_vbat_slope_per_v=2.0, thrust_vbat_ref_v=3.9)
+    with pytest.raises(InvalidObservationError, match="calibrated thrust"):
+        observe_tension(accel, level, 0.2, MASS_KG, calibration=steep, vbat_v=3.0)
+    for bad in (
+        {"thrust_scale": 0.0},
+        {"thrust_axis_rad": (0.0, math.nan)},
+        {"accel_bias_mps2": (0.0, 0.0)},
+        {"thrust_vbat_ref_v": -3.9},
+    ):
+        with pytest.raises(ValueError):
+            ObservationCalibration(**bad)  # type: ignore[arg-type]
 
 
 def test_observation_covariance_matches_monte_carlo() -> None:
