@@ -456,15 +456,13 @@ class RestCalibrator:
         self._g = float(gravity_mps2)
         self._offset: RestOffset | None = None
         self._armed_prev: bool | None = None
+        self._sum = self._sum2 = self._sum_a = self._first_accel = np.zeros(3)
         self._clear_window()
 
     def _clear_window(self) -> None:
+        # The sums restart with the window's first sample (cheap while armed: every sample).
         self._n = 0
         self._t0 = self._t_last = math.nan
-        self._sum = np.zeros(3)  # Σ (a − b − Rᵀ g e3)
-        self._sum2 = np.zeros(3)
-        self._first_accel = np.zeros(3)
-        self._sum_a = np.zeros(3)  # Σ (a − first a): the window's mean accelerometer
 
     @property
     def offset(self) -> RestOffset | None:
@@ -499,7 +497,7 @@ class RestCalibrator:
             self._clear_window()
         self._armed_prev = armed
         if armed:
-            self._clear_window()
+            self._n = 0
             return self._offset
         a = np.asarray(accel_body_mps2, dtype=float).reshape(3)
         q = np.asarray(quat_wxyz, dtype=float).reshape(4)
@@ -524,6 +522,9 @@ class RestCalibrator:
         if self._n == 0:
             self._t0 = stamp_s
             self._first_accel = a.copy()
+            self._sum = np.zeros(3)  # Σ (a − b − Rᵀ g e3)
+            self._sum2 = np.zeros(3)
+            self._sum_a = np.zeros(3)  # Σ (a − first a): the window's mean accelerometer
         self._sum_a = self._sum_a + (a - self._first_accel)
         self._n += 1
         self._t_last = stamp_s

@@ -24,6 +24,7 @@ import numpy as np
 
 from groundstation import follow as follow_mod
 from groundstation.bus import Sample
+from groundstation.calibration import RestCalibrator
 from groundstation.config import CalibrationSection, DroneParams, Settings
 from groundstation.localization import PositionEstimate, localize
 from groundstation.messages import (
@@ -131,6 +132,10 @@ class DroneRuntime:
     """Sensor corrections applied in the observation (None: none in force)."""
     calibration_source: str = "none"
     """Which calibration is in force (Estimate and status ``calibration``)."""
+    rest: RestCalibrator | None = None
+    """The rest calibration (``[calibration] rest``): the accelerometer's x/y offset found
+    while the drone sat still and disarmed, added to the configured bias until the next
+    disarm."""
 
 
 def calibration_from_config(
@@ -301,6 +306,11 @@ class Pipeline:
             weight_n_per_m=params.tether.weight_n_per_m,
             calibration=calibration,
             calibration_source=calibration_source,
+            rest=(
+                RestCalibrator(bias_body_mps2=params.calibration.accel_bias_mps2)
+                if params.calibration.rest
+                else None
+            ),
         )
         with self._lock:
             self.drones[drone] = runtime
@@ -323,10 +333,17 @@ class Pipeline:
 
     def _telemetry(self, runtime: DroneRuntime, msg: Telemetry, now_s: float) -> list[Sample]:
         runtime.received += 1
+        accel = msg.accel_mps2
+        if runtime.rest is not None:
+            # Rest calibration: the offset found at rest is extra accelerometer bias.
+            rest = runtime.rest.update(msg.stamp_s, accel, msg.quat_wxyz, msg.armed, msg.gyro_rps)
+            if rest is not None:
+                ox, oy, _ = rest.offset_body_mps2.tolist()
+                accel = (accel[0] - ox, accel[1] - oy, accel[2])
         # Malformed content first (whatever its seq), then the stream's order.
         try:
             obs = observe_tension(
-                msg.accel_mps2,
+                accel,
                 msg.quat_wxyz,
                 msg.thrust_n,
                 runtime.params.drone.mass_kg,
@@ -541,6 +558,7 @@ class Pipeline:
             "base_m": list(map(float, runtime.base_world_m)),
             "weight_n_per_m": runtime.weight_n_per_m,
             "calibration": runtime.calibration_source,
+            "rest_calibration": _rest_status(runtime.rest),
         }
 
     def drone_ids(self) -> Iterable[str]:
@@ -549,6 +567,22 @@ class Pipeline:
 
 
 _ZEROS3 = (0.0, 0.0, 0.0)
+
+
+def _rest_status(rest: RestCalibrator | None) -> dict[str, Any] | None:
+    """Status of the rest calibration: off (None), or the offset in force (or none yet)."""
+    if rest is None:
+        return None
+    off = rest.offset
+    if off is None:
+        return {"in_force": False}
+    return {
+        "in_force": True,
+        "offset_mps2": [float(v) for v in off.offset_body_mps2[:2]],
+        "std_mps2": [float(v) for v in off.std_mps2[:2]],
+        "duration_s": off.duration_s,
+        "stamp_s": off.stamp_s,
+    }
 
 
 def _finite(values: np.ndarray | Iterable[float]) -> bool:
