@@ -617,6 +617,8 @@ class CalibrationFit:
     spots: tuple[SpotError, ...]
     notes: tuple[str, ...]
     vbat_ref_v: float
+    vbat_range_v: tuple[float, float] | None = None
+    """Battery voltage range of the hover samples, V (None without ``vbat_v``)."""
 
 
 def _integrated_autocorr_time(z: FloatArray, runs: list[tuple[int, int]]) -> float:
@@ -700,7 +702,7 @@ def fit_calibration(
             Parameters not fitted keep these values.
         vbat_ref_v: voltage at which ``thrust_scale`` holds, V.
         fit_vbat: fit the voltage slope; None: when the hover samples carry ``vbat_v`` and
-            it spans at least 0.1 V.
+            it varies at all (≥ 0.02 V); the detection then decides whether it is determined.
         fit_tether: fit ω and a base offset too (tethered only).
         rest_offsets_body_mps2: (n, 3) per-sample rest offset the service would subtract on
             top of the bias (from :class:`RestCalibrator`), or None.
@@ -768,7 +770,7 @@ def fit_calibration(
     dv = np.where(have_v, vb - vbat_ref_v, 0.0)
     if fit_vbat is None:
         fit_vbat = (
-            bool(have_v.mean() > 0.9 and np.ptp(vb[have_v]) >= 0.1) if have_v.any() else False
+            bool(have_v.mean() > 0.9 and np.ptp(vb[have_v]) >= 0.02) if have_v.any() else False
         )
     if fit_tether and not tethered:
         fit_tether = False
@@ -937,6 +939,13 @@ def fit_calibration(
     spots: tuple[SpotError, ...] = ()
     if tethered:
         spots = _spot_errors(data, h_idx, runs, theta, idx, cov, res_h0, res_h1, model, floor_z_m)
+    vbat_range = (float(vb[have_v].min()), float(vb[have_v].max())) if have_v.any() else None
+    if vbat_range is not None and not free[PARAMETERS.index("vbat_slope_per_v")]:
+        notes.append(
+            f"battery {vbat_range[0]:.2f}–{vbat_range[1]:.2f} V in these hovers: thrust_scale "
+            "holds there; the battery's effect on thrust is not calibrated (calibrate over a "
+            "wider voltage range to fit thrust_vbat_slope_per_v)"
+        )
     if r_idx.size:
         notes.append(
             f"{r_idx.size} still, disarmed samples constrain the accelerometer bias"
@@ -959,6 +968,7 @@ def fit_calibration(
         spots=spots,
         notes=tuple(notes),
         vbat_ref_v=float(vbat_ref_v),
+        vbat_range_v=vbat_range,
     )
 
 
