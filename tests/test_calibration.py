@@ -199,3 +199,19 @@ def test_multi_segment_fit() -> None:
     assert len(fit.spots) == 4
     std = fit.std["thrust_scale"]
     assert std is not None and abs(fit.values["thrust_scale"] - 0.93) <= 3 * std
+
+
+def test_rest_assumption_an_unseen_floor_tilt_becomes_an_offset() -> None:
+    # The assumption made visible: if the attitude says level while the floor tilts by
+    # 1°, the specific force's tilt is read as an offset of g·sin(1°) (0.17 m/s²).
+    from scipy.spatial.transform import Rotation
+
+    tilt = math.radians(1.0)
+    R_floor = Rotation.from_euler("y", tilt).as_matrix()
+    cal = RestCalibrator()
+    for i in range(150):
+        cal.update(i * 0.01, R_floor.T @ [0, 0, 9.81], (1.0, 0.0, 0.0, 0.0), armed=False)
+    assert cal.offset is not None
+    np.testing.assert_allclose(
+        cal.offset.offset_body_mps2, [-9.81 * math.sin(tilt), 0.0, 0.0], atol=1e-9
+    )
