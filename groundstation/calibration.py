@@ -106,9 +106,9 @@ CONVENTIONS: tuple[tuple[str, str], ...] = (
     ),
     ("vbat_slope_per_v", "battery voltage does not vary enough apart from thrust; fixed at 0"),
     ("base_dz_m", "not determined by these spots; base height kept as recorded/configured"),
-    ("weight_n_per_m", "not determined by these spots; ω kept as configured"),
     ("base_dx_m", "not determined by these spots; base x kept as recorded/configured"),
     ("base_dy_m", "not determined by these spots; base y kept as recorded/configured"),
+    ("weight_n_per_m", "not determined by these spots; ω kept as configured"),
     ("bias_x_mps2", "not determined; fixed at 0"),
     ("bias_y_mps2", "not determined; fixed at 0"),
 )

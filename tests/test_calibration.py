@@ -215,3 +215,18 @@ def test_rest_assumption_an_unseen_floor_tilt_becomes_an_offset() -> None:
     np.testing.assert_allclose(
         cal.offset.offset_body_mps2, [-9.81 * math.sin(tilt), 0.0, 0.0], atol=1e-9
     )
+
+
+def test_fit_tether_recovers_the_tether_weight() -> None:
+    # ω 20 % off in the configuration; the six spots differ in sag enough to tell ω from the
+    # thrust scale. The base offset is not determined by them: fixed, and said so.
+    truth = Truth(thrust_scale=0.95, bias_mps2=(0.1, -0.1, 0.1))
+    data = flight(list(PAPER_HOVER_SPOTS_M), truth, seed=5, weight_n_per_m=0.06, rate_hz=50.0)
+    fit = fit_calibration(data, 0.030, weight_n_per_m=0.05, fit_tether=True)
+    std = fit.std["weight_n_per_m"]
+    assert std is not None and std < 0.005
+    assert abs(fit.values["weight_n_per_m"] - 0.06) <= 3 * std
+    s_std = fit.std["thrust_scale"]
+    assert s_std is not None and abs(fit.values["thrust_scale"] - 0.95) <= 3 * s_std
+    for f in fit.fixed:
+        assert f.name.startswith("base_d") and f.value == 0.0 and "not determined" in f.reason
