@@ -470,14 +470,12 @@ def write_doc(results: list[dict[str, Any]], quick: bool, dwell_s: float, seed: 
             f"- {r['case'].name}: fitted position error {100 * f:.1f} cm vs true {100 * t:.1f} cm"
             f" (ratio {f / t:.2f}, target ≤ 1.2: {ok})."
         )
-    for r in results:
-        f, t = _mean(r["fitted"]), _mean(r["true"])
         slope_fixed = [fd for fd in r["folds"] if "vbat_slope_per_v" not in fd["values"]]
         if f > 1.2 * t and slope_fixed:
             lines.append(
-                f"  - {r['case'].name}: in {len(slope_fixed)} of 3 folds the battery slope was"
-                " not determined by the calibration spots (their voltage spans only a few"
-                " hundredths of a volt at this vibration level) and the fit fixed it at 0, as it"
+                f"  Why: in {len(slope_fixed)} of 3 folds the battery slope was not determined"
+                " by the calibration spots (their voltage spans a few hundredths of a volt; at"
+                " this vibration level that does not pin it) and the fit fixed it at 0, as it"
                 " printed; the held-out spots fly at other voltages. The true calibration"
                 f" without its slope errs by {100 * _mean(r['true_no_slope']):.1f} cm."
             )
