@@ -1,4 +1,4 @@
-"""Command line: ``groundstation serve | sim | demo | record | replay | calibrate``.
+"""Command line: ``groundstation serve | sim | demo | record | replay | crazyflie | calibrate``.
 
 Flags of the public contract are kept exactly (``../shared/INTERFACE.md``); the ones added
 beside them are listed in README.md. Every long-running command stops on SIGINT or SIGTERM,
@@ -150,6 +150,9 @@ def _load(args: argparse.Namespace, base: dict[str, Any] | None = None) -> Setti
     extra = getattr(args, "sim_overrides", None)
     if extra:
         overrides["sim"] = extra
+    crazyflie = getattr(args, "crazyflie_overrides", None)
+    if crazyflie:
+        overrides["crazyflie"] = crazyflie
     settings = load_settings(args.config, overrides, base=base)
     _setup_logging(settings.service.log_level, settings.service.log_json)
     return settings
@@ -364,6 +367,47 @@ def cmd_replay(args: argparse.Namespace) -> int:
     return int(recording.run_replay(settings, args.file, speed=args.speed, stop_event=stop))
 
 
+def cmd_crazyflie(args: argparse.Namespace) -> int:
+    from groundstation.bridges.crazyflie import CrazyflieBridge, LinkError, make_link
+    from groundstation.messages import DRONE_ID_RE
+    from groundstation.zenoh_bus import ZenohBus
+
+    if not DRONE_ID_RE.fullmatch(args.drone):
+        print(f"groundstation: --drone {args.drone!r}: not [A-Za-z0-9_-]{{1,64}}", file=sys.stderr)
+        return 2
+    if args.rate_hz is not None:
+        args.crazyflie_overrides = {"rate_hz": args.rate_hz}
+    settings = _load(args)
+    # cflib logs every connection step at INFO, and warns on each connection that it has no
+    # TOC cache directory (an optional [crazyflie] toc_cache_dir).
+    cflib_level = logging.DEBUG if settings.service.log_level == "DEBUG" else logging.WARNING
+    logging.getLogger("cflib").setLevel(cflib_level)
+    if settings.crazyflie.toc_cache_dir is None:
+        logging.getLogger("cflib.crazyflie.toccache").setLevel(max(cflib_level, logging.ERROR))
+    try:
+        link = make_link(args.uri, settings, args.drone)
+    except LinkError as exc:
+        print(f"groundstation: {exc}", file=sys.stderr)
+        return 2
+    params = settings.for_drone(args.drone)
+    stop = _stop_on_signals()
+    with ZenohBus(settings.zenoh) as bus:
+        bridge = CrazyflieBridge(
+            settings.crazyflie,
+            bus,
+            args.drone,
+            link,
+            floor_z_m=params.base.floor_z_m,
+            reach=(params.base.position_m, params.tether.length_m),
+        )
+        print(
+            f"groundstation crazyflie: {args.uri} as tether/{args.drone} "
+            f"every {settings.crazyflie.log_period_ms} ms",
+            flush=True,
+        )
+        return bridge.run(stop)
+
+
 def cmd_calibrate(args: argparse.Namespace) -> int:
     from groundstation.recording.calibrate import run_calibrate
 
@@ -451,6 +495,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", metavar="OUT.mcap")
     p.add_argument("--figures", metavar="DIR", help="with --offline: draw figures here")
     p.set_defaults(func=cmd_replay)
+
+    p = sub.add_parser("crazyflie", help="bridge a Crazyflie (cflib) to the bus")
+    _add_common(p)
+    p.add_argument(
+        "--uri",
+        required=True,
+        metavar="URI",
+        help="cflib URI (radio://0/80/2M/E7E7E7E7E7, usb://0, udp://HOST:PORT); "
+        "fake://hover is a test fake, not a drone",
+    )
+    p.add_argument("--drone", required=True, metavar="ID", help="drone id on the bus")
+    p.add_argument("--rate-hz", type=float, metavar="HZ", help="telemetry rate (100)")
+    p.set_defaults(func=cmd_crazyflie)
 
     p = sub.add_parser(
         "calibrate", help="fit thrust scale, thrust axis, accelerometer bias from recordings"

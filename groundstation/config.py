@@ -3,7 +3,7 @@
 The TOML layout is the public contract (``../shared/INTERFACE.md``, "Configuration file"):
 ``[zenoh]``, ``[drone]``, ``[tether]``, ``[base]`` and per-drone overrides under
 ``[drones.<id>]`` with the same sub-tables. Tables added beside the contract: ``[follow]``,
-``[filter]``, ``[web]``, ``[service]``, ``[sim]`` (documented in README.md).
+``[filter]``, ``[web]``, ``[service]``, ``[sim]``, ``[crazyflie]`` (documented in README.md).
 
 Environment overrides use the prefix ``GROUNDSTATION_`` and ``__`` between levels, e.g.
 ``GROUNDSTATION_TETHER__WEIGHT_N_PER_M=0.04`` or ``GROUNDSTATION_ZENOH__CONNECT='["tcp/..."]'``.
@@ -41,6 +41,7 @@ __all__ = [
     "BaseSection",
     "CalibrationSection",
     "ConfigError",
+    "CrazyflieSection",
     "DroneOverride",
     "DroneParams",
     "DroneSection",
@@ -176,6 +177,12 @@ class WebSection(_Section):
     scene_budget_hz: float = Field(80.0, gt=0.0)
     """Drone redraws per second in all: with many drones each is drawn less often, so the
     dashboard's cost stays bounded and estimation keeps its capacity."""
+    panel: Literal["tab", "shared"] = "tab"
+    """(added) ``tab``: each browser tab has its own panel and selected drone; ``shared``:
+    one panel for every tab (a wall display mirroring the operator's)."""
+    forget_after_s: float = Field(60.0, ge=0.0)
+    """(added) A drone silent this long (seconds) is dropped from the scene and the selector;
+    it is drawn faded from ``[service] stale_after_s`` on. 0: never forget."""
 
 
 class ServiceSection(_Section):
@@ -354,6 +361,75 @@ class SimSection(_Section):
     duration_s: float | None = None
 
 
+class CrazyflieSection(_Section):
+    """``[crazyflie]`` (added): the bridge ``groundstation crazyflie`` (docs/real-lab.md).
+
+    The bridge publishes the nominal thrust of ``thrust_map``; the service applies
+    ``[calibration]`` on top, so a thrust scale is never applied twice.
+    """
+
+    thrust_map: tuple[float, float, float] = (2.130295e-11, 1.032633e-6, 5.484560e-4)
+    """``[a, b, c]``: thrust of one motor, ``a·pwm² + b·pwm + c`` newtons, pwm in 0..65535
+    (a motor at pwm 0 gives 0 N). The default is the widely used Crazyflie 2.x fit."""
+    motor_variables: Literal["motor", "pwm"] = "motor"
+    """``motor``: ``motor.m1..m4``; ``pwm``: ``pwm.m1_pwm..m4_pwm``. Where the firmware logs
+    both, ``motor.*`` is the request before its battery compensation (keep
+    ``thrust_vbat_slope_per_v = 0``) and ``pwm.*`` the duty after it (fit the slope); see
+    docs/real-lab.md, "compensating once"."""
+    attitude_source: Literal["estimator", "mocap"] = "estimator"
+    """``estimator``: ``stateEstimate.qw..qz``; ``mocap``: ``quat_wxyz`` of ``mocap_key``."""
+    mocap_key: str | None = None
+    """Zenoh key of the motion-capture pose of this drone, JSON ``{"position_m": [x, y, z],
+    "quat_wxyz": [w, x, y, z] (optional)}``; ``{drone}`` is replaced by the drone id."""
+    mocap_stale_s: float = Field(0.1, gt=0.0)
+    """A pose older than this (host clock) is not used: ``position_m`` is left out."""
+    send_extpos: bool = False
+    """Also forward each motion-capture pose to the drone's estimator (``extpos``)."""
+    armed_source: Literal["auto", "supervisor", "none"] = "auto"
+    """``supervisor``: bit 1 of ``supervisor.info``; ``auto``: that when the firmware logs it,
+    else no ``armed`` field; ``none``: never report ``armed``."""
+    rate_hz: float = Field(100.0, ge=0.5, le=100.0)
+    """Telemetry rate; the log period is the nearest multiple of 10 ms."""
+    slow_period_ms: int = Field(100, ge=10, le=2540)
+    """Period of the slowly changing variables (battery, armed), ms, a multiple of 10."""
+    watchdog_s: float = Field(0.5, gt=0.0)
+    """No fresh setpoint for this long: hold the last one (logged once); a setpoint computed
+    from telemetry older than this is dropped."""
+    yaw_deg: float | None = None
+    """Yaw of the position setpoints, degrees; None holds the yaw the drone has when the first
+    setpoint arrives."""
+    connect_timeout_s: float = Field(10.0, gt=0.0)
+    toc_cache_dir: str | None = None
+    """Directory where cflib caches the firmware's TOCs (faster reconnections); None: none."""
+    data_timeout_s: float = Field(1.0, gt=0.0)
+    """No log data for this long on an open link: taken as lost (a driver may not notice)."""
+    reconnect_max_s: float = Field(5.0, gt=0.0)
+    """Longest wait between reconnection attempts (the back-off doubles from 0.25 s)."""
+    status_period_s: float = Field(1.0, gt=0.0)
+    """Period of ``tether/{drone}/bridge`` status messages."""
+
+    @field_validator("slow_period_ms")
+    @classmethod
+    def _ten_ms_steps(cls, value: int) -> int:
+        if value % 10:
+            raise ValueError(f"{value!r}: Crazyflie log periods are multiples of 10 ms")
+        return value
+
+    @field_validator("thrust_map")
+    @classmethod
+    def _thrust_map(cls, value: tuple[float, float, float]) -> tuple[float, float, float]:
+        a, b, c = value
+        top = a * 65535.0**2 + b * 65535.0 + c
+        if not all(math.isfinite(v) for v in value) or not 0.0 < top < 10.0:
+            raise ValueError(f"{list(value)!r}: thrust at pwm 65535 must be within (0, 10) N")
+        return value
+
+    @property
+    def log_period_ms(self) -> int:
+        """The telemetry log period: ``1000 / rate_hz`` rounded to 10 ms steps, at least 10."""
+        return max(10, 10 * round(100.0 / self.rate_hz))
+
+
 class DroneOverride(_Section):
     """``[drones.<id>]``: any of the per-drone tables, partially."""
 
@@ -395,6 +471,7 @@ class Settings(BaseSettings):
     web: WebSection = WebSection()
     service: ServiceSection = ServiceSection()
     sim: SimSection = SimSection()
+    crazyflie: CrazyflieSection = CrazyflieSection()
     drones: dict[str, DroneOverride] = Field(default_factory=dict)
 
     @field_validator("drones")

@@ -21,9 +21,13 @@ __all__ = [
     "FollowCommand",
     "FollowInfo",
     "InvalidMessage",
+    "LandIn",
+    "MocapPoseIn",
     "Reel",
     "Setpoint",
+    "Status",
     "Stop",
+    "TakeoffIn",
     "Telemetry",
     "TetherParams",
     "Truth",
@@ -89,13 +93,17 @@ class _In(BaseModel):
         try:
             return cls.model_validate_json(payload)
         except ValidationError as exc:
-            errors = exc.errors(include_url=False, include_input=False)
-            if errors and errors[0]["type"] in {"json_invalid", "json_type"}:
-                raise InvalidMessage("not_json", errors[0]["msg"]) from None
-            detail = "; ".join(
-                f"{'.'.join(str(p) for p in e['loc']) or '<root>'}: {e['msg']}" for e in errors[:4]
-            )
-            raise InvalidMessage("invalid", f"{cls.__name__}: {detail}") from None
+            raise _invalid(cls.__name__, exc) from None
+
+
+def _invalid(model: str, exc: ValidationError) -> InvalidMessage:
+    errors = exc.errors(include_url=False, include_input=False)
+    if errors and errors[0]["type"] in {"json_invalid", "json_type"}:
+        return InvalidMessage("not_json", errors[0]["msg"])
+    detail = "; ".join(
+        f"{'.'.join(str(p) for p in e['loc']) or '<root>'}: {e['msg']}" for e in errors[:4]
+    )
+    return InvalidMessage("invalid", f"{model}: {detail}")
 
 
 class _Out(BaseModel):
@@ -104,6 +112,21 @@ class _Out(BaseModel):
     def to_json(self) -> bytes:
         """Compact UTF-8 JSON."""
         return self.model_dump_json().encode()
+
+    @classmethod
+    def read(cls, payload: bytes) -> Self:
+        """(added) Validate a payload another process published (the dashboard reads
+        Estimates, Truth, status): strict and finite as an input, unknown fields ignored at
+        every level, as the contract says, so a newer publisher's additions do not break a
+        reader. What this process publishes is still checked with ``extra="forbid"``.
+
+        Raises:
+            InvalidMessage: ``not_json`` or ``invalid`` with pydantic's reasons.
+        """
+        try:
+            return cls.model_validate_json(payload, strict=True, extra="ignore")
+        except ValidationError as exc:
+            raise _invalid(cls.__name__, exc) from None
 
 
 class Telemetry(_In):
@@ -274,3 +297,61 @@ class SetpointIn(_In):
 
     stamp_s: Finite
     position_m: Vec3
+
+
+class Status(_Out):
+    """(added) Ground station → anyone, the queryable ``tether/{drone}/status``: health of one
+    drone. Every field but ``drone`` may be absent (older or newer services)."""
+
+    drone: str
+    stale: bool | None = None
+    """No telemetry for longer than ``[service] stale_after_s``."""
+    telemetry_hz: float | None = None
+    estimate_hz: float | None = None
+    last_seen_age_s: float | None = None
+    """Seconds since the last telemetry; None: never."""
+    received: int | None = None
+    accepted: int | None = None
+    estimates: int | None = None
+    setpoints: int | None = None
+    stops: int | None = None
+    seq_gaps: int | None = None
+    drops: dict[str, int] | None = None
+    """Rejected inputs per kind."""
+    invalid: int | None = None
+    queue_overflow: int | None = None
+    filter: dict[str, Any] | None = None
+    """Filter state (``initialized``, ``change_detections``)."""
+    follow: FollowInfo | None = None
+    length_m: float | None = None
+    length_source: str | None = None
+    """``config``, ``reel`` or ``operator``."""
+    base_m: tuple[float, float, float] | None = None
+    weight_n_per_m: float | None = None
+    service: str | None = None
+    """The answering service instance."""
+    peers: int | None = None
+    """Zenoh peers and routers the service's session is connected to (0: nobody can reach it)."""
+
+
+class MocapPoseIn(_In):
+    """(added) Motion capture → Crazyflie bridge, on ``[crazyflie] mocap_key``."""
+
+    position_m: Vec3
+    """World frame (the contract's), metres."""
+    quat_wxyz: Vec4 | None = None
+    """Body → world, scalar first (needed with ``attitude_source = "mocap"``)."""
+
+
+class TakeoffIn(_In):
+    """(added) Operator → Crazyflie bridge, ``tether/{drone}/cmd/takeoff``: climb straight up."""
+
+    height_m: Finite = Field(gt=0.0, le=3.0)
+    """Target height, world z, metres."""
+    speed_mps: Finite = Field(default=0.25, gt=0.0, le=1.0)
+
+
+class LandIn(_In):
+    """(added) Operator → Crazyflie bridge, ``tether/{drone}/cmd/land``: down, motors off."""
+
+    speed_mps: Finite = Field(default=0.25, gt=0.0, le=1.0)

@@ -30,7 +30,7 @@ def _gs(*args: str, timeout_s: float = 60.0) -> subprocess.CompletedProcess[str]
 def test_help_version_and_scenarios() -> None:
     out = _gs("--help")
     assert out.returncode == 0
-    for cmd in ("serve", "sim", "demo", "record", "replay"):
+    for cmd in ("serve", "sim", "demo", "record", "replay", "crazyflie"):
         assert cmd in out.stdout
     serve_help = _gs("serve", "--help").stdout
     for flag in ("--config", "--connect", "--listen", "--headless", "--web-host", "--web-port"):
