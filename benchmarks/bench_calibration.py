@@ -314,13 +314,20 @@ def _mean(d: dict[int, float]) -> float:
 workdir_of_report: list[Path] = [Path(".")]
 
 
-def write_doc(results: list[dict[str, Any]], quick: bool, dwell_s: float, seed: int) -> None:
+def write_doc(
+    results: list[dict[str, Any]],
+    quick: bool,
+    dwell_s: float,
+    seed: int,
+    doc: Path = DOC,
+) -> tuple[Path, Path]:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    FIGURE.parent.mkdir(parents=True, exist_ok=True)
+    figure = doc.parent / "figures" / FIGURE.name
+    figure.parent.mkdir(parents=True, exist_ok=True)
     names = [f"{r['case'].name}\n({r['case'].accel_noise_mps2:g} m/s²)" for r in results]
     x = np.arange(len(results))
     fig, ax = plt.subplots(figsize=(8, 4.4))
@@ -339,7 +346,7 @@ def write_doc(results: list[dict[str, Any]], quick: bool, dwell_s: float, seed: 
     )
     ax.legend(fontsize=8, ncol=3, loc="upper center", bbox_to_anchor=(0.5, -0.22))
     fig.tight_layout()
-    fig.savefig(FIGURE, dpi=120)
+    fig.savefig(figure, dpi=120)
     plt.close(fig)
 
     cmd = "python -m benchmarks.bench_calibration" + (" --quick" if quick else "")
@@ -436,7 +443,7 @@ def write_doc(results: list[dict[str, Any]], quick: bool, dwell_s: float, seed: 
         lines.append(f"- {r['case'].name}: " + "; ".join(parts))
     lines += [
         "",
-        f"![position error before/after calibration]({FIGURE.relative_to(DOC.parent)})",
+        f"![position error before/after calibration]({figure.relative_to(doc.parent)})",
         "",
         "## Fitted parameters against the drawn truth",
         "",
@@ -490,13 +497,17 @@ def write_doc(results: list[dict[str, Any]], quick: bool, dwell_s: float, seed: 
         "```",
         "",
     ]
-    DOC.write_text("\n".join(lines), encoding="utf-8")
+    doc.write_text("\n".join(lines), encoding="utf-8")
+    return doc, figure
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="two cases, 8 s per spot")
     ap.add_argument("--seed", type=int, default=3)
+    ap.add_argument(
+        "--doc", type=Path, default=DOC, help="page to write (figure in figures/ beside it)"
+    )
     args = ap.parse_args(argv)
     _capture_fits()
     if args.quick:
@@ -523,8 +534,8 @@ def main(argv: list[str] | None = None) -> int:
                 f"({r['wall_s']:.0f} s)",
                 flush=True,
             )
-    write_doc(results, args.quick, dwell, args.seed)
-    print(f"wrote {DOC.relative_to(ROOT)} and {FIGURE.relative_to(ROOT)}")
+    doc, figure = write_doc(results, args.quick, dwell, args.seed, args.doc)
+    print(f"wrote {doc} and {figure}")
     return 0
 
 

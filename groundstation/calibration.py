@@ -917,8 +917,6 @@ def fit_calibration(
         involved = {
             PARAMETERS[i] for i, wj in zip(idx.tolist(), weight.tolist(), strict=True) if wj >= 0.3
         }
-        np.save("/tmp/info.npy", info)
-        np.save("/tmp/D.npy", D)
         pick = next(((nm, why) for nm, why in CONVENTIONS if nm in involved), None)
         if pick is None:
             raise CalibrationError("the samples do not determine the thrust scale")

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -43,6 +44,11 @@ def test_pure_module() -> None:
         "sys.exit(1 if bad else 0)"
     )
     assert subprocess.run([sys.executable, "-c", code], check=False).returncode == 0
+    import groundstation.calibration as mod
+
+    source = Path(mod.__file__).read_text(encoding="utf-8")
+    for io in ("np.save", "open(", "print(", "np.load"):
+        assert io not in source, io
 
 
 def test_thrust_axis_is_rx_ry_e3() -> None:
