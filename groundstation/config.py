@@ -1,9 +1,10 @@
 """The one root configuration: defaults, then a TOML file, then the environment, then the CLI.
 
-The TOML layout is the public contract (``../shared/INTERFACE.md``, "Configuration file"):
+The TOML layout is the public contract (``docs/contract.md``, "Configuration file"):
 ``[zenoh]``, ``[drone]``, ``[tether]``, ``[base]`` and per-drone overrides under
 ``[drones.<id>]`` with the same sub-tables. Tables added beside the contract: ``[follow]``,
-``[filter]``, ``[web]``, ``[service]``, ``[sim]``, ``[crazyflie]`` (documented in README.md).
+``[filter]``, ``[calibration]``, ``[web]``, ``[service]``, ``[sim]``, ``[crazyflie]``
+(``docs/contract.md``).
 
 Environment overrides use the prefix ``GROUNDSTATION_`` and ``__`` between levels, e.g.
 ``GROUNDSTATION_TETHER__WEIGHT_N_PER_M=0.04`` or ``GROUNDSTATION_ZENOH__CONNECT='["tcp/..."]'``.
@@ -14,12 +15,13 @@ caller passes it on.
 
 from __future__ import annotations
 
+import json
 import math
 import re
 import tomllib
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, get_args
 
 from pydantic import (
     BaseModel,
@@ -65,14 +67,76 @@ class ConfigError(ValueError):
     """A configuration value is invalid; the message names the key and the value."""
 
 
+_STRICT = {"strict_scalars": True}
+"""Validation context of values from a file or the command line (see :class:`_Section`)."""
+
+
+def _scalar_kinds(annotation: Any) -> set[type]:
+    """The scalar types (float, int, bool) an annotation accepts, through Optional/tuple."""
+    if annotation in (float, int, bool):
+        return {annotation}
+    kinds: set[type] = set()
+    for arg in get_args(annotation):
+        if arg is not Ellipsis:
+            kinds |= _scalar_kinds(arg)
+    return kinds
+
+
+def _loose_scalar(kinds: set[type], value: Any) -> str | None:
+    """Why ``value`` is not a real number/bool where ``kinds`` are expected (None if it is)."""
+    if value is None:
+        return None
+    if isinstance(value, list | tuple):
+        for item in value:
+            why = _loose_scalar(kinds, item)
+            if why is not None:
+                return why
+        return None
+    if isinstance(value, str) and kinds:
+        kind = "true or false" if kinds == {bool} else "a number"
+        return f"{kind} is required, not the string {value!r} (write it without quotes)"
+    if bool in kinds and kinds <= {bool} and not isinstance(value, bool):
+        return f"true or false is required, not {value!r}"
+    if isinstance(value, bool) and kinds and bool not in kinds:
+        return f"a number is required, not the boolean {value!r}"
+    return None
+
+
 class _Section(BaseModel):
-    model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
+    """A config table: frozen, no unknown keys, finite floats.
+
+    Values from a TOML file or the command line are validated with the context
+    ``{"strict_scalars": True}``: a number or a bool written as a string (``length_m =
+    "1.6"``, ``mocap = "false"``) is an error, as is a bool where a number belongs. Values
+    from the environment are strings by nature and are converted first (lax), then laid over
+    the file as numbers.
+    """
+
+    model_config = ConfigDict(
+        frozen=True, extra="forbid", allow_inf_nan=False, use_attribute_docstrings=True
+    )
+
+    @field_validator("*", mode="before")
+    @classmethod
+    def _strict_scalars(cls, value: Any, info: ValidationInfo) -> Any:
+        if not (info.context or {}).get("strict_scalars") or info.field_name is None:
+            return value
+        kinds = _scalar_kinds(cls.model_fields[info.field_name].annotation)
+        why = _loose_scalar(kinds, value)
+        if why is not None:
+            raise ValueError(why)
+        return value
+
+
+_ENDPOINT_RE = re.compile(r"[A-Za-z0-9_+-]+/[^\s/?#][^\s]*")
+"""zenoh's endpoint form ``<protocol>/<address>[?<metadata>][#<config>]``, loosely."""
 
 
 class ZenohSection(_Section):
     """``[zenoh]``: how the service joins the bus."""
 
     mode: Literal["peer", "client", "router"] = "peer"
+    """Zenoh mode: a peer, a client of a router, or a router."""
     connect: tuple[str, ...] = ()
     """Endpoints to connect to, e.g. ``tcp/127.0.0.1:7447``."""
     listen: tuple[str, ...] = ()
@@ -84,11 +148,23 @@ class ZenohSection(_Section):
     raw: dict[str, Any] = Field(default_factory=dict)
     """Extra zenoh config entries, ``{"path/in/config": value}``, inserted as JSON5."""
 
+    @field_validator("connect", "listen")
+    @classmethod
+    def _endpoints(cls, value: tuple[str, ...]) -> tuple[str, ...]:
+        for endpoint in value:
+            if not _ENDPOINT_RE.fullmatch(endpoint):
+                raise ValueError(
+                    f"{endpoint!r} is not a zenoh endpoint <protocol>/<address> "
+                    "(e.g. tcp/127.0.0.1:7447)"
+                )
+        return value
+
 
 class DroneSection(_Section):
     """``[drone]``: the vehicle."""
 
     mass_kg: float = Field(0.030, gt=0.0, le=100.0)
+    """Drone mass, kg (m of eq:NE_tether)."""
     accel_noise_mps2: float = Field(0.3, gt=0.0)
     """Accelerometer white-noise standard deviation per axis (filter tuning)."""
     thrust_noise_n: float = Field(0.003, gt=0.0)
@@ -99,6 +175,7 @@ class TetherSection(_Section):
     """``[tether]``: the tether's weight per length (ω) and its default length."""
 
     weight_n_per_m: float = Field(0.05, gt=0.0)
+    """ω, the tether's weight per unit length, N/m (weigh it: docs/troubleshooting.md)."""
     length_m: float = Field(1.6, gt=0.0)
     """Used until a Reel message arrives."""
 
@@ -107,7 +184,9 @@ class BaseSection(_Section):
     """``[base]``: where the tether leaves the base, and the floor a slack tether rests on."""
 
     position_m: Vec3 = (0.0, 0.0, 0.754)
+    """World position of the base exit point, metres (until a Reel message gives it)."""
     floor_z_m: float = 0.0
+    """Height of the floor a slack tether rests on, metres."""
 
 
 class FollowSection(_Section):
@@ -117,10 +196,15 @@ class FollowSection(_Section):
     """|T| above which the drone follows the pull, N. Above the whole default tether's
     weight (ω·L = 0.08 N) so a hanging tether alone never engages it."""
     hysteresis_ratio: float = Field(0.2, ge=0.0, lt=1.0)
+    """Following releases below threshold_n · (1 − hysteresis_ratio)."""
     land_below_m: float | None = None
+    """Tug-to-land height (world z), metres; none: tug-to-land off."""
     max_speed_mps: float = Field(0.5, gt=0.0)
+    """Largest setpoint speed, m/s."""
     reach_margin_m: float = Field(0.05, ge=0.0)
+    """Setpoints stay this much inside the tether's reach from the base, metres."""
     stale_after_s: float = Field(0.5, gt=0.0)
+    """Input older than this disengages following, s."""
     admittance_mps_per_n: float = Field(2.0, gt=0.0)
     """Without motion capture the goal moves along the pull at this speed per newton."""
 
@@ -172,8 +256,11 @@ class WebSection(_Section):
     """``[web]``: the dashboard."""
 
     host: str = "127.0.0.1"
+    """Dashboard bind address (``0.0.0.0``: every interface)."""
     port: int = Field(8080, ge=0, le=65535)
+    """Dashboard TCP port."""
     scene_rate_hz: float = Field(20.0, gt=0.0, le=30.0)
+    """Scene and chart updates per second."""
     scene_budget_hz: float = Field(80.0, gt=0.0)
     """Drone redraws per second in all: with many drones each is drawn less often, so the
     dashboard's cost stays bounded and estimation keeps its capacity."""
@@ -192,13 +279,23 @@ class ServiceSection(_Section):
     """Drones this instance owns: one key-expression chunk such as ``lab-a-*`` (``tether/``
     in front is accepted); ``*`` inside a chunk is zenoh's ``$*``."""
     queue_size: int = Field(8192, ge=16)
+    """Inputs waiting for the worker at most; beyond, dropped as ``queue_overflow``."""
     max_payload_bytes: int = Field(65536, ge=256)
+    """Larger payloads are dropped as ``too_large``."""
     stale_after_s: float = Field(0.5, gt=0.0)
+    """A drone silent this long is stale: no estimates, follow off, s."""
     status_period_s: float = Field(1.0, gt=0.0)
+    """Health bookkeeping period, s."""
     log_level: Literal["DEBUG", "INFO", "WARNING", "ERROR"] = "INFO"
+    """Log level."""
     log_json: bool = False
+    """Log one JSON object per line on stderr."""
     record: str | None = None
     """Record every bus sample to this MCAP file while serving."""
+    follow_threshold_min_n: float = Field(0.02, gt=0.0)
+    """(added) The smallest follow threshold the service accepts, N: a FollowCommand with a
+    lower ``threshold_n`` is refused (and said so on ``tether/{drone}/events``), as is a
+    ``[follow] threshold_n`` below it."""
 
     @field_validator("drones")
     @classmethod
@@ -348,17 +445,25 @@ class SimSection(_Section):
     realistic: RealisticSection = RealisticSection()
 
     scenario: str = "hover"
+    """Scenario (``groundstation sim --list``)."""
     rate_hz: float = Field(250.0, gt=0.0, le=2000.0)
+    """Telemetry rate, Hz."""
     drones: tuple[str, ...] = ("cf1",)
+    """Drone ids to simulate."""
     accel_noise_mps2: float = Field(0.3, ge=0.0)
+    """Simulated accelerometer noise per axis, m/s²."""
     thrust_noise_n: float = Field(0.003, ge=0.0)
+    """Simulated thrust noise, N."""
     thrust_bias_ratio: float = Field(0.0, ge=-0.5, le=0.5)
+    """Relative error of the reported thrust (0.02: reports 2 % too much)."""
     mocap: bool = True
     """Publish the motion-capture ``position_m`` in Telemetry."""
     seed: int = 0
+    """Random seed of the simulated sensor noise."""
     speed: float = Field(1.0, gt=0.0)
     """Real-time factor (1 = wall clock)."""
     duration_s: float | None = None
+    """Stop after this many simulated seconds; none: the scenario's own end, or never."""
 
 
 class CrazyflieSection(_Section):
@@ -516,7 +621,9 @@ class Settings(BaseSettings):
                 merged[name] = section
                 continue
             try:
-                merged[name] = type(section).model_validate(section.model_dump() | patch)
+                merged[name] = type(section).model_validate(
+                    section.model_dump() | patch, context=_STRICT
+                )
             except ValidationError as exc:
                 raise ConfigError(
                     _describe(exc, prefix=f"drones.{drone_id}.{name}", data=patch)
@@ -545,8 +652,34 @@ def _describe(exc: ValidationError, *, prefix: str = "", data: Any = None) -> st
         value = err.get("input", _lookup(data, loc))
         if isinstance(value, float) and not math.isfinite(value):
             value = repr(value)
-        lines.append(f"{key} = {value!r}: {err['msg']}")
+        lines.append(f"{key} = {value!r}: {err['msg'].removeprefix('Value error, ')}")
     return "invalid configuration: " + "; ".join(lines)
+
+
+def _check_tables_strictly(layered: Mapping[str, Any]) -> None:
+    """Validate each table with the strict-scalars context (``BaseSettings`` drops contexts).
+
+    Raises:
+        ConfigError: names the key and the value.
+    """
+    for name, field in Settings.model_fields.items():
+        section_type, value = field.annotation, layered.get(name)
+        if not (isinstance(value, Mapping) and isinstance(section_type, type)):
+            continue
+        if issubclass(section_type, _Section):
+            try:
+                section_type.model_validate(value, context=_STRICT)
+            except ValidationError as exc:
+                raise ConfigError(_describe(exc, prefix=name, data=value)) from None
+
+
+def _decode_env(raw: Any) -> Any:
+    if not isinstance(raw, str):
+        return raw
+    try:
+        return json.loads(raw)
+    except ValueError:
+        return raw
 
 
 def _deep_merge(base: dict[str, Any], patch: Mapping[str, Any]) -> dict[str, Any]:
@@ -595,12 +728,28 @@ def load_settings(
             # Environment beats the file: validate env alone, then lay it over the file.
             env_only = Settings()
             env_set = env_only.model_dump(exclude_unset=True)
+            # Per-drone overrides stay untyped dicts until resolved: decode their strings
+            # here (a number or a list in JSON), as the typed tables were decoded above.
+            for override in env_set.get("drones", {}).values():
+                for table in override.values():
+                    if isinstance(table, dict):
+                        for key, raw in table.items():
+                            table[key] = _decode_env(raw)
             layered = _deep_merge(layered, env_set)
         layered = _deep_merge(layered, dict(cli_overrides or {}))
+        _check_tables_strictly(layered)
         settings = Settings.model_validate(layered)
     except ValidationError as exc:
         raise ConfigError(_describe(exc, data=layered)) from None
     # Resolve every override once at start-up so a bad per-drone value fails now.
-    for drone_id in settings.drones:
-        settings.for_drone(drone_id)
+    floor_n = settings.service.follow_threshold_min_n
+    for key, follow in [("follow", settings.follow)] + [
+        (f"drones.{d}.follow", settings.for_drone(d).follow) for d in settings.drones
+    ]:
+        if follow.threshold_n < floor_n:
+            raise ConfigError(
+                f"invalid configuration: {key}.threshold_n = {follow.threshold_n!r}: below "
+                f"service.follow_threshold_min_n = {floor_n!r} (a threshold that low follows "
+                "the tether's own pull)"
+            )
     return settings

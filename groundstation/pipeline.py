@@ -29,12 +29,14 @@ from groundstation.config import CalibrationSection, DroneParams, Settings
 from groundstation.localization import PositionEstimate, localize
 from groundstation.messages import (
     Estimate,
+    Event,
     FollowCommand,
     FollowInfo,
     InvalidMessage,
     Reel,
     Setpoint,
     Stop,
+    StopIn,
     Telemetry,
     TetherParams,
     parse_key,
@@ -65,6 +67,8 @@ _KEY_CACHE_SIZE = 4 * MAX_DRONES
 """Parsed keys remembered (each drone has four input kinds)."""
 _MAX_GAP_S = 1.0
 """A telemetry gap longer than this restarts the filter (the tension may have changed)."""
+_COMMAND_KINDS = frozenset({"follow", "params"})
+"""Inputs from operators: every rejection of one is told on ``tether/{drone}/events``."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -73,8 +77,12 @@ class Parsed:
 
     drone: str
     kind: str
-    message: Telemetry | Reel | FollowCommand | TetherParams
+    message: Telemetry | Reel | FollowCommand | TetherParams | StopIn
     received_s: float
+    source: str | None = None
+    """The sender's zenoh session id, where the sample carried it."""
+    ignored: tuple[str, ...] = ()
+    """Unknown fields of a follow/params command (ignored, but told to the sender)."""
 
 
 class _Rate:
@@ -168,14 +176,30 @@ class Pipeline:
         settings: the root configuration.
         on_drop: called as ``on_drop(drone_or_None, kind, detail)`` for every rejected
             input (the service logs the first of each kind).
+        on_event: called as ``on_event(drone, event)`` with each
+            :class:`~groundstation.messages.Event` for ``tether/{drone}/events`` (the operator
+            action log): every rejected or applied command, follow switched off by staleness,
+            a Stop issued; for rejected telemetry/reel only the first per drone and kind.
+            Called from :meth:`validate`'s thread for rejections at validation, else from
+            :meth:`process`'s / :meth:`tick`'s.
+        wall_clock: UNIX seconds for the events' ``stamp_s``; None stamps them with the
+            receive clock ``now_s`` (offline runs).
     """
 
     def __init__(
         self,
         settings: Settings,
         on_drop: Any = None,
+        *,
+        on_event: Any = None,
+        wall_clock: Any = None,
     ) -> None:
         self.settings = settings
+        self._on_event = on_event
+        self._wall_clock = wall_clock
+        self.self_id = "service"
+        """``who`` of the events about the service's own actions (the service sets its id)."""
+        self._told: set[tuple[str, str]] = set()  # (drone, kind) of rejections told once
         self.drones: dict[str, DroneRuntime] = {}
         self.global_drops: Counter[str] = Counter()
         self.last_received_s: dict[str, float] = {}
@@ -213,12 +237,53 @@ class Pipeline:
             message = model.parse(sample.payload)
         except InvalidMessage as exc:
             self.count_drop(drone, exc.kind, exc.detail)
+            if drone is not None and self._on_event is not None:
+                self._tell_rejection(drone, sample, exc, now_s)
             return None
         if kind == "telemetry" and (
             drone in self.last_received_s or len(self.last_received_s) < MAX_DRONES
         ):
             self.last_received_s[drone] = now_s
-        return Parsed(drone, kind, message, now_s)
+        ignored = model.unknown_fields(sample.payload) if kind in _COMMAND_KINDS else ()
+        return Parsed(drone, kind, message, now_s, sample.source, ignored)
+
+    def _tell_rejection(
+        self, drone: str, sample: Sample, exc: InvalidMessage, now_s: float
+    ) -> None:
+        kind = sample.key[len("tether/") + len(drone) + 1 :]
+        if kind not in _COMMAND_KINDS:
+            with self._lock:
+                if (drone, exc.kind) in self._told or len(self._told) >= 16 * MAX_DRONES:
+                    return
+                self._told.add((drone, exc.kind))
+        reason = exc.detail if kind in _COMMAND_KINDS else f"{exc.detail} (further ones counted)"
+        self._emit(drone, "rejected", kind, now_s, sample.source, reason, field=exc.field)
+
+    def _emit(
+        self,
+        drone: str,
+        kind: str,
+        input_kind: str,
+        now_s: float,
+        who: str | None,
+        reason: str,
+        *,
+        field: str | None = None,
+        changes: dict[str, Any] | None = None,
+    ) -> None:
+        """Hand one operator-log Event to ``on_event`` (nothing when there is no listener)."""
+        if self._on_event is None:
+            return
+        event = Event(
+            stamp_s=self._wall_clock() if self._wall_clock is not None else now_s,
+            kind=kind,
+            input=input_kind,
+            who=who or "unknown",
+            reason=reason[:500],
+            field=field,
+            changes=changes or {},
+        )
+        self._on_event(drone, event)
 
     def count_drop(self, drone: str | None, kind: str, detail: str) -> None:
         """Count a rejected input per drone and kind (thread-safe) and report it."""
@@ -258,18 +323,111 @@ class Pipeline:
                 runtime.base_world_m = np.array(msg.base_m, dtype=float)
             return []
         if isinstance(msg, TetherParams):
+            changes: dict[str, Any] = {}
             if msg.weight_n_per_m is not None:
                 runtime.weight_n_per_m = msg.weight_n_per_m
+                changes["weight_n_per_m"] = msg.weight_n_per_m
             if msg.length_m is not None:
                 if runtime.length_source == "reel":
                     self.count_drop(runtime.drone, "length_from_reel", "a reel reports length")
+                    self._emit(
+                        runtime.drone,
+                        "warning",
+                        "params",
+                        now_s,
+                        parsed.source,
+                        f"length_m {msg.length_m} ignored: a reel reports the length "
+                        f"({runtime.length_m:.3f} m)",
+                        field="length_m",
+                    )
                 else:
                     runtime.length_m = msg.length_m
                     runtime.length_source = "operator"
+                    changes["length_m"] = msg.length_m
+            self._tell_ignored(runtime.drone, parsed, now_s)
+            if changes:
+                self._emit(
+                    runtime.drone,
+                    "params",
+                    "params",
+                    now_s,
+                    parsed.source,
+                    "applied",
+                    changes=changes,
+                )
+            return []
+        if isinstance(msg, StopIn):
+            self._seen_stop(runtime, msg, parsed, now_s)
             return []
         assert isinstance(msg, FollowCommand)
-        self._follow_command(runtime, msg)
+        self._follow_command(runtime, msg, parsed, now_s)
         return []
+
+    def _seen_stop(self, runtime: DroneRuntime, stop: StopIn, parsed: Parsed, now_s: float) -> None:
+        """Someone else's Stop on ``cmd/stop``: switch follow off, log who stopped the drone.
+
+        Follow must not be on when the drone flies again after a Stop (re-armed, taken off):
+        the operator enables it again, as after a stale drone.
+        """
+        changes: dict[str, Any] = {}
+        if runtime.follow_state.enabled:
+            state = follow_mod.set_enabled(runtime.follow_state, False)
+            runtime.follow_state = replace(state, reason=f"Stop ({stop.reason}): follow off")
+            changes["enabled"] = False
+        self._emit(
+            runtime.drone, "stop", "cmd/stop", now_s, parsed.source, stop.reason, changes=changes
+        )
+
+    def _tell_ignored(self, drone: str, parsed: Parsed, now_s: float) -> None:
+        if parsed.ignored:
+            model = type(parsed.message)
+            self._emit(
+                drone,
+                "warning",
+                parsed.kind,
+                now_s,
+                parsed.source,
+                f"unknown fields ignored: {', '.join(map(repr, parsed.ignored))} "
+                f"(a {model.__name__} has {', '.join(model.model_fields)})",
+                field=parsed.ignored[0],
+            )
+
+    def _refuse_follow(
+        self, runtime: DroneRuntime, cmd: FollowCommand, now_s: float
+    ) -> tuple[str, str] | None:
+        """Why a FollowCommand must not be applied, as ``(field, reason)``, or None.
+
+        Checked at the command boundary, before :func:`follow.set_enabled`:
+
+        - a threshold below ``[service] follow_threshold_min_n``;
+        - enabling follow on a drone that is stale or has never sent telemetry (the README's
+          rule: a stale drone drops follow and the operator enables it again; an unknown drone
+          is the most stale of all, and would otherwise fly off in follow mode the moment it
+          starts).
+
+        That a threshold is not below the tether's own pull is :mod:`groundstation.follow`'s
+        business: the threshold applies to the pull beyond the tether's own tension there.
+        """
+        floor_n = self.settings.service.follow_threshold_min_n
+        if cmd.threshold_n is not None and cmd.threshold_n < floor_n:
+            return "threshold_n", (
+                f"threshold_n {cmd.threshold_n:g} N is below the service's floor {floor_n:g} N "
+                "([service] follow_threshold_min_n): that low a threshold follows the sensor "
+                "noise and any error in the tether's own tension; not applied"
+            )
+        if not cmd.enabled:
+            return None
+        if runtime.last_seen_s is None:
+            return "enabled", (
+                f"{runtime.drone} has sent no telemetry: follow stays off (enable it once the "
+                "drone is flying); not applied"
+            )
+        if runtime.stale:
+            return "enabled", (
+                f"{runtime.drone} is stale (silent for {now_s - runtime.last_seen_s:.1f} s): "
+                "follow stays off until it is heard again; not applied"
+            )
+        return None
 
     def tick(self, now_s: float) -> list[Sample]:
         """Mark drones silent for ``stale_after_s`` as stale; disengage their follow mode."""
@@ -280,7 +438,19 @@ class Pipeline:
             heard_s = max(runtime.last_seen_s, self.last_received_s.get(runtime.drone, -math.inf))
             if now_s - heard_s > stale_after:
                 runtime.stale = True
+                was_on = runtime.follow_state.enabled
                 runtime.follow_state = follow_mod.mark_stale(runtime.follow_state)
+                if was_on:
+                    self._emit(
+                        runtime.drone,
+                        "follow",
+                        "service",
+                        now_s,
+                        self.self_id,
+                        f"{runtime.drone} silent for {now_s - heard_s:.2f} s: follow off; "
+                        "enable it again once the drone is heard",
+                        changes={"enabled": False},
+                    )
         return []
 
     # ---------------------------------------------------------------- internals
@@ -316,7 +486,32 @@ class Pipeline:
             self.drones[drone] = runtime
         return runtime
 
-    def _follow_command(self, runtime: DroneRuntime, cmd: FollowCommand) -> None:
+    def _follow_command(
+        self, runtime: DroneRuntime, cmd: FollowCommand, parsed: Parsed, now_s: float
+    ) -> None:
+        self._tell_ignored(runtime.drone, parsed, now_s)
+        refusal = self._refuse_follow(runtime, cmd, now_s)
+        if refusal is not None:
+            field, reason = refusal
+            self.count_drop(runtime.drone, "follow_refused", reason)
+            self._emit(
+                runtime.drone, "rejected", "follow", now_s, parsed.source, reason, field=field
+            )
+            return
+        before = self._follow_info(runtime)
+        self._apply_follow(runtime, cmd)
+        after = self._follow_info(runtime)
+        changes: dict[str, Any] = {"enabled": after.enabled}
+        for name in ("threshold_n", "land_below_m"):
+            if getattr(after, name) != getattr(before, name):
+                changes[name] = getattr(after, name)
+        if before.enabled != after.enabled:
+            reason = "follow on" if after.enabled else "follow off"
+        else:
+            reason = "re-tuned" if len(changes) > 1 else "no change"
+        self._emit(runtime.drone, "follow", "follow", now_s, parsed.source, reason, changes=changes)
+
+    def _apply_follow(self, runtime: DroneRuntime, cmd: FollowCommand) -> None:
         fp = runtime.follow_params
         if cmd.threshold_n is not None:
             fp = replace(fp, threshold_n=cmd.threshold_n)
@@ -451,6 +646,7 @@ class Pipeline:
             runtime.stops += 1
             stop = Stop(stamp_s=msg.stamp_s, reason=decision.stop_reason)
             out.append(Sample(f"tether/{runtime.drone}/cmd/stop", stop.to_json()))
+            self._emit(runtime.drone, "stop", "service", now_s, self.self_id, decision.stop_reason)
         return out
 
     def _estimate(
