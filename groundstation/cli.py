@@ -598,7 +598,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--fit-tether", action="store_true", help="also fit the tether's ω and the base position"
     )
-    p.add_argument("--log-level", choices=["DEBUG", "INFO", "WARNING", "ERROR"])
+    p.add_argument(
+        "--log-level", choices=["DEBUG", "INFO", "WARNING", "ERROR"], help="log level (INFO)"
+    )
     p.set_defaults(func=cmd_calibrate)
     return parser
 

@@ -465,6 +465,11 @@ class Status(_Out):
     None on an in-memory bus)."""
     events_suppressed: int | None = None
     """Events for this drone not published because of the per-drone cap (a flood)."""
+    rest_calibration: dict[str, Any] | None = None
+    """Rest calibration (``[calibration] rest``): None when off; else ``{"in_force": false}``,
+    or the accelerometer's x/y offset found while the drone sat still and disarmed, applied
+    until the next disarm: ``in_force``, ``offset_mps2`` [x, y], ``std_mps2``, ``duration_s``,
+    ``stamp_s``."""
 
 
 class MocapPoseIn(_In):

@@ -203,7 +203,10 @@ def config_tables() -> str:
                 default_value: Any = sub.default_factory()  # type: ignore[call-arg]
             else:
                 default_value = sub.default
-            default = "none" if default_value is None else f"`{json.dumps(default_value)}`"
+            if isinstance(default_value, BaseModel):  # a nested table, e.g. [sim.realistic]
+                default = f"the `[{table}.{name}]` table"
+            else:
+                default = "none" if default_value is None else f"`{json.dumps(default_value)}`"
             tag = "contract" if name in contract else "added"
             out.append(f"| `{name}` | {kind} | {default} | {tag} | {meaning} |")
         out.append("")
