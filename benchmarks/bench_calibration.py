@@ -314,6 +314,30 @@ def _mean(d: dict[int, float]) -> float:
 workdir_of_report: list[Path] = [Path(".")]
 
 
+def _nanobench_rows() -> list[str]:
+    from benchmarks import nanobench
+
+    rows = []
+    for name in nanobench.FILES:
+        data, f, mask = nanobench.fit(name)
+        v = data.vbat_v[mask]
+        slope = (
+            f"{f.values['vbat_slope_per_v']:.3f} ± {f.std['vbat_slope_per_v']:.3f}"
+            if f.std["vbat_slope_per_v"] is not None
+            else "fixed at 0 (undetermined)"
+        )
+        m = f.mean_after_n * 1e3
+        rows.append(
+            f"| {name.split('_rep')[0]} | {np.nanmin(v):.2f}–{np.nanmax(v):.2f} | "
+            f"{f.values['thrust_scale']:.3f} ± {f.std['thrust_scale']:.3f} (at "
+            f"{f.vbat_ref_v:g} V) | {slope} | ×{nanobench.reading_over_weight(data, f, mask):.2f}"
+            f" at the median voltage | {m[0]:.1f} / {m[1]:.1f} / {m[2]:.1f} | "
+            f"{f.rms_before_n[2] * 1e3:.0f} → {f.rms_after_n[2] * 1e3:.0f} | "
+            f"{f.hover_samples} / {f.n_eff:.0f} |"
+        )
+    return rows
+
+
 def write_doc(
     results: list[dict[str, Any]],
     quick: bool,
@@ -393,11 +417,15 @@ def write_doc(
         "",
         "## Real flights: NanoBench (untethered, true tension 0)",
         "",
-        "`tests/test_calibration_nanobench.py` fits the nominal PWM→thrust map on two real",
-        "Crazyflie 2.1 flights (mass assumed 30 g): see its assertions; on these excerpts the",
-        "map over-reads 1.5–2.0× at hover, more on the drained battery (ramps at ~3.1 V: scale",
-        "0.53, ×1.88; figure-eight at ~3.6 V: ×1.6, slope 0.28/V fitted), tension residual mean",
-        "below 3 mN, n_eff 10–30 out of ~700 samples (the residual is far from white).",
+        "The fit against the true tension, zero, on two real Crazyflie 2.1 flights (excerpts",
+        "in tests/data/nanobench/, every 4th row; mass assumed 30 g; the attitude the drone",
+        "reports; `benchmarks/nanobench.py`, asserted by tests/test_calibration_nanobench.py).",
+        "The nominal PWM→thrust map of the data README over-reads by 1/scale:",
+        "",
+        "| flight | battery in flight V | thrust_scale | slope 1/V | map over-reads | residual"
+        " mean x/y/z mN | RMS z before → after mN | n / n_eff |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- |",
+        *_nanobench_rows(),
         "",
         "## Leave-one-out on the realistic simulator",
         "",
