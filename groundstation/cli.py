@@ -539,6 +539,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--web-port", metavar="N", type=int, help="dashboard port (8080, or a free one)")
     p.add_argument("--duration", type=float, metavar="S", help="stop after S wall seconds")
     p.add_argument("--once", action="store_true", help="stop when the scenario ends")
+    p.add_argument(
+        "--profile", choices=("ideal", "realistic"), help="simulator profile (docs/simulator.md)"
+    )
     p.set_defaults(func=cmd_demo)
 
     p = sub.add_parser("record", help="record the bus into MCAP")
@@ -611,6 +614,8 @@ def _sim_overrides(args: argparse.Namespace) -> dict[str, Any]:
         return over
     if getattr(args, "scenario", None):
         over["scenario"] = args.scenario
+    if getattr(args, "profile", None):
+        over["profile"] = args.profile
     if args.command == "sim":
         if args.drones:
             over["drones"] = list(args.drones)
@@ -626,8 +631,6 @@ def _sim_overrides(args: argparse.Namespace) -> dict[str, Any]:
             over["mocap"] = False
         if args.thrust_bias is not None:
             over["thrust_bias_ratio"] = args.thrust_bias
-        if args.profile is not None:
-            over["profile"] = args.profile
     return over
 
 
