@@ -281,7 +281,8 @@ def cmd_sim(args: argparse.Namespace) -> int:
         sim.start()
         try:
             print(
-                f"groundstation sim: scenario {sim.scenario.name} for {', '.join(sim.drones)}",
+                f"groundstation sim: scenario {sim.scenario.name} ({sim.profile} profile) for "
+                f"{', '.join(sim.drones)}",
                 flush=True,
             )
             while not stop.wait(0.2):
@@ -404,6 +405,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--rate", type=float, metavar="HZ", help="telemetry rate")
     p.add_argument("--no-mocap", action="store_true", help="omit motion-capture position_m")
     p.add_argument("--thrust-bias", type=float, metavar="RATIO", help="e.g. 0.02 for +2 %%")
+    p.add_argument(
+        "--profile",
+        choices=("ideal", "realistic"),
+        help="ideal: the estimator's assumptions; realistic: rigid body, lumped-mass tether, "
+        "real sensor errors ([sim.realistic], docs/simulator.md)",
+    )
     p.set_defaults(func=cmd_sim)
 
     p = sub.add_parser("demo", help="simulator + service + dashboard in one process")
@@ -454,6 +461,8 @@ def _sim_overrides(args: argparse.Namespace) -> dict[str, Any]:
             over["mocap"] = False
         if args.thrust_bias is not None:
             over["thrust_bias_ratio"] = args.thrust_bias
+        if args.profile is not None:
+            over["profile"] = args.profile
     return over
 
 

@@ -21,7 +21,14 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    ValidationInfo,
+    field_validator,
+)
 from pydantic_settings import (
     BaseSettings,
     PydanticBaseSettingsSource,
@@ -39,6 +46,7 @@ __all__ = [
     "DroneSection",
     "FilterSection",
     "FollowSection",
+    "RealisticSection",
     "ServiceSection",
     "Settings",
     "SimSection",
@@ -205,8 +213,133 @@ class ServiceSection(_Section):
         return re.sub(r"\*+", "$*", self.drones)
 
 
+class RealisticSection(_Section):
+    """``[sim.realistic]``: the ``realistic`` profile (docs/simulator.md has every source).
+
+    Defaults are the real tethered Crazyflie 2.1 flights of issue 9 (30.7 g, 1.6 m tether,
+    motion capture); each error class has a switch and a size; per-flight constants are drawn
+    from ``[sim] seed`` and the drone's index. Sign conventions of every error and the
+    equivalent ``[calibration]`` values: :mod:`groundstation.sim.sensors`.
+    """
+
+    physics_rate_hz: float = Field(1000.0, ge=200.0, le=20000.0)
+    """Rate of the rigid-body and tether integration, Hz."""
+    warmup_s: float = Field(2.0, ge=0.0, le=60.0)
+    """Closed-loop settling before t = 0 for airborne starts (after the tether settles), s."""
+    # airframe (Crazyflie 2.1: Förster 2015, "System identification of the Crazyflie 2.0")
+    inertia_kg_m2: Vec3 = (1.66e-5, 1.66e-5, 2.93e-5)
+    """Principal moments of inertia, kg·m²."""
+    arm_m: float = Field(0.046, gt=0.0)
+    """Centre-to-motor distance, m."""
+    max_thrust_ratio: float = Field(2.0, gt=1.0)
+    """Maximum collective thrust over the drone's weight."""
+    motor_lag: bool = True
+    motor_tau_s: float = Field(0.030, ge=0.0, le=0.5)
+    """Motor time constant, s (issue 9: ~30 ms)."""
+    rotor_drag: bool = True
+    rotor_drag_n_s_per_m: float = Field(0.0073, ge=0.0)
+    """Horizontal rotor drag at hover thrust, N per m/s of body velocity (Förster 2015)."""
+    yaw_motion: bool = True
+    """Initial yaw uniform in ±π per flight, then a slow yaw swing."""
+    yaw_amplitude_rad: float = Field(0.3, ge=0.0, le=3.2)
+    yaw_period_s: float = Field(20.0, gt=0.0)
+    # tether (lumped mass; ω and L come from [tether])
+    tether_segments: int = Field(10, ge=2, le=200)
+    tether_stretch_stiffness_n: float = Field(100.0, gt=0.0)
+    """EA, N (the real tether is stiffer, ~1e4 N; 100 N stretches 0.1 % at 0.1 N and keeps
+    the integration cheap; stiffer costs sub-steps, not stability)."""
+    tether_axial_damping_ratio: float = Field(0.1, ge=0.0, le=1.0)
+    tether_air_damping_n_s_per_m2: float = Field(1e-3, ge=0.0)
+    """Effective linear drag per metre of tether (air + internal friction), N·s/m²."""
+    floor_friction: float = Field(0.4, ge=0.0)
+    """Coulomb friction coefficient of the tether on the floor."""
+    # accelerometer and gyro
+    vibration: bool = True
+    accel_noise_mps2: float = Field(1.0, ge=0.0)
+    """Vibration noise std per axis at hover, m/s² (issue 9: 0.7–2.0; newer firmware
+    0.06–0.39)."""
+    accel_noise_lag1: float = Field(0.2, ge=0.0, lt=1.0)
+    """Lag-1 autocorrelation of the noise per IMU sample (issue 9: up to 0.3)."""
+    accel_noise_ar: float = Field(0.6, ge=0.0, lt=1.0)
+    """AR(1) coefficient of the coloured part (must be >= accel_noise_lag1)."""
+    accel_noise_floor_mps2: float = Field(0.02, ge=0.0)
+    """Sensor noise with the motors off, m/s²."""
+    gyro_noise_rps: float = Field(0.01, ge=0.0)
+    misalignment: bool = True
+    misalignment_max_rad: float = Field(0.052, ge=0.0, le=0.35)
+    """Per-boot accelerometer tilt against the attitude frame, magnitude up to this, rad
+    (issue 9: ~3°)."""
+    accel_scale: bool = True
+    accel_scale_max: float = Field(0.025, ge=0.0, le=0.5)
+    """Per-boot accelerometer scale error, uniform in ±this (issue 9: up to 2.5 %)."""
+    accel_bias: bool = True
+    accel_bias_std_mps2: float = Field(0.05, ge=0.0)
+    """Per-boot accelerometer bias std per axis, m/s² (beyond misalignment and scale)."""
+    thrust_axis: bool = True
+    thrust_axis_rad: tuple[float, float] = (-0.037, -0.016)
+    """Thrust axis ``[about_x, about_y]`` of body +z, rad, airframe constant (issue 9)."""
+    thrust_map: bool = True
+    thrust_report_error: float = Field(-0.0909, ge=-0.5, le=2.0)
+    """Reported/true thrust − 1 at ``thrust_vbat_ref_v`` (issue 9: true = 1.10 × reported,
+    i.e. −0.091; range −0.10..+0.90)."""
+    thrust_report_error_std: float = Field(0.01, ge=0.0)
+    """Per-flight spread of ``thrust_report_error``."""
+    thrust_vbat_exponent: float = Field(2.0, ge=0.0, le=5.0)
+    """γ: reported/true grows as (V_ref/V)^γ as the battery sags."""
+    thrust_vbat_ref_v: float = Field(4.05, gt=0.0)
+    """Battery voltage at which ``thrust_report_error`` holds, V (issue 9: 4.03–4.06 V)."""
+    battery: bool = True
+    """A sagging battery; off: constant ``thrust_vbat_ref_v`` and no ``vbat_v``."""
+    publish_vbat: bool = True
+    """Publish ``vbat_v`` in Telemetry."""
+    battery_full_v: float = Field(4.20, gt=0.0)
+    battery_empty_v: float = Field(3.50, gt=0.0)
+    battery_capacity_mah: float = Field(250.0, gt=0.0)
+    battery_internal_ohm: float = Field(0.12, ge=0.0)
+    battery_hover_current_a: float = Field(1.2, ge=0.0)
+    battery_soc_start: float = Field(1.0, ge=0.0, le=1.0)
+    # timing
+    imu_timing: bool = True
+    imu_rate_hz: float = Field(100.0, gt=0.0, le=1000.0)
+    """Mean IMU Telemetry rate, Hz (issue 9: 100 Hz)."""
+    imu_jitter_std_s: float = Field(0.0015, ge=0.0)
+    imu_late_prob: float = Field(0.05, ge=0.0, le=1.0)
+    imu_spacing_min_s: float = Field(0.006, gt=0.0)
+    imu_spacing_max_s: float = Field(0.027, gt=0.0)
+    """IMU spacing bounds, s (issue 9: 6–27 ms)."""
+    mocap_timing: bool = True
+    """Off: a motion-capture frame at every IMU sample, no latency, no bursts."""
+    mocap_rate_min_hz: float = Field(70.0, gt=0.0)
+    mocap_rate_max_hz: float = Field(116.0, gt=0.0)
+    """Per-flight frame rate, uniform in [min, max], Hz (issue 9: 70–116 Hz)."""
+    mocap_latency_s: float = Field(0.010, ge=0.0)
+    mocap_burst_prob: float = Field(0.175, ge=0.0, lt=1.0)
+    """Fraction of frames held back and delivered with the next (issue 9: 15–20 % < 1 ms)."""
+    mocap_outage_rate_per_s: float = Field(0.2, ge=0.0)
+    mocap_outage_max_s: float = Field(0.150, gt=0.0)
+    """Longest gap, s (issue 9: up to 150 ms)."""
+    mocap_noise_m: float = Field(0.0003, ge=0.0)
+    mocap_attach: Literal["latest", "new"] = "latest"
+    """``latest``: every Telemetry carries the latest arrived frame; ``new``: only the first
+    Telemetry after a new frame."""
+
+    @field_validator("accel_noise_ar")
+    @classmethod
+    def _ar_covers_lag1(cls, value: float, info: ValidationInfo) -> float:
+        lag1 = info.data.get("accel_noise_lag1", 0.0)
+        if value < lag1:
+            raise ValueError(f"{value!r} must be >= accel_noise_lag1 {lag1!r}")
+        return value
+
+
 class SimSection(_Section):
     """``[sim]``: the simulator."""
+
+    profile: Literal["ideal", "realistic"] = "ideal"
+    """``ideal``: the estimator's own assumptions (quasi-static catenary, white noise, exact
+    sensors); ``realistic``: rigid body, lumped-mass tether and real sensor errors
+    (``[sim.realistic]``). docs/simulator.md."""
+    realistic: RealisticSection = RealisticSection()
 
     scenario: str = "hover"
     rate_hz: float = Field(250.0, gt=0.0, le=2000.0)

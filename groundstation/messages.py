@@ -10,7 +10,7 @@ Fields added beside the contract are marked "(added)"; they are documented in RE
 from __future__ import annotations
 
 import re
-from typing import Annotated, Self
+from typing import Annotated, Any, Self
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
@@ -250,6 +250,16 @@ class Truth(_Out):
     on_ground: bool
     phase: str = ""
     """Scenario phase label."""
+    profile: str | None = None
+    """(added) Simulator profile, ``realistic`` (absent: ``ideal``)."""
+    errors: dict[str, Any] | None = None
+    """(added) The flight's drawn sensor errors and their equivalent ``[calibration]`` values
+    (``realistic`` profile; on the first Truth and once per second;
+    :mod:`groundstation.sim.sensors` defines every sign)."""
+
+    def to_json(self) -> bytes:
+        """Compact UTF-8 JSON; the added optional fields only when set (ideal: as before)."""
+        return self.model_dump_json(exclude_none=True).encode()
 
 
 class StopIn(_In):

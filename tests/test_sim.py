@@ -144,3 +144,29 @@ def test_simulator_imports_none_of_the_estimator() -> None:
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "", f"the simulator imports {out.stdout.strip()}"
+
+
+def test_takeoff_ramp_spools_up_on_the_floor_then_climbs() -> None:
+    """Issue 11 §3: thrust ramps 0 → weight over 2 s while the drone still sits on the floor."""
+    sim = _sim("takeoff_ramp", accel_noise_mps2=0.0, thrust_noise_n=0.0)
+    sc = SCENARIOS["takeoff_ramp"]
+    weight_n = 0.030 * 9.81
+    ramp: list[tuple[float, float]] = []
+    for _ in range(round(15.0 / sim.dt_s)):
+        samples = sim.step()
+        tel = json.loads(next(s.payload for s in samples if s.key.endswith("/telemetry")))
+        truth = json.loads(next(s.payload for s in samples if s.key.endswith("/truth")))
+        t = tel["stamp_s"]
+        if sc.arm_at_s + 0.05 <= t < sc.arm_at_s + sc.thrust_ramp_s - 0.05:
+            assert tel["armed"] and truth["on_ground"], t
+            assert truth["position_m"][2] == pytest.approx(0.0, abs=1e-9)
+            np.testing.assert_allclose(tel["accel_mps2"], (0.0, 0.0, 9.81), atol=1e-9)
+            ramp.append((t - sc.arm_at_s, tel["thrust_n"]))
+    assert len(ramp) > 400
+    t_ramp = np.array([r[0] for r in ramp])
+    thrust = np.array([r[1] for r in ramp])
+    # Linear in time from 0 to the weight over thrust_ramp_s.
+    np.testing.assert_allclose(thrust, weight_n * t_ramp / sc.thrust_ramp_s, atol=2e-3)
+    assert thrust.max() < weight_n
+    drone = sim.drones["cf1"]
+    np.testing.assert_allclose(drone.position_world_m, (1.0, 0.0, 1.0), atol=0.01)

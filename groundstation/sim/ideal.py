@@ -54,6 +54,11 @@ class DroneSim:
     coin_arm_m: np.ndarray | None = None
     offset_m: np.ndarray = field(default_factory=lambda: np.zeros(3))
     """Where the scenario's script is shifted to (several drones fly side by side)."""
+    thrust_ramp_s: float = 0.0
+    """After arming, thrust ramps linearly 0 → weight over this time (level) before the
+    position controller takes over (:attr:`Scenario.thrust_ramp_s`)."""
+    armed_for_s: float = 0.0
+    """Time since the last arming, s."""
     # outputs of the last step
     integral_m_s: np.ndarray = field(default_factory=lambda: np.zeros(3))
     thrust_n: float = 0.0
@@ -99,6 +104,11 @@ class DroneSim:
         if not self.armed:
             self.integral_m_s[:] = 0.0
             return 0.0, self.quat_axis()
+        if self.armed_for_s < self.thrust_ramp_s:
+            # Spool-up: thrust grows with time, level, whatever the position error.
+            self.integral_m_s[:] = 0.0
+            ramp = self.armed_for_s / self.thrust_ramp_s
+            return ramp * self.mass_kg * GRAVITY_MPS2, _E3.copy()
         err = self.target_world_m - self.position_world_m
         if not self.on_ground:
             self.integral_m_s += err * dt_s
@@ -124,6 +134,7 @@ class DroneSim:
         """Advance by ``dt_s``: control, forces, contact, integration, sensor truth."""
         h = dt_s / self.substeps
         for _ in range(self.substeps):
+            self.armed_for_s = self.armed_for_s + h if self.armed else 0.0
             thrust, z_axis = self._control(h)
             if self.armed:
                 self.quat_wxyz = quat_wxyz_from_z_axis(z_axis)

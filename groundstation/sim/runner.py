@@ -2,6 +2,20 @@
 
 :class:`Simulator` publishes ``tether/{drone}/telemetry``, ``tether/{drone}/reel`` and the
 ground truth ``tether/{drone}/truth``, and obeys ``cmd/setpoint`` and ``cmd/stop``.
+
+Lock-step API (benchmarks, no bus, no clock), the same for both profiles::
+
+    sim = Simulator(settings, bus=None_or_any, scenario="hover")   # [sim] profile picks
+    while sim.t_s < 10.0:
+        samples = sim.step()          # advances sim.dt_s = 1/[sim] rate_hz
+        ...                           # Sample(key, payload): telemetry, truth, reel, follow
+    sim.drones["cf1"].position_world_m, sim.drawn_errors("cf1")
+    sim.handle_command(sample)        # a cmd/setpoint or cmd/stop Sample from the service
+
+``ideal``: one Telemetry + Truth per drone per step, at the step's stamp. ``realistic``: the
+drone runs at ``[sim.realistic] physics_rate_hz`` inside the step and a step returns the IMU
+samples whose stamps fell in it (0, 1 or more per drone at the default 250 Hz stepping and
+~100 Hz IMU), each with a Truth at the same stamp; Reel at 10 Hz in both.
 """
 
 from __future__ import annotations
@@ -11,14 +25,18 @@ import logging
 import threading
 import time
 from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from groundstation.bus import Bus, Sample, Subscription
 from groundstation.config import Settings
 from groundstation.messages import InvalidMessage, SetpointIn, StopIn, Truth
-from groundstation.sim.ideal import DroneSim
 from groundstation.sim.scenarios import SCENARIOS, scenario_names
+
+if TYPE_CHECKING:
+    from groundstation.sim.ideal import DroneSim
+    from groundstation.sim.realistic import RealisticDrone
 
 __all__ = ["Simulator"]
 
@@ -45,7 +63,8 @@ class Simulator:
         self.dt_s = 1.0 / settings.sim.rate_hz
         self.t_s = 0.0
         self.seq = 0
-        self.drones: dict[str, DroneSim] = {}
+        self.profile = settings.sim.profile
+        self.drones: dict[str, DroneSim | RealisticDrone] = {}
         self._operator_done: set[int] = set()
         self._handles: list[Subscription] = []
         self._stop = threading.Event()
@@ -53,10 +72,25 @@ class Simulator:
         self._commands: list[tuple[str, str, bytes]] = []
         self._cmd_lock = threading.Lock()
         self.stops_received: dict[str, str] = {}
+        self._errors_sent_s: dict[str, float] = {}
         for i, drone_id in enumerate(settings.sim.drones):
-            self.drones[drone_id] = self._make_drone(drone_id, i)
+            if self.profile == "realistic":
+                self.drones[drone_id] = self._make_realistic(drone_id, i)
+            else:
+                self.drones[drone_id] = self._make_drone(drone_id, i)
 
-    def _make_drone(self, drone_id: str, index: int) -> DroneSim:
+    def drawn_errors(self, drone_id: str) -> dict[str, Any] | None:
+        """The flight's drawn sensor errors and their equivalent ``[calibration]`` values
+        (``calibration`` key; realistic profile), None for the ideal profile."""
+        drone = self.drones[drone_id]
+        if self.profile != "realistic":
+            return None
+        return drone.drawn_errors()  # type: ignore[union-attr]
+
+    def _placement(
+        self, drone_id: str, index: int
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, float]:
+        """Base, start, script offset, tether length and floor of one drone."""
         params = self.settings.for_drone(drone_id)
         sc = self.scenario
         base = np.array(sc.base_m if sc.base_m is not None else params.base.position_m, float)
@@ -69,15 +103,51 @@ class Simulator:
         floor = params.base.floor_z_m
         if sc.start_on_ground:
             start[2] = floor
+        length = sc.length_m if sc.length_m is not None else params.tether.length_m
+        return base, start, offset, length, floor
+
+    def _make_realistic(self, drone_id: str, index: int) -> RealisticDrone:
+        from groundstation.sim.realistic import RealisticDrone
+
+        params = self.settings.for_drone(drone_id)
+        sc = self.scenario
+        base, start, offset, length, floor = self._placement(drone_id, index)
+        drone = RealisticDrone(
+            self.settings.sim.realistic,
+            base_world_m=base,
+            start_world_m=start,
+            length_m=length,
+            weight_n_per_m=params.tether.weight_n_per_m,
+            floor_z_m=floor,
+            mass_kg=params.drone.mass_kg,
+            seed=(self.settings.sim.seed, index),
+            armed=not sc.start_on_ground,
+            start_on_ground=sc.start_on_ground,
+            thrust_ramp_s=sc.thrust_ramp_s,
+            coin_mass_kg=sc.coin_mass_kg,
+            coin_arm_m=np.array(sc.coin_arm_m, float) + offset
+            if sc.coin_mass_kg is not None
+            else None,
+        )
+        drone.offset_m = offset
+        return drone
+
+    def _make_drone(self, drone_id: str, index: int) -> DroneSim:
+        from groundstation.sim.ideal import DroneSim
+
+        params = self.settings.for_drone(drone_id)
+        sc = self.scenario
+        base, start, offset, length, floor = self._placement(drone_id, index)
         drone = DroneSim(
             base_world_m=base,
-            length_m=sc.length_m if sc.length_m is not None else params.tether.length_m,
+            length_m=length,
             weight_n_per_m=params.tether.weight_n_per_m,
             floor_z_m=floor,
             mass_kg=params.drone.mass_kg,
             position_world_m=start,
             target_world_m=start.copy(),
             armed=not sc.start_on_ground,
+            thrust_ramp_s=sc.thrust_ramp_s,
             coin_mass_kg=sc.coin_mass_kg,
             coin_arm_m=np.array(sc.coin_arm_m, float) + offset
             if sc.coin_mass_kg is not None
@@ -118,6 +188,10 @@ class Simulator:
         self._thread.join(timeout_s)
         return not self._thread.is_alive()
 
+    def handle_command(self, sample: Sample) -> None:
+        """Take a ``cmd/setpoint`` or ``cmd/stop`` Sample (applied at the next step)."""
+        self._on_command(sample)
+
     def _on_command(self, sample: Sample) -> None:
         drone_id = sample.key.split("/")[1]
         kind = "stop" if sample.key.endswith("/cmd/stop") else "setpoint"
@@ -146,7 +220,7 @@ class Simulator:
 
     # ------------------------------------------------------------------ stepping
 
-    def _scripted(self, drone: DroneSim) -> np.ndarray:
+    def _scripted(self, drone: DroneSim | RealisticDrone) -> np.ndarray:
         """Apply the scenario's script at ``self.t_s``; return the external force."""
         sc = self.scenario
         t = self.t_s
@@ -181,8 +255,12 @@ class Simulator:
         self._apply_commands()
         for drone_id, drone in self.drones.items():
             external = externals[drone_id]
-            drone.step(self.dt_s, external)
-            out.extend(self._messages(drone_id, drone, external, publish_reel))
+            if self.profile == "realistic":
+                due = drone.step(self.dt_s, external)
+                out.extend(self._realistic_messages(drone_id, drone, due, publish_reel))  # type: ignore[arg-type]
+            else:
+                drone.step(self.dt_s, external)
+                out.extend(self._messages(drone_id, drone, external, publish_reel))  # type: ignore[arg-type]
         self.seq += 1
         self.t_s = self.seq * self.dt_s
         return out
@@ -230,6 +308,48 @@ class Simulator:
             out.append(Sample(f"tether/{drone_id}/reel", json.dumps(reel).encode()))
         return out
 
+    def _realistic_messages(
+        self,
+        drone_id: str,
+        drone: RealisticDrone,
+        due: list[dict[str, Any]],
+        publish_reel: bool,
+    ) -> list[Sample]:
+        out: list[Sample] = []
+        for item in due:
+            payload = json.dumps(item["telemetry"]).encode()
+            out.append(Sample(f"tether/{drone_id}/telemetry", payload))
+            tr = item["truth"]
+            errors = None
+            last = self._errors_sent_s.get(drone_id)
+            if last is None or tr["stamp_s"] >= last + 1.0:
+                self._errors_sent_s[drone_id] = tr["stamp_s"]
+                errors = drone.drawn_errors()
+            truth = Truth(
+                stamp_s=tr["stamp_s"],
+                position_m=_v3(tr["position_m"]),
+                velocity_mps=_v3(tr["velocity_mps"]),
+                tension_n=_v3(tr["tension_n"]),
+                length_m=tr["length_m"],
+                base_m=_v3(tr["base_m"]),
+                floor_contact=tr["floor_contact"],
+                taut=tr["taut"],
+                armed=tr["armed"],
+                on_ground=tr["on_ground"],
+                phase=self.scenario.name,
+                profile="realistic",
+                errors=errors,
+            )
+            out.append(Sample(f"tether/{drone_id}/truth", truth.to_json()))
+        if publish_reel and self.scenario.coin_mass_kg is None:
+            reel = {
+                "stamp_s": round(self.t_s, 9),
+                "length_m": drone.length_m,
+                "base_m": drone.base_world_m.tolist(),
+            }
+            out.append(Sample(f"tether/{drone_id}/reel", json.dumps(reel).encode()))
+        return out
+
     def run(self, on_step: Callable[[float], None] | None = None) -> None:
         """Run in scaled real time until stopped or the duration is over."""
         cfg = self.settings.sim
@@ -251,5 +371,5 @@ class Simulator:
                 next_wall = time.monotonic()  # fell behind: do not burst to catch up
 
 
-def _v3(a: np.ndarray) -> tuple[float, float, float]:
+def _v3(a: Any) -> tuple[float, float, float]:
     return (float(a[0]), float(a[1]), float(a[2]))

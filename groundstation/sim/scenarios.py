@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 __all__ = [
@@ -60,6 +61,9 @@ class Scenario:
         operator: scripted FollowCommands ``(at_s, payload)``, published by the simulator
             as an operator would.
         duration_s: natural length of the scenario (None: run until stopped).
+        thrust_ramp_s: after arming, the thrust ramps linearly from 0 to the drone's weight
+            over this time, level, before the position controller takes over (a real
+            spool-up on the floor); 0 switches the controller on at once.
     """
 
     name: str
@@ -77,6 +81,30 @@ class Scenario:
     coin_arm_m: tuple[float, float, float] = (0.3, 0.0, 1.0)
     operator: tuple[tuple[float, dict[str, object]], ...] = ()
     duration_s: float | None = None
+    thrust_ramp_s: float = 0.0
+
+
+def _climb(
+    start_m: tuple[float, float, float],
+    goal_m: tuple[float, float, float],
+    at_s: float,
+    speed_mps: float,
+    step_s: float = 0.2,
+) -> tuple[Waypoint, ...]:
+    """Waypoints from ``start_m`` to ``goal_m`` at ``speed_mps`` from ``at_s`` (a gentle climb)."""
+    dist = sum((g - s) ** 2 for s, g in zip(start_m, goal_m, strict=True)) ** 0.5
+    n = max(1, math.ceil(dist / (speed_mps * step_s)))
+    return tuple(
+        Waypoint(
+            at_s + k * step_s,
+            (
+                start_m[0] + (goal_m[0] - start_m[0]) * k / n,
+                start_m[1] + (goal_m[1] - start_m[1]) * k / n,
+                start_m[2] + (goal_m[2] - start_m[2]) * k / n,
+            ),
+        )
+        for k in range(n + 1)
+    )
 
 
 def _spots_tour(dwell_s: float) -> tuple[Waypoint, ...]:
@@ -118,6 +146,20 @@ SCENARIOS: dict[str, Scenario] = {
             start_on_ground=True,
             arm_at_s=2.0,
             duration_s=20.0,
+        ),
+        Scenario(
+            "takeoff_ramp",
+            "disarmed on the floor at (0.5, 0, 0) m; armed at 2 s, thrust ramps 0 → weight over "
+            "2 s on the floor, then climbs to (1, 0, 1) m",
+            start_m=(0.5, 0.0, 0.0),
+            waypoints=(
+                Waypoint(0.0, (0.5, 0.0, 0.0)),
+                *_climb((0.5, 0.0, 0.0), (1.0, 0.0, 1.0), at_s=4.0, speed_mps=0.5),
+            ),
+            start_on_ground=True,
+            arm_at_s=2.0,
+            thrust_ramp_s=2.0,
+            duration_s=15.0,
         ),
         Scenario(
             "coin",
