@@ -445,7 +445,6 @@ class TensionFilterParams:
         noise_time_constant_s: Memory of the noise estimate, s.
         noise_prior_samples: Weight of the prior in the noise estimate, samples.
         noise_warmup_samples: Samples of noise estimate before the change test runs.
-        max_autocorrelation: Bound of the estimated lag-1 autocorrelation (|rho| below it).
         hover_time_constant_s: Time constant of the filter at hover, s: the process noise
             is ``Q = r dt_mean / tau^2 * dt`` per axis (r the observation noise, dt_mean the
             mean sample spacing), whatever the noise level and the rate.
@@ -477,7 +476,6 @@ class TensionFilterParams:
     noise_time_constant_s: float = 5.0
     noise_prior_samples: float = 2.0
     noise_warmup_samples: int = 30
-    max_autocorrelation: float = 0.9
     hover_time_constant_s: float = 2.5
     change_threshold: float = 50.0
     change_min_window: int = 4
@@ -520,11 +518,6 @@ class TensionFilterParams:
                 raise ValueError(
                     f"TensionFilterParams.{name} must be finite and >= 0, got {value!r}"
                 )
-        if not (0.0 <= self.max_autocorrelation < 1.0):
-            raise ValueError(
-                "TensionFilterParams.max_autocorrelation must be in [0, 1), "
-                f"got {self.max_autocorrelation!r}"
-            )
         if self.drift_min_time_constant_s > self.hover_time_constant_s:
             raise ValueError(
                 "TensionFilterParams needs drift_min_time_constant_s <= hover_time_constant_s, "
@@ -631,45 +624,64 @@ class _Ring:
 
 
 class _NoiseEstimate:
-    """On-line observation noise per world axis: variance and lag-1 autocorrelation.
+    """On-line observation noise per world axis: short-range and long-run variance.
 
-    From the lag-1 and lag-2 differences of the raw observations, which a slowly moving
-    tension does not reach: for noise with variance s2 and lag-k autocorrelation rho_k,
-    ``E[(y_t - y_(t-k))^2] = 2 s2 (1 - rho_k)``. Vibration noise is modelled as AR(1),
-    rho_2 = rho^2, so with D1, D2 the two mean squares::
+    What an average of n samples suffers is the *long-run* variance r (the spectral density
+    at zero frequency times the rate): ``Var(mean of n) -> r / n``, with
+    ``r = s2 (1 + 2 sum_k rho_k)`` for per-sample variance s2 and autocorrelations rho_k.
+    Vibration noise is not white (lag-1 autocorrelation up to 0.3 on real flights) and not
+    a pure AR(1) either (the realistic simulator mixes white noise with an AR(0.6) part:
+    lag-1 0.2 but r = 2.0 s2, where an AR(1) with that lag-1 has 1.5 s2), so r is measured
+    directly, in two parts, both blind to a slowly moving tension:
 
-        rho = D2 / D1 - 1,    s2 = D1 / (2 (1 - rho))
+    * ``s_d = E[(y_t - y_(t-1))^2] / 2 = s2 (1 - rho_1)`` over ``noise_time_constant_s``
+      = 5 s: the noise level, which moves with throttle and battery;
+    * ``kappa = r / s_d``, the noise's shape, from second differences of block means
+      (blocks of 0.25 s, i.e. 25 samples at 100 Hz, long against the vibration's
+      correlation time): for independent blocks of n_j samples
+      ``E[(m_j - 2 m_(j-1) + m_(j-2))^2] = r (1/n_j + 4/n_(j-1) + 1/n_(j-2))``, which a
+      tension ramp does not reach. Pooled over the axes and averaged over six times as long
+      (30 s, 120 blocks: +-8 %), from a prior kappa = 1.5 (weight 10 blocks, 2.5 s) between
+      white noise (kappa = 1) and real vibration (AR(1) with rho = 0.3: 2.65; the realistic
+      simulator's: 2.5); the change test's youth factor covers the rest.
 
-    Each mean square is an exponential average over ``noise_time_constant_s`` (a running
-    mean for the first samples, started from the prior), winsorised at 16 times its
-    current value once warm, so a tug's one large difference moves it by a few per mille.
-    rho, a property of the airframe rather than of the moment, is averaged further, over
-    six times as long (from 5 s of samples at 100 Hz it scatters by about +-0.05).
+    Then ``r = s_d kappa``. Each mean is an exponential average (a running mean for the
+    first samples, started from the prior), winsorised at 16 times its current value once
+    warm, so a tug's one large difference moves it by a few per mille. For ``status`` the
+    per-sample s2 comes from the variance within blocks and ``rho_1 = 1 - s_d / s2``.
     """
+
+    BLOCK_S = 0.25
+    KAPPA_PRIOR = 1.5
+    KAPPA_PRIOR_BLOCKS = 10.0
 
     def __init__(self, prior_var_n2: tuple[float, float, float], prior_samples: float) -> None:
         self.d1 = [2.0 * v for v in prior_var_n2]
-        self.d2 = list(self.d1)
-        self.rho = [0.0, 0.0, 0.0]  # slow average of D2 / D1 - 1
+        self.s2 = list(prior_var_n2)
         self.prior_samples = prior_samples
         self.samples = 0  # differences taken
         self.prev1: list[float] | None = None  # y_(t-1)
-        self.prev2: list[float] | None = None  # y_(t-2)
-        self.alpha_cache = (math.nan, math.nan, math.nan)
+        self.alpha_cache = (math.nan, math.nan)
+        # long-run part: kappa, the mean over blocks and axes of r_block / s_d
+        self.kappa = self.KAPPA_PRIOR
+        self.blocks = 0
+        self.break_chain()
 
     def break_chain(self) -> None:
-        self.prev1 = self.prev2 = None
+        self.prev1 = None
+        self.block_sum = [0.0, 0.0, 0.0]
+        self.block_sq = [0.0, 0.0, 0.0]
+        self.block_n = 0
+        self.block_t = 0.0
+        self.means: list[tuple[list[float], int]] = []  # the last two block means, counts
 
     def push(self, y: list[float], dt: float, time_constant_s: float, warm: int) -> None:
-        p1, p2 = self.prev1, self.prev2
+        p1 = self.prev1
+        self.prev1 = y
         if p1 is not None:
             self.samples += 1
             if self.alpha_cache[0] != dt:
-                self.alpha_cache = (
-                    dt,
-                    -math.expm1(-dt / time_constant_s),
-                    -math.expm1(-dt / (6.0 * time_constant_s)),
-                )
+                self.alpha_cache = (dt, -math.expm1(-dt / time_constant_s))
             alpha = max(1.0 / (self.samples + self.prior_samples), self.alpha_cache[1])
             clip = self.samples > warm
             d1 = self.d1
@@ -678,37 +690,56 @@ class _NoiseEstimate:
                 if clip and e > 16.0 * d1[i]:
                     e = 16.0 * d1[i]
                 d1[i] += alpha * (e - d1[i])
-            if p2 is not None:
-                d2 = self.d2
-                for i in range(3):
-                    e = (y[i] - p2[i]) ** 2
-                    if clip and e > 16.0 * d2[i]:
-                        e = 16.0 * d2[i]
-                    d2[i] += alpha * (e - d2[i])
-                beta = max(1.0 / (self.samples + self.prior_samples), self.alpha_cache[2])
-                rho = self.rho
-                for i in range(3):
-                    if d1[i] > 0.0:
-                        rho[i] += beta * (d2[i] / d1[i] - 1.0 - rho[i])
-        self.prev2 = p1
-        self.prev1 = y
-
-    def model(self, max_rho: float) -> tuple[list[float], list[float]]:
-        """``(s2 per axis in N^2, rho per axis)`` of the AR(1) noise model.
-
-        rho is shrunk toward 0 by ``k / (k + 100)`` after k differences: from 50 samples
-        its estimate scatters by +-0.15, which the whitening would pass on.
-        """
-        s2, rho = [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]
-        shrink = self.samples / (self.samples + 100.0)
+            self.block_t += dt
+        bs, bq = self.block_sum, self.block_sq
         for i in range(3):
-            d1 = self.d1[i]
-            r = min(max(self.rho[i] * shrink, -max_rho), max_rho)
-            rho[i] = r
+            bs[i] += y[i]
+            bq[i] += y[i] * y[i]
+        self.block_n += 1
+        if self.block_t >= self.BLOCK_S and self.block_n >= 3:
+            self._end_block(time_constant_s, warm)
+
+    def _end_block(self, time_constant_s: float, warm: int) -> None:
+        n = self.block_n
+        mean = [v / n for v in self.block_sum]
+        # Within-block variance (for status only), over the same memory as s_d.
+        alpha = max(1.0 / (self.blocks + 2.0), self.BLOCK_S / time_constant_s)
+        for i in range(3):
+            within = max(self.block_sq[i] / n - mean[i] * mean[i], 0.0) * n / (n - 1)
+            self.s2[i] += alpha * (within - self.s2[i])
+        self.means.append((mean, n))
+        if len(self.means) == 3:
+            (m2, n2), (m1, n1), (m0, n0) = self.means
+            weight = 1.0 / n0 + 4.0 / n1 + 1.0 / n2
+            self.blocks += 1
+            beta = max(
+                1.0 / (self.blocks + self.KAPPA_PRIOR_BLOCKS),
+                self.BLOCK_S / (6.0 * time_constant_s),
+            )
+            ratio = 0.0
+            for i in range(3):
+                sd = 0.5 * self.d1[i]
+                e = (m0[i] - 2.0 * m1[i] + m2[i]) ** 2 / weight / sd if sd > 0.0 else 1.0
+                ratio += min(e, 16.0 * self.kappa) / 3.0
+            self.kappa += beta * (ratio - self.kappa)
+            del self.means[0]
+        self.block_sum = [0.0, 0.0, 0.0]
+        self.block_sq = [0.0, 0.0, 0.0]
+        self.block_n = 0
+        self.block_t = 0.0
+
+    def model(self) -> tuple[list[float], list[float], list[float]]:
+        """``(s2, rho_1, r)`` per axis: per-sample variance (N^2), lag-1 autocorrelation,
+        long-run variance (N^2)."""
+        s2, rho, r = [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]
+        for i in range(3):
+            sd = 0.5 * self.d1[i]
             # A floor (10 uN per sample) keeps S = P- + R positive definite on a stream
             # that repeats one value.
-            s2[i] = max(d1 / (2.0 * (1.0 - r)), _MIN_NOISE_VAR_N2)
-        return s2, rho
+            r[i] = max(sd * max(self.kappa, 0.5), _MIN_NOISE_VAR_N2)
+            s2[i] = max(self.s2[i], sd * 0.5, _MIN_NOISE_VAR_N2)
+            rho[i] = min(max(1.0 - sd / s2[i], -1.0), 1.0)
+        return s2, rho, r
 
 
 class TensionFilter:
@@ -848,12 +879,6 @@ class TensionFilter:
         self._prior_var = (float(prior[0, 0]), float(prior[1, 1]), float(prior[2, 2]))
         self._noise = _NoiseEstimate(self._prior_var, p.noise_prior_samples)
         self._dt_mean = math.nan
-        # Residual colour of the whitened observations z (what the AR(1) model missed),
-        # from their differences: a property of the noise, so it persists across resets.
-        self._dz_sq = 2.0  # mean of |dz|^2 / (3 r), 2 for white z
-        self._dz_lag1 = -1.0  # mean of dz_t . dz_(t-1) / (3 r), -1 for white z
-        self._dz_samples = 0
-        self._alpha_cache: tuple[float, float] = (math.nan, math.nan)
         self._beta_cache: tuple[float, float] = (math.nan, math.nan)
         self._decay_cache: tuple[float, float] = (math.nan, math.nan)
         self.reset()
@@ -890,6 +915,7 @@ class TensionFilter:
             self._prior = (x0, np.diag(std * std))
         self._initialized = False
         self._samples = 0
+        self._r_prev: tuple[float, ...] | None = None
         self._new_regime()
         self._last: TensionEstimate | None = None
 
@@ -900,8 +926,6 @@ class TensionFilter:
         self._bias_var = 0.0  # its variance per axis at no drift
         self._scale = 1.0
         self._ring.count = 0
-        self._z_prev: list[float] | None = None
-        self._dz_prev: list[float] | None = None
 
     @property
     def initialized(self) -> bool:
@@ -927,9 +951,8 @@ class TensionFilter:
         """
         if not self.params.estimate_noise:
             return self._prior_var, (0.0, 0.0, 0.0), self._prior_var
-        s2, rho = self._noise.model(self.params.max_autocorrelation)
-        r = tuple(v * (1.0 + c) / (1.0 - c) for v, c in zip(s2, rho, strict=True))
-        return tuple(s2), tuple(rho), r
+        s2, rho, r = self._noise.model()
+        return tuple(s2), tuple(rho), tuple(r)
 
     # -- steps -------------------------------------------------------------------------
 
@@ -975,17 +998,11 @@ class TensionFilter:
                 self._dt_mean += 0.02 * (min(dt, 4.0 * self._dt_mean) - self._dt_mean)
         if gap:
             self._new_regime()  # the state stays; P grows by Q dt below
-        chained = self._noise.prev1  # y_(t-1) of the same regime, or None
         if p.estimate_noise:
             self._noise.push(y, dt, p.noise_time_constant_s, p.noise_warmup_samples)
         s2, rho, r = self.noise_model()
-        if chained is not None:
-            # z = (y_t - rho y_(t-1)) / (1 - rho): white noise of variance r.
-            z = [(y[i] - rho[i] * chained[i]) / (1.0 - rho[i]) for i in range(3)]
-            r_now = r
-        else:
-            z, r_now = y, s2  # no predecessor: the raw sample, its own variance
-        R = np.diag(r_now)
+        # R = the long-run variance r, not the per-sample s2: what the filter averages.
+        z, R = y, np.diag(r)
 
         if first:
             self._initialized = True
@@ -994,6 +1011,7 @@ class TensionFilter:
                 kf.x = np.array(z).reshape(3, 1)
                 kf.P = R.copy()
                 self._samples = 1
+                self._r_prev = r
                 return self._publish(False, 0.0, 1.0, s2, rho, r)
             # First sample after a reset with a prior: x- = prior, P- = its covariance,
             # then the usual update (no prediction step: no time has passed).
@@ -1003,6 +1021,15 @@ class TensionFilter:
             self._prior = None
             self._samples = 0
 
+        r_prev = self._r_prev
+        self._r_prev = r
+        if p.estimate_noise and r_prev is not None and r_prev != r:
+            # P follows the noise estimate: with P0 = R and Q proportional to R, P is
+            # proportional to R, so a revised R rescales it (P = D P D, D = sqrt(r / r_prev));
+            # otherwise the first samples, weighed with the prior noise, would be held as
+            # precise as that prior says.
+            d = np.sqrt(np.divide(r, r_prev))
+            kf.P = kf.P * np.outer(d, d)
         tau, scale = self._time_constant(dt)
         dt_mean = self._dt_mean if self._dt_mean == self._dt_mean else dt
         # Q = q dt I per axis, q = r dt_mean / tau^2 (tau: hover, restart or drift).
@@ -1015,8 +1042,6 @@ class TensionFilter:
 
         # Whitened innovation w = L^-1 nu with S = L L' (filterpy kept nu and S).
         innov = _whiten(kf.S, kf.y)
-        if chained is not None:
-            self._update_residual_colour(z, r, dt)
         if p.estimate_noise and self._noise.samples < p.noise_warmup_samples:
             # Innovations whitened with a noise estimate of a few samples are not evidence
             # (of a tug or of a drift).
@@ -1064,55 +1089,20 @@ class TensionFilter:
         scale = self._drift_scale(dt, tau)
         return tau / math.sqrt(scale), scale
 
-    def _update_residual_colour(self, z: list[float], r: tuple[float, ...], dt: float) -> None:
-        """Lag-1 correlation of the differences of z, the check on the whitening.
-
-        For white z, ``corr(dz_t, dz_(t-1)) = -1/2``; for z with a leftover lag-1
-        autocorrelation rho_z it is ``-(1 - rho_z) / 2``. Differences again, so that a
-        ramp of the tension does not read as colour.
-        """
-        p = self.params
-        zp = self._z_prev
-        self._z_prev = z
-        if zp is None:
-            return
-        dz = [(z[i] - zp[i]) / math.sqrt(r[i]) for i in range(3)]
-        a = (dz[0] * dz[0] + dz[1] * dz[1] + dz[2] * dz[2]) / 3.0
-        dp = self._dz_prev
-        self._dz_prev = dz
-        self._dz_samples += 1
-        if self._alpha_cache[0] != dt:
-            self._alpha_cache = (dt, -math.expm1(-dt / (6.0 * p.noise_time_constant_s)))
-        alpha = max(1.0 / (self._dz_samples + 50.0), self._alpha_cache[1])
-        bound = 16.0 * self._dz_sq
-        if self._dz_samples > p.noise_warmup_samples:
-            a = min(a, bound)
-        self._dz_sq += alpha * (a - self._dz_sq)
-        if dp is not None:
-            c = (dz[0] * dp[0] + dz[1] * dp[1] + dz[2] * dp[2]) / 3.0
-            c = min(max(c, -bound), bound)
-            self._dz_lag1 += alpha * (c - self._dz_lag1)
-
     def _normaliser(self) -> float:
         """Variance factor of the change test's window sums, >= 1 (1 once the noise is known).
 
-        The product of: kappa = (1 + rho_z) / (1 - rho_z), the long-sum factor of z's
-        leftover colour (1 when the AR(1) whitening is exact), so windows count effective
-        samples; while the noise estimate is young (k differences), an upper bound on its
-        error, ``1 + 3 sqrt(2 / k)`` (the variance of a k-sample mean square), and the colour
-        it cannot see yet (rho = 0.3 assumed, fading as rho's own shrinkage does). Without the
-        last two the first flight's first samples fired on 2 m/s^2 noise: its estimate is
-        30 % low after 20 samples.
+        R is the long-run variance, so every window sum has at most the variance the test
+        assumes (short windows of positively correlated noise have less): the statistic
+        counts effective samples and errs toward silence. While the noise estimate is young
+        (k differences) an upper bound on its error, ``1 + 3 sqrt(2 / k)`` (the scatter of a
+        k-sample mean square), fading out by 1000 samples. Without it the first flight's
+        first samples fired on 2 m/s^2 noise: the estimate is 30 % low after 20 samples.
         """
-        rho_z = 1.0 + 2.0 * self._dz_lag1 / max(self._dz_sq, 1e-9)
-        rho_z = min(max(rho_z, 0.0), 0.6)
-        factor = (1.0 + rho_z) / (1.0 - rho_z)
         k = self._noise.samples
         if k < 1000 and self.params.estimate_noise:
-            young = 1.0 - k / 1000.0
-            factor *= 1.0 + 3.0 * math.sqrt(2.0 / max(k, 1)) * young
-            factor *= 1.0 + (1.3 / 0.7 - 1.0) * 100.0 / (k + 100.0)
-        return factor
+            return 1.0 + 3.0 * math.sqrt(2.0 / max(k, 1)) * (1.0 - k / 1000.0)
+        return 1.0
 
     def _update_bias(self, innov: list[float], dt: float) -> None:
         # EWMA b = (1 - beta) b + beta w, with beta from the time constant and dt.
