@@ -476,7 +476,7 @@ class TensionFilterParams:
     noise_time_constant_s: float = 5.0
     noise_prior_samples: float = 2.0
     noise_warmup_samples: int = 30
-    hover_time_constant_s: float = 2.5
+    hover_time_constant_s: float = 6.0
     change_threshold: float = 50.0
     change_min_window: int = 4
     change_max_window_s: float = 1.0
