@@ -747,6 +747,7 @@ class Pipeline:
             "filter": {
                 "initialized": runtime.filter.initialized,
                 "change_detections": runtime.change_detections,
+                **_noise_status(runtime.filter),
             },
             "follow": self._follow_info(runtime).model_dump(),
             "length_m": runtime.length_m,
@@ -778,6 +779,18 @@ def _rest_status(rest: RestCalibrator | None) -> dict[str, Any] | None:
         "std_mps2": [float(v) for v in off.std_mps2[:2]],
         "duration_s": off.duration_s,
         "stamp_s": off.stamp_s,
+    }
+
+
+def _noise_status(filt: TensionFilter) -> dict[str, Any]:
+    """The filter's measured observation noise for ``status`` (None before any sample)."""
+    s2, rho, _ = filt.noise_model()
+    est = filt.estimate
+    tau = est.time_constant_s if est is not None else math.nan
+    return {
+        "noise_std_n": [math.sqrt(v) for v in s2],
+        "noise_autocorrelation": list(rho),
+        "time_constant_s": tau if math.isfinite(tau) else None,
     }
 
 
