@@ -327,10 +327,15 @@ def _nanobench_rows() -> list[str]:
             else "fixed at 0 (undetermined)"
         )
         m = f.mean_after_n * 1e3
+        where = (
+            f"at {f.vbat_ref_v:g} V"
+            if f.std["vbat_slope_per_v"] is not None
+            else "at the flight's voltage"
+        )
         rows.append(
             f"| {name.split('_rep')[0]} | {np.nanmin(v):.2f}–{np.nanmax(v):.2f} | "
-            f"{f.values['thrust_scale']:.3f} ± {f.std['thrust_scale']:.3f} (at "
-            f"{f.vbat_ref_v:g} V) | {slope} | ×{nanobench.reading_over_weight(data, f, mask):.2f}"
+            f"{f.values['thrust_scale']:.3f} ± {f.std['thrust_scale']:.3f} ({where}) | {slope} | "
+            f"×{nanobench.reading_over_weight(data, f, mask):.2f}"
             f" at the median voltage | {m[0]:.1f} / {m[1]:.1f} / {m[2]:.1f} | "
             f"{f.rms_before_n[2] * 1e3:.0f} → {f.rms_after_n[2] * 1e3:.0f} | "
             f"{f.hover_samples} / {f.n_eff:.0f} |"
