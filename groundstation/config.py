@@ -3,8 +3,8 @@
 The TOML layout is the public contract (``docs/contract.md``, "Configuration file"):
 ``[zenoh]``, ``[drone]``, ``[tether]``, ``[base]`` and per-drone overrides under
 ``[drones.<id>]`` with the same sub-tables. Tables added beside the contract: ``[follow]``,
-``[filter]``, ``[calibration]``, ``[web]``, ``[service]``, ``[sim]``, ``[crazyflie]``
-(``docs/contract.md``).
+``[filter]``, ``[calibration]``, ``[web]``, ``[service]``, ``[sim]``, ``[crazyflie]``,
+``[localization]`` (``docs/contract.md``).
 
 Environment overrides use the prefix ``GROUNDSTATION_`` and ``__`` between levels, e.g.
 ``GROUNDSTATION_TETHER__WEIGHT_N_PER_M=0.04`` or ``GROUNDSTATION_ZENOH__CONNECT='["tcp/..."]'``.
@@ -50,6 +50,7 @@ __all__ = [
     "DroneSection",
     "FilterSection",
     "FollowSection",
+    "LocalizationSection",
     "RealisticSection",
     "ServiceSection",
     "Settings",
@@ -195,8 +196,9 @@ class FollowSection(_Section):
     """``[follow]``: tension following and tug-to-land defaults (off until enabled)."""
 
     threshold_n: float = Field(0.10, gt=0.0)
-    """|T| above which the drone follows the pull, N. Above the whole default tether's
-    weight (ω·L = 0.08 N) so a hanging tether alone never engages it."""
+    """Pull above which the drone follows it, N: the tension beyond the tether's own in quiet
+    hover at the drone's position (catenary there, plus a slowly tracked offset), so a
+    hanging tether alone never engages it, near taut neither."""
     hysteresis_ratio: float = Field(0.2, ge=0.0, lt=1.0)
     """Following releases below threshold_n · (1 − hysteresis_ratio)."""
     land_below_m: float | None = None
@@ -215,7 +217,30 @@ class FilterSection(_Section):
     """``[filter]``: tension-filter knobs beside the noise figures of ``[drone]``."""
 
     ground_thrust_ratio: float = Field(0.5, gt=0.0, lt=1.0)
-    """Below this fraction of the weight the drone is taken to be on the ground."""
+    """Below this fraction of the weight the drone is surely on the ground; at or above it,
+    on the ground until lift-off is seen (groundstation.contact: motion-capture height, the
+    IMU's climb, or the floor no longer carrying it)."""
+
+
+class LocalizationSection(_Section):
+    """``[localization]`` (added): where the azimuth and the catenary's shape come from."""
+
+    azimuth: Literal["auto", "tension", "reel", "mocap"] = "auto"
+    """``auto`` fuses the tension's direction and the reel's exit azimuth by their
+    uncertainty; ``tension``, ``reel`` or ``mocap`` uses that one alone (``mocap`` with
+    ``elevation = false`` is the paper's method: β from Telemetry ``position_m``, r and z from
+    the tension). A source asked for but absent or stale leaves the azimuth undetermined."""
+    elevation: bool = True
+    """Fuse the reel's ``exit_elevation_rad`` with the tension (the base slope constrains
+    the catenary)."""
+    reel_stale_after_s: float = Field(0.5, gt=0.0)
+    """Exit angles older than this (receive time) are not used, s."""
+    exit_azimuth_std_rad: float = Field(0.03, gt=0.0)
+    """σ of ``exit_azimuth_rad`` when the Reel message gives none, rad."""
+    exit_elevation_std_rad: float = Field(0.03, gt=0.0)
+    """σ of ``exit_elevation_rad`` when the Reel message gives none, rad."""
+    mocap_std_m: float = Field(0.002, gt=0.0)
+    """Horizontal σ of the motion-capture position (``azimuth = "mocap"``), m."""
 
 
 class CalibrationSection(_Section):
@@ -506,6 +531,14 @@ class SimSection(_Section):
     """Relative error of the reported thrust (0.02: reports 2 % too much)."""
     mocap: bool = True
     """Publish the motion-capture ``position_m`` in Telemetry."""
+    exit_angles: bool = False
+    """(added) A base sensor: publish the tether's ``exit_azimuth_rad`` / ``exit_elevation_rad``
+    (and their σ) in Reel, from the simulated tether's first segment, with the noise below
+    (groundstation/sim/base_sensor.py)."""
+    exit_azimuth_noise_rad: float = Field(0.02, ge=0.0)
+    """Azimuth noise σ of the base sensor for a horizontal exit, rad (grows as 1/cos(elevation))."""
+    exit_elevation_noise_rad: float = Field(0.02, ge=0.0)
+    """Elevation noise σ of the base sensor, rad."""
     seed: int = 0
     """Random seed of the simulated sensor noise."""
     speed: float = Field(1.0, gt=0.0)
@@ -621,6 +654,7 @@ class Settings(BaseSettings):
     follow: FollowSection = FollowSection()
     filter: FilterSection = FilterSection()
     calibration: CalibrationSection = CalibrationSection()
+    localization: LocalizationSection = LocalizationSection()
     web: WebSection = WebSection()
     service: ServiceSection = ServiceSection()
     sim: SimSection = SimSection()

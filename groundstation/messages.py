@@ -293,11 +293,17 @@ class Estimate(_Out):
     radial_interval_m: tuple[float, float] | None = None
     """(added) Interval of the radial distance (wide when the tether rests slack on the floor)."""
     azimuth_determined: bool | None = None
-    """(added) False when H is within its noise (tether near plumb: azimuth unknown)."""
+    """(added) False when the azimuth's σ exceeds 1/3 rad (e.g. H within its noise, the
+    tether near plumb, with no other source)."""
+    azimuth_source: str | None = None
+    """(added) The most certain source of the azimuth: ``tension``, ``reel``, ``mocap``, or
+    ``none``; null without a position."""
     floor_contact: bool | None = None
     """(added) Part of the tether rests on the floor."""
     on_ground: bool = False
-    """(added) Drone disarmed or thrust below half its weight: no tension estimate."""
+    """(added) The floor carries the drone (disarmed, thrust below ``[filter]
+    ground_thrust_ratio`` of its weight, or spooling up before lift-off is seen; see
+    groundstation.contact): no tension estimate, ``tension_n`` zero."""
     converged: bool = False
     """(added) The filter has seen enough samples for its std to be meaningful."""
     length_m: float | None = None
@@ -450,6 +456,9 @@ class Status(_Out):
     """Filter state (``initialized``, ``change_detections``)."""
     follow: FollowInfo | None = None
     """Follow mode, as in the Estimate."""
+    contact: dict[str, Any] | None = None
+    """Ground/air state: ``on_ground`` and the ``reason`` that decided it (``disarmed``,
+    ``low_thrust``, ``resting``, ``mocap_height``, ``climbing``, ``push_free``, ``air``)."""
     length_m: float | None = None
     """Tether length in use, metres."""
     length_source: str | None = None

@@ -22,11 +22,12 @@ from typing import Any
 
 import numpy as np
 
+from groundstation import contact as contact_mod
 from groundstation import follow as follow_mod
 from groundstation.bus import Sample
 from groundstation.calibration import RestCalibrator
 from groundstation.config import CalibrationSection, DroneParams, Settings
-from groundstation.localization import PositionEstimate, localize
+from groundstation.localization import AngleObservation, PositionEstimate, localize
 from groundstation.messages import (
     Estimate,
     Event,
@@ -117,6 +118,18 @@ class DroneRuntime:
     base_world_m: np.ndarray
     weight_n_per_m: float
     length_source: str = "config"
+    contact_params: contact_mod.ContactParams = field(default_factory=contact_mod.ContactParams)
+    contact: contact_mod.ContactState = field(default_factory=contact_mod.ContactState)
+    """Ground/air state (groundstation.contact): on the floor no tension is published."""
+    rested: bool = False
+    """Seen certainly on the ground (disarmed, low thrust) since the last lift-off: the filter
+    then restarts from the lift-off prior."""
+    exit_azimuth: AngleObservation | None = None
+    """The reel's last exit azimuth (with its σ) and when it was received."""
+    exit_azimuth_received_s: float = -math.inf
+    exit_elevation: AngleObservation | None = None
+    """The reel's last exit elevation (with its σ) and when it was received."""
+    exit_elevation_received_s: float = -math.inf
     last_seq: int | None = None
     last_stamp_s: float | None = None
     last_seen_s: float | None = None
@@ -321,6 +334,18 @@ class Pipeline:
             runtime.length_source = "reel"
             if msg.base_m is not None:
                 runtime.base_world_m = np.array(msg.base_m, dtype=float)
+            loc = self.settings.localization
+            if msg.exit_azimuth_rad is not None:
+                runtime.exit_azimuth = AngleObservation(
+                    msg.exit_azimuth_rad, msg.exit_azimuth_std_rad or loc.exit_azimuth_std_rad
+                )
+                runtime.exit_azimuth_received_s = parsed.received_s
+            if msg.exit_elevation_rad is not None:
+                runtime.exit_elevation = AngleObservation(
+                    msg.exit_elevation_rad,
+                    msg.exit_elevation_std_rad or loc.exit_elevation_std_rad,
+                )
+                runtime.exit_elevation_received_s = parsed.received_s
             return []
         if isinstance(msg, TetherParams):
             changes: dict[str, Any] = {}
@@ -481,6 +506,9 @@ class Pipeline:
                 if params.calibration.rest
                 else None
             ),
+            contact_params=contact_mod.ContactParams(
+                ground_thrust_ratio=params.filter.ground_thrust_ratio
+            ),
         )
         with self._lock:
             self.drones[drone] = runtime
@@ -545,6 +573,7 @@ class Pipeline:
                 armed=msg.armed,
                 calibration=runtime.calibration,
                 vbat_v=msg.vbat_v,
+                ground_thrust_ratio=runtime.contact_params.ground_thrust_ratio,
             )
         except DegenerateQuaternionError as exc:
             self.count_drop(runtime.drone, "bad_quaternion", str(exc))
@@ -583,16 +612,43 @@ class Pipeline:
         runtime.accepted += 1
         runtime.telemetry_rate.add(now_s)
 
+        # Ground or air, with hysteresis: between ground_thrust_ratio and the weight the
+        # floor may still carry the drone (its push is no tension) until lift-off is seen.
+        runtime.contact = contact_mod.contact_step(
+            runtime.contact,
+            runtime.contact_params,
+            dt_s=dt_s,
+            armed=msg.armed,
+            thrust_n=msg.thrust_n,
+            mass_kg=runtime.params.drone.mass_kg,
+            vertical_accel_mps2=contact_mod.vertical_accel_mps2(msg.accel_mps2, msg.quat_wxyz),
+            upward_force_n=float(obs.tension_world_n[2])
+            if obs.tension_world_n is not None
+            else None,
+            height_m=msg.position_m[2] if msg.position_m is not None else None,
+            floor_z_m=runtime.params.base.floor_z_m,
+        )
+        on_ground = runtime.contact.on_ground or obs.tension_world_n is None
+
         position: PositionEstimate | None = None
         tension: Sequence[float] = _ZEROS3
         std: Sequence[float] = _ZEROS3
         converged = False
-        if obs.tension_world_n is None:
+        if on_ground or obs.tension_world_n is None:
             # On the ground the floor carries the drone: no tension estimate. The filter
             # restarts at lift-off rather than from the floor's reaction, from the prior
-            # that a tether resting on the floor pulls on the drone with next to nothing.
-            runtime.filter.reset(prior_world_n=(0.0, 0.0, 0.0), prior_std_n=LIFTOFF_PRIOR_STD_N)
+            # that a tether resting on the floor pulls on the drone with next to nothing:
+            # if the drone was seen resting (disarmed or below the thrust ratio). Found in
+            # the air without that (a service started mid-flight) it starts from its first
+            # observation instead.
+            if runtime.contact.reason in ("disarmed", "low_thrust"):
+                runtime.rested = True
+            if runtime.rested:
+                runtime.filter.reset(prior_world_n=(0.0, 0.0, 0.0), prior_std_n=LIFTOFF_PRIOR_STD_N)
+            else:
+                runtime.filter.reset()
         else:
+            runtime.rested = False
             est = runtime.filter.update(
                 obs.tension_world_n, dt_s, thrust_axis_world=obs.thrust_axis_world
             )
@@ -604,6 +660,9 @@ class Pipeline:
             std = est.std_n.tolist()
             converged = est.converged
             if converged:
+                # Exit angles only while fresh: the reel reports at its own rate.
+                loc = self.settings.localization
+                fresh_s = now_s - loc.reel_stale_after_s
                 position = localize(
                     est.tension_world_n,
                     est.cov_n2,
@@ -611,6 +670,15 @@ class Pipeline:
                     runtime.length_m,
                     runtime.base_world_m,
                     runtime.params.base.floor_z_m,
+                    azimuth=loc.azimuth,
+                    exit_azimuth=runtime.exit_azimuth
+                    if runtime.exit_azimuth_received_s >= fresh_s
+                    else None,
+                    exit_elevation=runtime.exit_elevation
+                    if loc.elevation and runtime.exit_elevation_received_s >= fresh_s
+                    else None,
+                    mocap_world_m=msg.position_m,
+                    mocap_std_m=loc.mocap_std_m,
                 )
 
         follow_position = (
@@ -629,10 +697,12 @@ class Pipeline:
             floor_z_m=runtime.params.base.floor_z_m,
             tension_world_n=tension if converged else None,
             position_is_external=msg.position_m is not None,
+            weight_n_per_m=runtime.weight_n_per_m,
+            on_ground=on_ground,
         )
         runtime.follow_state = decision.state
         out: list[Sample] = []
-        estimate = self._estimate(runtime, msg, tension, std, position, obs.on_ground, converged)
+        estimate = self._estimate(runtime, msg, tension, std, position, on_ground, converged)
         if estimate is not None:
             runtime.last_estimate = estimate
             runtime.estimates += 1
@@ -687,6 +757,7 @@ class Pipeline:
             radial_m=float(position.radial_m) if position is not None else None,
             radial_interval_m=(float(lo_hi[0]), float(lo_hi[1])) if lo_hi is not None else None,
             azimuth_determined=position.azimuth_determined if position is not None else None,
+            azimuth_source=position.azimuth_source if position is not None else None,
             floor_contact=bool(position.floor_contact) if position is not None else None,
             on_ground=on_ground,
             converged=converged,
@@ -750,6 +821,7 @@ class Pipeline:
                 **_noise_status(runtime.filter),
             },
             "follow": self._follow_info(runtime).model_dump(),
+            "contact": {"on_ground": runtime.contact.on_ground, "reason": runtime.contact.reason},
             "length_m": runtime.length_m,
             "length_source": runtime.length_source,
             "base_m": list(map(float, runtime.base_world_m)),

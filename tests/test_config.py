@@ -101,3 +101,10 @@ def test_integers_are_fine_where_floats_are_expected(tmp_path: Path) -> None:
     cfg.write_text("[tether]\nlength_m = 2\n[base]\nposition_m = [0, 0, 1]\n")
     s = load_settings(cfg, use_env=False)
     assert s.tether.length_m == 2.0 and s.base.position_m == (0.0, 0.0, 1.0)
+
+
+def test_localization_section() -> None:
+    s = load_settings(None, {"localization": {"azimuth": "mocap"}}, use_env=False)
+    assert s.localization.azimuth == "mocap" and s.localization.elevation is True
+    with pytest.raises(ConfigError, match=r"localization\.azimuth = 'compass'"):
+        load_settings(None, {"localization": {"azimuth": "compass"}}, use_env=False)
