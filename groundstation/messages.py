@@ -312,6 +312,9 @@ class Estimate(_Out):
     """(added) Tether length used."""
     base_m: tuple[float, float, float] | None = None
     """(added) Base exit point used."""
+    calibration: str = "none"
+    """(added) Which sensor calibration the observation applied (``[calibration] source``,
+    ``config`` for unlabelled values), or ``none``."""
 
 
 class Setpoint(_Out):
@@ -473,6 +476,11 @@ class Status(_Out):
     None on an in-memory bus)."""
     events_suppressed: int | None = None
     """Events for this drone not published because of the per-drone cap (a flood)."""
+    rest_calibration: dict[str, Any] | None = None
+    """Rest calibration (``[calibration] rest``): None when off; else ``{"in_force": false}``,
+    or the accelerometer's x/y offset found while the drone sat still and disarmed, applied
+    until the next disarm: ``in_force``, ``offset_mps2`` [x, y], ``std_mps2``, ``duration_s``,
+    ``stamp_s``."""
 
 
 class MocapPoseIn(_In):

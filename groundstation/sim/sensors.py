@@ -31,7 +31,9 @@ terms, so a fitted calibration can be checked against :meth:`DrawnErrors.equival
   exponent (motor thrust at a fixed PWM grows with V², so the map reads ever higher as the
   battery sags).
 - Equivalent calibration (what ``[calibration]`` must hold for the estimator to be exactly
-  right at level hover, ``f_B = g·e3``): ``accel_bias_mps2 = (1 + s)·R_B_Aᵀ·g·e3 − g·e3 + b``;
+  right at hover): ``accel_bias_mps2 = (1 + s)·R_B_Aᵀ·f_h − f_h + b`` with ``f_h`` the true
+  specific force in B at the start of the hover (``accel_bias_level_mps2``: the same at
+  ``f_h = g·e3``);
   ``thrust_axis_rad = (a_x, a_y)``; ``thrust_scale = 1/(1 + e)``, ``thrust_vbat_slope_per_v =
   γ/((1 + e)·V_ref)``, ``thrust_vbat_ref_v = V_ref`` (the first-order expansion of
   ``(V/V_ref)^γ/(1 + e)``; 0.2 % off at 0.16 V from V_ref); ``thrust_scale_hover_start``: the
@@ -143,6 +145,9 @@ class DrawnErrors:
         thrust_vbat_ref_v: V_ref, V.
         hover_vbat_v: battery voltage at hover thrust at the start of the flight, V.
         mocap_rate_hz: this flight's motion-capture frame rate, Hz.
+        hover_specific_force_body_mps2: true specific force in B at the start of the hover
+            (after the warm-up; ``g·e3`` for a start on the floor), where the equivalent
+            accelerometer bias is exact.
     """
 
     misalignment_rad: tuple[float, float]
@@ -154,6 +159,7 @@ class DrawnErrors:
     thrust_vbat_ref_v: float
     hover_vbat_v: float
     mocap_rate_hz: float
+    hover_specific_force_body_mps2: tuple[float, float, float] = (0.0, 0.0, GRAVITY_MPS2)
 
     @property
     def R_body_accel(self) -> np.ndarray:
@@ -166,11 +172,22 @@ class DrawnErrors:
             self.thrust_vbat_ref_v / vbat_v
         ) ** self.thrust_vbat_exponent
 
-    def equivalent(self) -> dict[str, Any]:
-        """The ``[calibration]`` values that make the estimator exact at level hover."""
-        g_e3 = np.array([0.0, 0.0, GRAVITY_MPS2])
+    def accel_bias_at(self, f_body_mps2: np.ndarray) -> np.ndarray:
+        """Equivalent accelerometer bias at true specific force ``f_B``:
+        ``(1 + s)·R_B_Aᵀ·f_B − f_B + b``, m/s² (accel − this = f_B, noise aside)."""
+        f = np.asarray(f_body_mps2, dtype=float)
         b = np.array(self.accel_bias_mps2)
-        bias = (1.0 + self.accel_scale_error) * self.R_body_accel.T @ g_e3 - g_e3 + b
+        return np.asarray((1.0 + self.accel_scale_error) * self.R_body_accel.T @ f - f + b)
+
+    def equivalent(self) -> dict[str, Any]:
+        """The ``[calibration]`` values that make the estimator exact at hover.
+
+        ``accel_bias_mps2`` at this flight's hover specific force
+        (``hover_specific_force_body_mps2``), ``accel_bias_level_mps2`` at ``g·e3``; they
+        differ by the misalignment and scale acting on the hover tilt (a few 0.01 m/s²).
+        """
+        bias = self.accel_bias_at(np.array(self.hover_specific_force_body_mps2))
+        level = self.accel_bias_at(np.array([0.0, 0.0, GRAVITY_MPS2]))
         one_e = 1.0 + self.thrust_report_error
         return {
             "thrust_scale": 1.0 / one_e,
@@ -179,6 +196,7 @@ class DrawnErrors:
             "thrust_scale_hover_start": 1.0 / self.report_factor(self.hover_vbat_v),
             "thrust_axis_rad": [float(v) for v in self.thrust_axis_rad],
             "accel_bias_mps2": [float(v) for v in bias],
+            "accel_bias_level_mps2": [float(v) for v in level],
         }
 
     def as_dict(self) -> dict[str, Any]:
@@ -298,6 +316,8 @@ class MocapStream:
         arrival = capture + p.mocap_latency_s + rng.uniform(0.0, 0.001, capture.size)
         late = rng.uniform(size=capture.size) < p.mocap_burst_prob
         late[-1] = False
+        # never hold a frame across an outage (the gap would outgrow mocap_outage_max_s)
+        late[:-1] &= np.diff(capture) < 1.5 * period
         hold = rng.uniform(0.0, 0.0008, capture.size)
         for i in range(capture.size - 2, -1, -1):
             if late[i]:
