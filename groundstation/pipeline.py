@@ -162,6 +162,13 @@ class DroneRuntime:
     while the drone sat still and disarmed, added to the configured bias until the next
     disarm."""
 
+    @property
+    def last_estimate(self) -> Estimate | None:
+        """The last published Estimate as a model (built on demand, not per message)."""
+        if self.last_estimate_fields is None or self.follow_json_cache is None:
+            return None
+        return Estimate(follow=self.follow_json_cache[0], **self.last_estimate_fields)
+
 
 def calibration_from_config(
     section: CalibrationSection,
@@ -184,13 +191,6 @@ def calibration_from_config(
     if cal.is_identity:
         return None, section.source
     return cal, section.source if section.source != "none" else "config"
-
-    @property
-    def last_estimate(self) -> Estimate | None:
-        """The last published Estimate as a model (built on demand, not per message)."""
-        if self.last_estimate_fields is None or self.follow_json_cache is None:
-            return None
-        return Estimate(follow=self.follow_json_cache[0], **self.last_estimate_fields)
 
 
 class Pipeline:
