@@ -49,13 +49,13 @@ TOL_N = 0.003
 HOVER_TENSION_N = np.array([-0.020, 0.005, -0.060])
 DOC_PATH = Path(__file__).resolve().parent.parent / "docs" / "filter_benchmark.md"
 
-# Fixed-gain "fast": tau = sqrt(r dt / q) = 0.13 s with r = (9 mN)^2, dt = 4 ms.
-_FAST_RW = math.sqrt((MASS_KG * ACCEL_NOISE_MPS2) ** 2 * DT_S) / 0.13
+# Fixed gains: no change test, no drift adaptation (its shortest time constant is the hover
+# one); "fast" holds tau = 0.13 s, the time constant a fixed filter needs for the tug target.
 FILTERS: dict[str, TensionFilterParams] = {
     "adaptive": TensionFilterParams(),
-    "fixed-hover": TensionFilterParams(change_threshold=1e300, drift_max_scale=1.0),
+    "fixed-hover": TensionFilterParams(change_threshold=1e300, drift_min_time_constant_s=2.5),
     "fixed-fast": TensionFilterParams(
-        random_walk_n_per_sqrt_s=_FAST_RW, change_threshold=1e300, drift_max_scale=1.0
+        hover_time_constant_s=0.13, change_threshold=1e300, drift_min_time_constant_s=0.13
     ),
 }
 

@@ -168,9 +168,10 @@ class DroneSection(_Section):
     mass_kg: float = Field(0.030, gt=0.0, le=100.0)
     """Drone mass, kg (m of eq:NE_tether)."""
     accel_noise_mps2: float = Field(0.3, gt=0.0)
-    """Accelerometer white-noise standard deviation per axis (filter tuning)."""
+    """Accelerometer noise standard deviation per axis: the tension filter's prior until it has
+    measured the noise on line (level and colour, over its first seconds in the air)."""
     thrust_noise_n: float = Field(0.003, gt=0.0)
-    """Collective-thrust noise standard deviation (filter tuning)."""
+    """Collective-thrust noise standard deviation (the filter's prior, as above)."""
 
 
 class TetherSection(_Section):

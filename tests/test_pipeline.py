@@ -168,6 +168,46 @@ def test_no_nan_ever_published() -> None:
         assert np.all(np.isfinite(values))
 
 
+def test_calibration_is_applied_and_reported_per_drone() -> None:
+    """[calibration] and [drones.<id>.calibration] reach the observation and the reports."""
+    from groundstation.config import load_settings
+
+    settings = load_settings(
+        None,
+        {
+            "calibration": {"thrust_scale": 1.1, "source": "cal.toml 2026-12-01"},
+            "drones": {"cf2": {"calibration": {"thrust_scale": 1.0, "source": "none"}}},
+        },
+        use_env=False,
+    )
+    pipe = Pipeline(settings)
+    level = GOOD | {"accel_mps2": [0.0, 0.0, 9.81], "thrust_n": 0.30, "vbat_v": 3.7}
+    outs = {}
+    for drone in ("cf1", "cf2"):
+        # 1 s of level hover: the contact state starts on the ground and finds the drone in
+        # the air once the floor visibly carries nothing (groundstation.contact).
+        for k in range(250):
+            body = json.dumps(level | {"seq": k, "stamp_s": k * 0.004}).encode()
+            (out,) = pipe.handle(Sample(f"tether/{drone}/telemetry", body), k * 0.004)
+        outs[drone] = json.loads(out.payload)
+    # m f - F: cf1 thrust 0.30 * 1.1 = 0.33 N against m g = 0.2943 N: 35.7 mN downward pull
+    # (the filtered estimate, from the lift-off prior of 0: within 2 mN after 1 s).
+    assert outs["cf1"]["tension_n"][2] == pytest.approx(0.030 * 9.81 - 0.33, abs=2e-3)
+    assert outs["cf2"]["tension_n"][2] == pytest.approx(0.030 * 9.81 - 0.30, abs=2e-3)
+    assert outs["cf1"]["calibration"] == "cal.toml 2026-12-01"
+    assert outs["cf2"]["calibration"] == "none"
+    status1, status2 = pipe.status("cf1", 0.0), pipe.status("cf2", 0.0)
+    assert status1 is not None and status1["calibration"] == "cal.toml 2026-12-01"
+    assert status2 is not None and status2["calibration"] == "none"
+    # values without a source are never reported as "none"
+    unlabelled = load_settings(
+        None, {"calibration": {"accel_bias_mps2": [0.1, 0, 0]}}, use_env=False
+    )
+    pipe = Pipeline(unlabelled)
+    (out,) = pipe.handle(_telemetry(0), 0.0)
+    assert json.loads(out.payload)["calibration"] == "config"
+
+
 @pytest.mark.parametrize("mocap", [True, False], ids=["mocap", "no-mocap"])
 @pytest.mark.parametrize(("length_m", "fraction"), [(1.6, 0.97), (3.0, 0.90)])
 def test_near_taut_hover_with_follow_enabled_never_engages_until_pulled(

@@ -13,9 +13,11 @@ from hypothesis import strategies as st
 
 from groundstation.tension import (
     GRAVITY_MPS2,
+    NO_CALIBRATION,
     DegenerateQuaternionError,
     InvalidObservationError,
     InvalidTimeStepError,
+    ObservationCalibration,
     TensionFilter,
     TensionFilterParams,
     observation_cov_n2,
@@ -27,6 +29,7 @@ MASS_KG = 0.030
 DT_S = 0.004  # 250 Hz
 ACCEL_NOISE_MPS2 = 0.3
 THRUST_NOISE_N = 0.003
+TAU_S = TensionFilterParams().hover_time_constant_s  # the filter's hover time constant
 HOVER_TENSION_N = np.array([-0.020, 0.005, -0.060])
 G_WORLD_MPS2 = np.array([0.0, 0.0, -GRAVITY_MPS2])
 E3 = np.array([0.0, 0.0, 1.0])
@@ -211,6 +214,98 @@ def test_invalid_observation_inputs_raise(
         observe_tension(accel, [1, 0, 0, 0], thrust, mass)
 
 
+def _rot_x(a: float) -> np.ndarray:
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+
+
+def _rot_y(a: float) -> np.ndarray:
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
+@pytest.mark.parametrize("with_vbat", [True, False])
+def test_calibration_recovers_the_true_tension_from_a_corrupted_sample(with_vbat: bool) -> None:
+    """A sample synthesised with known sensor errors, observed with the matching calibration.
+
+    Truth first: attitude, thrust axis b = R_x(about_x) R_y(about_y) e3 in the body frame,
+    thrust F, acceleration p'' and tension T obey m p'' = R b F + T + m g. The sensors then
+    report accel = R^T (p'' - g) + bias and thrust_n = F / (scale + slope (vbat - ref)).
+    """
+    rng = np.random.default_rng(7)
+    for _ in range(200):
+        about = tuple(rng.uniform(-0.1, 0.1, 2))
+        bias = tuple(rng.uniform(-0.8, 0.8, 3))
+        cal = ObservationCalibration(
+            thrust_scale=float(rng.uniform(0.5, 1.9)),
+            thrust_axis_rad=(float(about[0]), float(about[1])),
+            accel_bias_mps2=(float(bias[0]), float(bias[1]), float(bias[2])),
+            thrust_vbat_slope_per_v=float(rng.uniform(-0.3, 0.3)),
+            thrust_vbat_ref_v=3.9,
+        )
+        vbat = float(rng.uniform(3.3, 4.2)) if with_vbat else None
+        quat = rng.normal(size=4)
+        quat /= np.linalg.norm(quat)
+        R = rotation_world_body(quat)
+        b_body = _rot_x(about[0]) @ _rot_y(about[1]) @ E3
+        thrust_true_n = float(rng.uniform(0.35, 0.8))
+        accel_world = rng.normal(0.0, 2.0, 3)
+        tension_true = MASS_KG * accel_world - R @ b_body * thrust_true_n - MASS_KG * G_WORLD_MPS2
+        accel_reported = R.T @ (accel_world - G_WORLD_MPS2) + np.array(bias)
+        factor = cal.thrust_scale + (
+            cal.thrust_vbat_slope_per_v * (vbat - cal.thrust_vbat_ref_v) if vbat else 0.0
+        )
+        thrust_reported = thrust_true_n / factor
+        obs = observe_tension(
+            accel_reported, quat, thrust_reported, MASS_KG, calibration=cal, vbat_v=vbat
+        )
+        assert obs.tension_world_n is not None
+        np.testing.assert_allclose(obs.tension_world_n, tension_true, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(obs.thrust_axis_world, R @ b_body, rtol=0, atol=1e-12)
+        assert obs.thrust_n == pytest.approx(thrust_true_n, rel=1e-12)
+        # Without the calibration the same sample is off (the errors are not negligible).
+        raw = observe_tension(accel_reported, quat, thrust_reported, MASS_KG)
+        assert raw.tension_world_n is not None
+        assert np.linalg.norm(raw.tension_world_n - tension_true) > 1e-3
+
+
+def test_identity_calibration_changes_nothing_bit_for_bit() -> None:
+    rng = np.random.default_rng(8)
+    for _ in range(50):
+        quat = rng.normal(size=4)
+        accel = rng.normal(0.0, 5.0, 3)
+        a = observe_tension(accel, quat, 0.4, MASS_KG)
+        b = observe_tension(accel, quat, 0.4, MASS_KG, calibration=NO_CALIBRATION, vbat_v=3.7)
+        assert a.tension_world_n is not None and b.tension_world_n is not None
+        assert a.tension_world_n.tolist() == b.tension_world_n.tolist()
+        assert a.thrust_axis_world == b.thrust_axis_world
+    assert NO_CALIBRATION.is_identity
+    assert not ObservationCalibration(thrust_scale=1.1).is_identity
+
+
+def test_calibrated_thrust_decides_ground_contact_and_bad_values_raise() -> None:
+    # 0.2 N reported is above half the weight (0.147 N); scaled by 0.5 it is below.
+    level = np.array([1.0, 0.0, 0.0, 0.0])
+    accel = np.array([0.0, 0.0, GRAVITY_MPS2])
+    assert observe_tension(accel, level, 0.2, MASS_KG).reason == "ok"
+    half = ObservationCalibration(thrust_scale=0.5)
+    assert observe_tension(accel, level, 0.2, MASS_KG, calibration=half).reason == "low_thrust"
+    with pytest.raises(InvalidObservationError, match="vbat_v"):
+        observe_tension(accel, level, 0.2, MASS_KG, vbat_v=-1.0)
+    # a battery slope that drives the factor negative is reported, not used
+    steep = ObservationCalibration(thrust_vbat_slope_per_v=2.0, thrust_vbat_ref_v=3.9)
+    with pytest.raises(InvalidObservationError, match="calibrated thrust"):
+        observe_tension(accel, level, 0.2, MASS_KG, calibration=steep, vbat_v=3.0)
+    for bad in (
+        {"thrust_scale": 0.0},
+        {"thrust_axis_rad": (0.0, math.nan)},
+        {"accel_bias_mps2": (0.0, 0.0)},
+        {"thrust_vbat_ref_v": -3.9},
+    ):
+        with pytest.raises(ValueError):
+            ObservationCalibration(**bad)  # type: ignore[arg-type]
+
+
 def test_observation_covariance_matches_monte_carlo() -> None:
     rng = np.random.default_rng(2)
     quat = quat_from_axis_angle(np.array([1.0, 2.0, 0.5]), 0.6)
@@ -236,9 +331,10 @@ def test_first_observation_initialises_state() -> None:
     est = filt.update(y, 123.0)  # dt of the first sample is irrelevant
     assert filt.initialized
     np.testing.assert_array_equal(est.tension_world_n, y)
-    np.testing.assert_allclose(
-        est.cov_n2, observation_cov_n2(None, MASS_KG, ACCEL_NOISE_MPS2, THRUST_NOISE_N)
-    )
+    _, _, r = filt.noise_model()  # the prior (config) noise, times the prior colour factor
+    np.testing.assert_allclose(est.cov_n2, np.diag(r))
+    prior = np.diag(observation_cov_n2(None, MASS_KG, ACCEL_NOISE_MPS2, THRUST_NOISE_N))
+    np.testing.assert_allclose(r, 1.5 * prior)
     assert est.samples == 1 and not est.converged and not est.change_detected
     with pytest.raises(ValueError, match="read-only"):
         est.tension_world_n[0] = 1.0
@@ -260,8 +356,9 @@ def test_coast_grows_covariance_with_elapsed_time() -> None:
     before = filt.kalman_filter.P.copy()
     est = filt.coast(2.0)
     assert est is not None
-    q = params.random_walk_n_per_sqrt_s**2
-    np.testing.assert_allclose(est.cov_n2, before + q * 2.0 * np.eye(3), rtol=1e-12)
+    _, _, r = filt.noise_model()
+    q = np.diag(r) * DT_S / params.hover_time_constant_s**2  # q = r dt_mean / tau^2
+    np.testing.assert_allclose(est.cov_n2, before + q * 2.0, rtol=1e-12)
     np.testing.assert_allclose(est.tension_world_n, HOVER_TENSION_N, atol=1e-15)
 
 
@@ -287,9 +384,11 @@ def test_invalid_observation_in_filter_raises() -> None:
         {"mass_kg": 0.0},
         {"accel_noise_mps2": -1.0},
         {"thrust_noise_n": math.nan},
-        {"random_walk_n_per_sqrt_s": 0.0},
-        {"change_min_window": 10, "change_max_window": 5},
-        {"drift_max_scale": 0.5},
+        {"hover_time_constant_s": 0.0},
+        {"change_min_window": 10, "ring_size": 5},
+        {"drift_min_time_constant_s": 7.0},
+        {"noise_prior_samples": 0.0},
+        {"gap_s": -1.0},
     ],
 )
 def test_params_validation(kwargs: dict[str, float]) -> None:
@@ -300,32 +399,32 @@ def test_params_validation(kwargs: dict[str, float]) -> None:
 def test_filterpy_matches_textbook_kalman_equations() -> None:
     """Guards the filterpy==2.0.0 pin: its predict/update equal the textbook procedure.
 
-    Irregular dt, tilted attitudes (so R is not diagonal) and the drift adaptation
-    (so Q varies) all active; the change threshold is out of reach so no
-    re-initialisation overwrites the state.
+    Irregular dt and the drift adaptation (so Q varies) active; the noise estimate off
+    (with it P is also rescaled as R is revised, which is not filterpy's step); the change
+    threshold is out of reach so no re-initialisation overwrites the state.
     """
     rng = np.random.default_rng(3)
-    filt = TensionFilter(TensionFilterParams(change_threshold=1e12))
+    filt = TensionFilter(TensionFilterParams(change_threshold=1e12, estimate_noise=False))
     n = 600
     truth = HOVER_TENSION_N + np.outer(np.linspace(0.0, 0.03, n), [1.0, -0.5, 0.3])
-    quats = [quat_from_axis_angle(rng.normal(size=3), rng.uniform(0.0, 0.5)) for _ in range(n)]
     ys = truth + rng.normal(0.0, 0.009, (n, 3))
-    Qs, Rs = [], []
+    Qs, Rs, zs = [], [], []
     for k in range(n):
-        filt.update(ys[k], float(rng.uniform(0.001, 0.02)), quats[k])
+        filt.update(ys[k], float(rng.uniform(0.001, 0.02)))
         Qs.append(filt.kalman_filter.Q.copy())
         Rs.append(filt.kalman_filter.R.copy())
-    assert max(float(Q[0, 0]) for Q in Qs[1:]) > 2.0 * float(Qs[1][0, 0])  # Q did adapt
+        zs.append(np.asarray(filt.kalman_filter.z, dtype=float).ravel())
+    assert max(float(Q[0, 0]) for Q in Qs[2:]) > 2.0 * float(Qs[2][0, 0])  # Q did adapt
 
     def textbook(joseph: bool) -> tuple[np.ndarray, np.ndarray]:
         A = C = np.eye(3)  # eq:Kalman_vars
         x = ys[0].copy()  # initialisation from the first sample: x = y, P = R
-        P = observation_cov_n2(quats[0], MASS_KG, ACCEL_NOISE_MPS2, THRUST_NOISE_N)
+        P = np.diag(np.diag(observation_cov_n2(None, MASS_KG, ACCEL_NOISE_MPS2, THRUST_NOISE_N)))
         for k in range(1, n):
             x_prior = A @ x  # x- = A x
             P_prior = A @ P @ A.T + Qs[k]  # P- = A P A' + Q
             K = P_prior @ C.T @ np.linalg.inv(C @ P_prior @ C.T + Rs[k])
-            x = x_prior + K @ (ys[k] - C @ x_prior)  # x = x- + K (y - C x-)
+            x = x_prior + K @ (zs[k] - C @ x_prior)  # x = x- + K (z - C x-)
             I_KC = np.eye(3) - K @ C
             P = I_KC @ P_prior @ I_KC.T + K @ Rs[k] @ K.T if joseph else I_KC @ P_prior
         return x, P
@@ -450,3 +549,150 @@ def test_reset_with_a_prior_calms_the_restart_and_a_wrong_prior_is_dropped() -> 
             assert rms_prior < 0.5 * rms_plain, (rms_prior, rms_plain)  # first sample calmer
     with pytest.raises(ValueError):
         TensionFilter().reset(prior_world_n=(0.0, 0.0, 0.0))
+
+
+# ---------------------------------------------------------------- unknown, coloured noise
+
+
+def ar1_noise(rng: np.random.Generator, n: int, sigma_n: float, rho: float) -> np.ndarray:
+    """AR(1) noise per axis (propeller vibration): std ``sigma_n``, lag-1 autocorrelation rho."""
+    e = rng.normal(0.0, sigma_n * math.sqrt(1.0 - rho * rho), (n, 3))
+    v = np.empty_like(e)
+    v[0] = rng.normal(0.0, sigma_n, 3)
+    for k in range(1, n):
+        v[k] = rho * v[k - 1] + e[k]
+    return v
+
+
+def jittered_dt(rng: np.random.Generator, n: int, mean_s: float = 0.010) -> np.ndarray:
+    """Crazyflie-like spacing: 100 Hz, scatter and late samples, within 6 ... 27 ms."""
+    late = 0.012 * (rng.random(n) < 0.05)
+    return np.clip(mean_s + rng.normal(0.0, 0.003, n) + late, 0.006, 0.027)
+
+
+@pytest.mark.parametrize(("accel_noise", "rho"), [(0.5, 0.0), (1.0, 0.3), (2.0, 0.3)])
+def test_noise_level_and_colour_are_estimated_on_line(accel_noise: float, rho: float) -> None:
+    """Told 0.3 m/s^2 (the default), fed 0.5 ... 2 m/s^2 white or coloured at 100 Hz."""
+    rng = np.random.default_rng(50)
+    n = 3000  # ~32 s
+    sigma_n = MASS_KG * accel_noise
+    v = ar1_noise(rng, n, sigma_n, rho)
+    dts = jittered_dt(rng, n)
+    filt = TensionFilter()
+    for k in range(n):
+        est = filt.update(HOVER_TENSION_N + v[k], float(dts[k]))
+    np.testing.assert_allclose(est.noise_std_n, sigma_n, rtol=0.12)
+    np.testing.assert_allclose(est.noise_autocorrelation, rho, atol=0.1)
+    # The reported std is sqrt(2) times the error of a tau average (random-walk model).
+    r = sigma_n**2 * (1 + rho) / (1 - rho)
+    limit = math.sqrt(r * float(np.mean(dts)) / (2 * TAU_S))  # sqrt(r dt / (2 tau))
+    assert np.all(np.abs(est.std_n / (math.sqrt(2) * limit) - 1.0) < 0.25), est.std_n / limit
+
+
+@pytest.mark.parametrize("accel_noise", [0.5, 1.0, 2.0])
+def test_no_false_tug_on_coloured_vibration_noise(accel_noise: float) -> None:
+    """Two minutes of hover per level, AR(1) rho = 0.3, jittered 100 Hz, told 0.3 m/s^2."""
+    rng = np.random.default_rng(int(accel_noise * 10))
+    n = 11_000  # ~2 min
+    sigma_n = MASS_KG * accel_noise
+    v = ar1_noise(rng, n, sigma_n, 0.3)
+    dts = jittered_dt(rng, n)
+    adaptive = TensionFilter()
+    false_adaptive = 0
+    largest = 0.0
+    errs = []
+    for k in range(n):
+        e = adaptive.update(HOVER_TENSION_N + v[k], float(dts[k]))
+        false_adaptive += e.change_detected
+        largest = max(largest, e.change_statistic)
+        if k > n // 4:
+            errs.append(e.tension_world_n - HOVER_TENSION_N)
+    assert false_adaptive == 0
+    assert largest < 0.8 * adaptive.params.change_threshold, largest  # with a margin
+    # At the information limit of a tau average: sqrt(r dt / (2 tau)) per axis.
+    r = sigma_n**2 * 1.3 / 0.7
+    limit = math.sqrt(r * float(np.mean(dts)) / (2 * TAU_S))
+    # Pooled over the axes: 90 s hold only ~15 independent tau-long averages per axis.
+    rms = float(np.sqrt(np.mean(np.square(errs))))
+    assert rms < 1.4 * limit, (rms, limit)
+
+
+@pytest.mark.parametrize("rate_hz", [50.0, 100.0, 250.0, 500.0])
+def test_any_rate_with_jitter_detects_a_tug_and_holds_hover(rate_hz: float) -> None:
+    """The same seconds-based tuning from 50 to 500 Hz, stamps jittered by +-30 %."""
+    rng = np.random.default_rng(int(rate_hz))
+    dt = 1.0 / rate_hz
+    n_hover = int(20.0 * rate_hz)
+    n = n_hover + int(2.0 * rate_hz)
+    dts = dt * rng.uniform(0.7, 1.3, n)
+    sigma_n = MASS_KG * 0.3
+    v = ar1_noise(rng, n, sigma_n, 0.2)
+    step = np.array([0.0, 0.030, 0.0])
+    filt = TensionFilter()
+    est = np.empty((n, 3))
+    det = np.zeros(n, dtype=bool)
+    for k in range(n):
+        truth = HOVER_TENSION_N + (step if k >= n_hover else 0.0)
+        e = filt.update(truth + v[k], float(dts[k]))
+        est[k], det[k] = e.tension_world_n, e.change_detected
+    assert not det[:n_hover].any()
+    first = np.flatnonzero(det[n_hover:])
+    # Detected within 0.1 s or 20 samples: the step is 2.7 sigma of a whitened sample
+    # (r = 1.5 s2 at rho = 0.2), so the statistic gains ~6 per sample toward 50.
+    assert len(first) and first[0] <= max(20, 0.1 * rate_hz), first[:3]
+    hover = est[int(5.0 * rate_hz) : n_hover] - HOVER_TENSION_N
+    limit = math.sqrt(sigma_n**2 * 1.2 / 0.8 * dt / (2 * TAU_S))
+    assert np.all(np.sqrt(np.mean(hover**2, axis=0)) < 1.6 * limit)
+    # 1 s after the tug: within the information of 1 s of samples (3 sigma)
+    after = est[n_hover + int(1.0 * rate_hz) :] - (HOVER_TENSION_N + step)
+    assert np.all(np.abs(after) < 3 * math.sqrt(sigma_n**2 * 1.5 * dt / 1.0) + 1e-3)
+
+
+def test_a_gap_keeps_the_state_and_a_change_during_it_is_found() -> None:
+    rng = np.random.default_rng(60)
+    filt = TensionFilter()
+    for _ in range(2000):
+        filt.update(HOVER_TENSION_N + rng.normal(0.0, 0.009, 3), DT_S)
+    before = filt.estimate
+    assert before is not None
+    # A 0.6 s gap, the same tension after it: no detection, the estimate carries on.
+    e = filt.update(HOVER_TENSION_N + rng.normal(0.0, 0.009, 3), 0.6)
+    assert not e.change_detected
+    assert np.linalg.norm(e.tension_world_n - before.tension_world_n) < 1e-3
+    for _ in range(500):
+        e = filt.update(HOVER_TENSION_N + rng.normal(0.0, 0.009, 3), DT_S)
+        assert not e.change_detected
+    # A 0.6 s gap across which the tension rose by 30 mN: found within 0.1 s.
+    moved = HOVER_TENSION_N + np.array([0.0, 0.0, -0.030])
+    found = None
+    for k in range(100):
+        e = filt.update(moved + rng.normal(0.0, 0.009, 3), 0.6 if k == 0 else DT_S)
+        if e.change_detected:
+            found = k
+            break
+    assert found is not None and found * DT_S <= 0.1
+    for _ in range(250):
+        e = filt.update(moved + rng.normal(0.0, 0.009, 3), DT_S)
+    assert np.all(np.abs(e.tension_world_n - moved) < 3e-3)
+
+
+def test_a_stream_repeating_one_value_stays_finite() -> None:
+    filt = TensionFilter()
+    for _ in range(20_000):
+        e = filt.update(HOVER_TENSION_N, DT_S)
+    assert np.all(np.isfinite(e.tension_world_n)) and np.all(np.isfinite(e.cov_n2))
+    np.testing.assert_allclose(e.tension_world_n, HOVER_TENSION_N, atol=1e-12)
+    e = filt.update(HOVER_TENSION_N + 0.03, DT_S)  # and a step after it is still handled
+    assert np.all(np.isfinite(e.tension_world_n))
+
+
+def test_pure_module_holds_no_mutable_global_state() -> None:
+    """No module-level list, dict, set or writable array: a pure module has no memory."""
+    import groundstation.tension as mod
+
+    for name, value in vars(mod).items():
+        if name.startswith("__"):
+            continue
+        assert not isinstance(value, list | dict | set | bytearray), name
+        if isinstance(value, np.ndarray):
+            assert not value.flags.writeable, name
