@@ -38,8 +38,15 @@ trusted, and a touch-down is noticed where it can be:
   In the air, without motion capture, only the two certain signs above bring the drone
   back to the ground (a hand lifting the drone pushes up like the floor would).
 
-The state starts on the ground: nothing is known yet, and no tension is published until
-one of the rules above says otherwise.
+The state starts on the ground, but until the drone has once been *certainly* on the
+ground (disarmed or below the ratio) the push rule is looser: an upward force below
+``climb_push_max_n`` (50 mN) instead of ``push_free_n`` for ``push_hold_s`` says the drone is
+flying (``reason = "flying_at_start"``: the service (re)started while it was in the air).
+With the strict bound a hover under a tether that pulls *up* (a base above the drone, the
+paper's coin bench: 12.7 mN up) would be held on the ground forever. The price: a service
+started in the last part of a spool-up on the floor (thrust above 0.83 of the weight,
+without motion capture) publishes up to 50 mN of floor push as tension until it sees the
+drone; below the follow threshold, and no tug-to-land can be armed without a tug.
 """
 
 from __future__ import annotations
@@ -59,7 +66,15 @@ GRAVITY_MPS2 = 9.81
 """Standard gravity, m/s^2 (the value of :data:`groundstation.tension.GRAVITY_MPS2`)."""
 
 Reason = Literal[
-    "start", "disarmed", "low_thrust", "resting", "mocap_height", "climbing", "push_free", "air"
+    "start",
+    "disarmed",
+    "low_thrust",
+    "resting",
+    "mocap_height",
+    "climbing",
+    "push_free",
+    "air",
+    "flying_at_start",
 ]
 
 
@@ -134,6 +149,8 @@ class ContactState:
         push_n: Smoothed upward observed force while on the ground, N, or None.
         push_free_s: How long ``push_n`` has been below ``push_free_n``, s.
         rest_height_m: Motion-capture height while resting, m, or None.
+        rest_seen: The drone has once been certainly on the ground (disarmed or below the
+            thrust ratio); before that an armed drone at hover thrust is taken to be flying.
     """
 
     on_ground: bool = True
@@ -143,6 +160,7 @@ class ContactState:
     push_n: float | None = None
     push_free_s: float = 0.0
     rest_height_m: float | None = None
+    rest_seen: bool = False
 
 
 def vertical_accel_mps2(
@@ -224,6 +242,7 @@ def contact_step(
             reason="disarmed" if not armed else "low_thrust",
             accel_bias_z_mps2=bias,
             rest_height_m=rest,
+            rest_seen=True,
         )
 
     if height is not None:
@@ -255,11 +274,15 @@ def contact_step(
     if upward_force_n is not None and math.isfinite(upward_force_n):
         w = min(1.0, dt / params.push_time_constant_s) if push is not None else 1.0
         push = upward_force_n if push is None else push + w * (upward_force_n - push)
-    free_s = state.push_free_s + dt if push is not None and push < params.push_free_n else 0.0
+    # Before any rest was seen the drone is most likely flying (the service started
+    # mid-flight), perhaps under a tether that pulls up: a looser bound on the push.
+    push_limit_n = params.push_free_n if state.rest_seen else params.climb_push_max_n
+    free_s = state.push_free_s + dt if push is not None and push < push_limit_n else 0.0
     if speed > params.liftoff_speed_mps and (push is None or push < params.climb_push_max_n):
         return replace(state, on_ground=False, reason="climbing", climb_speed_mps=0.0)
-    if push is not None and push < params.push_free_n and free_s >= params.push_hold_s:
-        return replace(state, on_ground=False, reason="push_free", climb_speed_mps=0.0)
+    if push is not None and push < push_limit_n and free_s >= params.push_hold_s:
+        reason: Reason = "push_free" if state.rest_seen else "flying_at_start"
+        return replace(state, on_ground=False, reason=reason, climb_speed_mps=0.0)
     return replace(
         state,
         on_ground=True,
