@@ -878,6 +878,8 @@ class TensionFilter:
         self._kf.inv = _inv3
         p = self.params
         self._ring = _Ring(p.ring_size)
+        # Window lengths of the change statistic, made once (floats).
+        self._windows = np.arange(p.change_min_window, p.ring_size + 1, dtype=np.float64)
         prior = observation_cov_n2(None, p.mass_kg, p.accel_noise_mps2, p.thrust_noise_n)
         self._prior_var = (float(prior[0, 0]), float(prior[1, 1]), float(prior[2, 2]))
         self._noise = _NoiseEstimate(self._prior_var, p.noise_prior_samples)
@@ -1005,7 +1007,8 @@ class TensionFilter:
             self._noise.push(y, dt, p.noise_time_constant_s, p.noise_warmup_samples)
         s2, rho, r = self.noise_model()
         # R = the long-run variance r, not the per-sample s2: what the filter averages.
-        z, R = y, np.diag(r)
+        r0, r1, r2 = r
+        z, R = y, np.array([[r0, 0.0, 0.0], [0.0, r1, 0.0], [0.0, 0.0, r2]])
 
         if first:
             self._initialized = True
@@ -1025,19 +1028,23 @@ class TensionFilter:
             self._samples = 0
 
         r_prev = self._r_prev
-        self._r_prev = r
-        if p.estimate_noise and r_prev is not None and r_prev != r:
+        if p.estimate_noise and r_prev is not None:
             # P follows the noise estimate: with P0 = R and Q proportional to R, P is
             # proportional to R, so a revised R rescales it (P = D P D, D = sqrt(r / r_prev));
             # otherwise the first samples, weighed with the prior noise, would be held as
-            # precise as that prior says.
-            d = np.sqrt(np.divide(r, r_prev))
-            kf.P = kf.P * np.outer(d, d)
+            # precise as that prior says. Applied once R has moved by 1 % (cost).
+            d0, d1, d2 = r[0] / r_prev[0], r[1] / r_prev[1], r[2] / r_prev[2]
+            if max(abs(d0 - 1.0), abs(d1 - 1.0), abs(d2 - 1.0)) > 0.01:
+                d = np.sqrt([d0, d1, d2])
+                kf.P = kf.P * np.outer(d, d)
+                self._r_prev = r
+        else:
+            self._r_prev = r
         tau, scale = self._time_constant(dt)
         dt_mean = self._dt_mean if self._dt_mean == self._dt_mean else dt
         # Q = q dt I per axis, q = r dt_mean / tau^2 (tau: hover, restart or drift).
-        q_dt = [r[i] * dt_mean / (tau * tau) * dt for i in range(3)]
-        kf.Q = np.diag(q_dt)
+        c = dt_mean / (tau * tau) * dt
+        kf.Q = np.array([[r0 * c, 0.0, 0.0], [0.0, r1 * c, 0.0], [0.0, 0.0, r2 * c]])
         kf.R = R
         kf.predict()  # x- = A x,  P- = A P A' + Q
         kf.update(np.array(z))  # K = P-C'(CP-C' + R)^-1, x = x- + K(y - Cx-), Joseph P
@@ -1153,7 +1160,7 @@ class TensionFilter:
         if dt_mean == dt_mean and dt_mean > 0.0:
             n_valid = min(n_valid, max(p.change_min_window, int(p.change_max_window_s / dt_mean)))
         sums = self._ring.window_sums(n_valid)[:, p.change_min_window - 1 :]
-        n = np.arange(p.change_min_window, n_valid + 1, dtype=np.float64)
+        n = self._windows[: n_valid - p.change_min_window + 1]
         stats = np.einsum("ij,ij->j", sums, sums) / (n * self._normaliser())
         best = int(stats.argmax())
         return float(stats[best]), int(n[best])
