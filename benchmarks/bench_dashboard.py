@@ -1,6 +1,8 @@
 """Dashboard CPU cost: 1 and 8 drones, telemetry + Estimates at 250 Hz each.
 
 Run:  .venv/bin/python -m benchmarks.bench_dashboard [--drones 1 8] [--seconds 8] [--no-browser]
+      .venv/bin/python -m benchmarks.bench_dashboard --quick   (1 drone, 3 s, no browser,
+      prints only: a smoke run, docs/dashboard_cost.md is left as it is)
 
 In one process on an in-memory bus, a feeder thread publishes, per drone, a Telemetry (with
 motion capture) and an Estimate every 4 ms (pre-encoded payloads, so the feeder is cheap).
@@ -14,7 +16,8 @@ Measured for each drone count:
 - the whole process's CPU per second with the dashboard minus the same feed without it
   (callbacks + update thread + viser's server thread serialising and sending), once with no
   browser and once with one headless Chromium connected (its own process, not counted; the
-  server's sending is).
+  server's sending is). Panels are per browser tab (``[web] panel = "tab"``): with no browser
+  there is no panel to refresh, with one there is one.
 
 Writes docs/dashboard_cost.md.
 """
@@ -39,6 +42,16 @@ from groundstation.dashboard import Dashboard
 REPO = Path(__file__).resolve().parents[1]
 RATE_HZ = 250.0
 CHROMIUM = "/usr/bin/chromium"
+FPS_JS = """() => new Promise((resolve) => {
+    let frames = 0;
+    const t0 = performance.now();
+    const tick = (t) => {
+        frames += 1;
+        if (t - t0 < 3000) requestAnimationFrame(tick);
+        else resolve(1000 * frames / (t - t0));
+    };
+    requestAnimationFrame(tick);
+})"""
 
 
 def _payloads(drone_index: int, n: int = 250) -> list[tuple[bytes, bytes]]:
@@ -126,6 +139,8 @@ class Run:
     process_cpu_per_s: float
     update_cpu_per_s: float | None
     ticks_per_s: float | None
+    browser_fps: float | None = None
+    """Frames the page drew per second (requestAnimationFrame callbacks over 3 s)."""
 
 
 def _settle(seconds: float) -> None:
@@ -159,7 +174,13 @@ def run_once(n_drones: int, seconds: float, dashboard_on: bool, browser: Any | N
             stats1 = dashboard.stats()
             update_cpu = (stats1.update_cpu_s - stats0.update_cpu_s) / wall_s
             ticks = (stats1.ticks - stats0.ticks) / wall_s
-        return Run(n_drones, page is not None, wall_s, sent_s, cpu_s / wall_s, update_cpu, ticks)
+        fps = None
+        if page is not None:
+            # The 3D view renders in requestAnimationFrame: their rate is the frame rate.
+            fps = page.evaluate(FPS_JS)
+        return Run(
+            n_drones, page is not None, wall_s, sent_s, cpu_s / wall_s, update_cpu, ticks, fps
+        )
     finally:
         if page is not None:
             page.close()
@@ -187,7 +208,10 @@ def main() -> int:
     parser.add_argument("--seconds", type=float, default=8.0)
     parser.add_argument("--no-browser", action="store_true")
     parser.add_argument("--out", type=Path, default=REPO / "docs" / "dashboard_cost.md")
+    parser.add_argument("--quick", action="store_true", help="1 drone, 3 s, no browser, no file")
     args = parser.parse_args()
+    if args.quick:
+        args.drones, args.seconds, args.no_browser = [1], 3.0, True
 
     load_1min = os.getloadavg()[0]
     per_cb_us = callback_cost_us()
@@ -243,31 +267,37 @@ def main() -> int:
         f"{8 * 2 * RATE_HZ * per_cb_us / 1e6 * 100:.1f} % of a core on the bus thread.",
         "",
         "| drones | feed achieved (Hz per drone) | update thread CPU/s | scene passes/s "
-        "| dashboard CPU/s, no browser | dashboard CPU/s, one browser |",
-        "| ---: | ---: | ---: | ---: | ---: | ---: |",
+        "| dashboard CPU/s, no browser | dashboard CPU/s, one browser "
+        "| browser frames/s (software WebGL) |",
+        "| ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
     ]
     for base, dash, with_browser in rows:
-        extra = "—"
+        extra = fps = "—"
         if with_browser is not None:
             extra = f"{with_browser.process_cpu_per_s - base.process_cpu_per_s:.3f}"
+            if with_browser.browser_fps is not None:
+                fps = f"{with_browser.browser_fps:.1f}"
         lines.append(
             f"| {dash.drones} | {dash.feed_rate_hz:.0f} | {dash.update_cpu_per_s or 0.0:.3f} "
             f"| {dash.ticks_per_s or 0.0:.1f} "
-            f"| {dash.process_cpu_per_s - base.process_cpu_per_s:.3f} | {extra} |"
+            f"| {dash.process_cpu_per_s - base.process_cpu_per_s:.3f} | {extra} | {fps} |"
         )
     lines += [
         "",
         '"Dashboard CPU/s" is this process\'s CPU per second with the dashboard minus the '
         "same feed without it: bus callbacks, the update thread and viser's server thread "
         "(serialising and, with a browser, sending). The browser renders in its own process "
-        "(software WebGL here) and is not counted. Baseline (feed + bus alone): "
+        "(software WebGL here) and is not counted. Each browser tab has its own panel, so the "
+        "no-browser column has no panel work and the one-browser column one panel's. "
+        "Baseline (feed + bus alone): "
         + ", ".join(f"{b.drones} drone(s) {b.process_cpu_per_s:.3f}" for b, _, _ in rows)
         + ".",
         "",
     ]
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text("\n".join(lines))
     print("\n".join(lines))
+    if not args.quick:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text("\n".join(lines))
     return 0
 
 

@@ -18,10 +18,12 @@ from typing import Any, Protocol
 __all__ = [
     "Bus",
     "InMemoryBus",
+    "PeerWatch",
     "QueryHandler",
     "Sample",
     "SampleHandler",
     "Subscription",
+    "describe_endpoints",
     "keyexpr_matches",
 ]
 
@@ -34,6 +36,9 @@ class Sample:
 
     key: str
     payload: bytes
+    source: str | None = None
+    """Who published it, where the transport says: the zenoh session id (hex) of the
+    publisher, or None (an in-memory bus, a publisher that does not attach its id)."""
 
 
 SampleHandler = Callable[[Sample], None]
@@ -59,6 +64,85 @@ class Bus(Protocol):
     def liveliness_token(self, key: str) -> Subscription: ...
 
     def close(self) -> None: ...
+
+
+class PeerWatch:
+    """Says when a process is connected to nobody, and when that changes.
+
+    ``poll`` is called now and then (a worker's tick, a CLI's wait loop) with the clock; it
+    asks ``count()`` (:meth:`groundstation.zenoh_bus.ZenohBus.peer_count`) and logs: a warning
+    once ``grace_s`` has passed with no peer or router ("no peer / no router reachable at
+    ..."), info when the count goes from 0 to more, a warning when it drops back to 0.
+
+    Args:
+        count: returns the number of connected zenoh peers + routers.
+        where: what to name in the message: the connect endpoints (or that there are none)
+            and the listen endpoints, e.g. from :func:`describe_endpoints`.
+        what: the process, e.g. ``"groundstation serve"``.
+        logger: where to log.
+        grace_s: how long connecting may take before "no peer" is said, s.
+        alone_ok: being alone is normal (``demo``: everything in one process): the "no
+            peer" message is only a debug line.
+    """
+
+    def __init__(
+        self,
+        count: Callable[[], int],
+        where: str,
+        what: str,
+        logger: logging.Logger,
+        grace_s: float = 2.0,
+        *,
+        alone_ok: bool = False,
+    ) -> None:
+        self._alone_level = logging.DEBUG if alone_ok else logging.WARNING
+        self._count = count
+        self.where = where
+        self.what = what
+        self._log = logger
+        self.grace_s = grace_s
+        self._started_s: float | None = None
+        self._warned = False
+        self.peers: int | None = None
+        """The count at the last poll (None before the first)."""
+        self.ever_connected = False
+
+    def poll(self, now_s: float) -> int:
+        """Check the count now; log what changed. Returns the count."""
+        try:
+            peers = int(self._count())
+        except Exception:  # a closing session: keep the last count
+            return self.peers or 0
+        if self._started_s is None:
+            self._started_s = now_s
+        previous, self.peers = self.peers, peers
+        if peers > 0:
+            if not self.ever_connected or previous == 0:
+                self._log.info("%s: connected to %d zenoh peer(s)/router(s)", self.what, peers)
+            self.ever_connected = True
+            self._warned = False
+        elif self.ever_connected and previous:
+            self._log.warning("%s: lost every zenoh peer and router; %s", self.what, self.where)
+            self._warned = True
+        elif not self._warned and now_s - self._started_s >= self.grace_s:
+            self._log.log(self._alone_level, "%s: %s", self.what, self.where)
+            self._warned = True
+        return peers
+
+
+def describe_endpoints(mode: str, connect: tuple[str, ...], listen: tuple[str, ...]) -> str:
+    """ "no peer / no router reachable at ..." for the ``[zenoh]`` table's endpoints."""
+    heard = f"; listening on {', '.join(listen)}" if listen else "; listening on nothing"
+    if connect:
+        return (
+            f"no peer / no router reachable at {', '.join(connect)} (mode {mode}{heard}); "
+            "still trying: is the router up, is the address right?"
+        )
+    return (
+        f"no peer / no router connected: nothing to connect to ([zenoh] connect is empty, "
+        f"mode {mode}{heard}); pass --connect tcp/HOST:7447 to reach a router"
+        + (", or connect the others to the listen endpoint" if listen else "")
+    )
 
 
 def keyexpr_matches(keyexpr: str, key: str) -> bool:

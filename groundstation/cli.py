@@ -1,8 +1,10 @@
-"""Command line: ``groundstation serve | sim | demo | record | replay``.
+"""Command line: ``groundstation serve | sim | demo | record | replay | crazyflie``.
 
-Flags of the public contract are kept exactly (``../shared/INTERFACE.md``); the ones added
-beside them are listed in README.md. Every long-running command stops on SIGINT or SIGTERM,
-closes its zenoh session and exits 0.
+Flags of the public contract are kept exactly (``docs/contract.md``); the ones added beside
+them are listed there too. Every long-running command stops on SIGINT or SIGTERM, closes its
+zenoh session and exits 0. A bad configuration, an unknown scenario or a zenoh session that
+cannot open (a router that is down, an endpoint that is not one) is one line on stderr and
+exit status 2.
 """
 
 from __future__ import annotations
@@ -82,13 +84,29 @@ def _wait(stop: threading.Event) -> None:
 
 
 def _add_common(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--config", metavar="PATH", help="TOML configuration file")
     p.add_argument(
-        "--connect", metavar="ENDPOINT", action="append", default=[], help="zenoh endpoint"
+        "--config", metavar="PATH", help="TOML configuration file (layout: docs/contract.md)"
     )
-    p.add_argument("--listen", metavar="ENDPOINT", action="append", default=[])
-    p.add_argument("--mode", choices=["peer", "client", "router"], help="zenoh mode")
-    p.add_argument("--log-level", choices=["DEBUG", "INFO", "WARNING", "ERROR"])
+    p.add_argument(
+        "--connect",
+        metavar="ENDPOINT",
+        action="append",
+        default=[],
+        help="zenoh endpoint to connect to, e.g. tcp/127.0.0.1:7447 (repeatable); alone it "
+        "makes this a client of that router",
+    )
+    p.add_argument(
+        "--listen",
+        metavar="ENDPOINT",
+        action="append",
+        default=[],
+        help="zenoh endpoint to listen on for peers, e.g. tcp/127.0.0.1:7447 (repeatable; "
+        "default: none, a router tcp/127.0.0.1:7447)",
+    )
+    p.add_argument("--mode", choices=["peer", "client", "router"], help="zenoh mode ([zenoh] mode)")
+    p.add_argument(
+        "--log-level", choices=["DEBUG", "INFO", "WARNING", "ERROR"], help="log level (INFO)"
+    )
     p.add_argument("--log-json", action="store_true", help="log JSON lines on stderr")
 
 
@@ -150,9 +168,36 @@ def _load(args: argparse.Namespace, base: dict[str, Any] | None = None) -> Setti
     extra = getattr(args, "sim_overrides", None)
     if extra:
         overrides["sim"] = extra
+    crazyflie = getattr(args, "crazyflie_overrides", None)
+    if crazyflie:
+        overrides["crazyflie"] = crazyflie
     settings = load_settings(args.config, overrides, base=base)
     _setup_logging(settings.service.log_level, settings.service.log_json)
+    args.loaded_settings = settings  # for the error messages of main()
     return settings
+
+
+def _check_scenario(name: str) -> None:
+    from groundstation.sim import SCENARIOS
+
+    if name not in SCENARIOS:
+        raise ConfigError(
+            f"unknown scenario {name!r} (--scenario / [sim] scenario); known: "
+            + ", ".join(sorted(SCENARIOS))
+        )
+
+
+def _zenoh_error_line(exc: Exception, settings: Settings | None) -> str:
+    """One line for a zenoh session that could not open (no Rust source locations)."""
+    detail = re.sub(r"\s+at /\S+\.rs:\d+\.?", "", str(exc)).strip()
+    detail = re.sub(r"\s+", " ", detail)
+    if settings is not None and "Unable to connect" in detail:
+        z = settings.zenoh
+        return (
+            f"no router reachable at {', '.join(z.connect) or '(nothing to connect to)'} "
+            f"(mode {z.mode}): is it up, is the address right? (zenoh: {detail})"
+        )
+    return f"zenoh could not open a session: {detail}"
 
 
 def _free_port(host: str, preferred: int) -> int:
@@ -274,9 +319,19 @@ def cmd_sim(args: argparse.Namespace) -> int:
         for name in sorted(SCENARIOS):
             print(f"{name:14s} {SCENARIOS[name].description}")
         return 0
+    from groundstation.bus import PeerWatch, describe_endpoints
+
     settings = _load(args)
+    _check_scenario(settings.sim.scenario)
     stop = _stop_on_signals()
-    with ZenohBus(settings.zenoh) as bus:
+    z = settings.zenoh
+    with ZenohBus(z) as bus:
+        watch = PeerWatch(
+            bus.peer_count,
+            describe_endpoints(z.mode, z.connect, z.listen),
+            "groundstation sim",
+            _log,
+        )
         sim = Simulator(settings, bus, scenario=args.scenario)
         sim.start()
         try:
@@ -286,6 +341,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
                 flush=True,
             )
             while not stop.wait(0.2):
+                watch.poll(time.monotonic())
                 if sim.wait(0.0):
                     break
         finally:
@@ -312,9 +368,10 @@ def cmd_demo(args: argparse.Namespace) -> int:
     if args.web_port is None:
         base["web"]["port"] = _free_port("127.0.0.1", 8080)
     settings = _load(args, base=base)
+    _check_scenario(settings.sim.scenario)
     stop = _stop_on_signals()
     with ZenohBus(settings.zenoh) as bus:
-        service = Service(settings, bus)
+        service = Service(settings, bus, alone_ok=True)
         sim = Simulator(settings, bus, scenario=args.scenario)
         dashboard = None
         try:
@@ -352,16 +409,61 @@ def cmd_record(args: argparse.Namespace) -> int:
 def cmd_replay(args: argparse.Namespace) -> int:
     from groundstation import recording
 
+    if args.offline and not args.out:
+        print(
+            "groundstation: replay --offline needs --out OUT.mcap (where to write the "
+            "re-estimated recording)",
+            file=sys.stderr,
+        )
+        return 2
     settings = _load(args)
     if args.offline:
-        if not args.out:
-            print("replay --offline needs --out OUT.mcap", file=sys.stderr)
-            return 2
         return int(
             recording.run_replay_offline(settings, args.file, args.out, figures_dir=args.figures)
         )
     stop = _stop_on_signals()
     return int(recording.run_replay(settings, args.file, speed=args.speed, stop_event=stop))
+
+
+def cmd_crazyflie(args: argparse.Namespace) -> int:
+    from groundstation.bridges.crazyflie import CrazyflieBridge, LinkError, make_link
+    from groundstation.messages import DRONE_ID_RE
+    from groundstation.zenoh_bus import ZenohBus
+
+    if not DRONE_ID_RE.fullmatch(args.drone):
+        print(f"groundstation: --drone {args.drone!r}: not [A-Za-z0-9_-]{{1,64}}", file=sys.stderr)
+        return 2
+    if args.rate_hz is not None:
+        args.crazyflie_overrides = {"rate_hz": args.rate_hz}
+    settings = _load(args)
+    # cflib logs every connection step at INFO, and warns on each connection that it has no
+    # TOC cache directory (an optional [crazyflie] toc_cache_dir).
+    cflib_level = logging.DEBUG if settings.service.log_level == "DEBUG" else logging.WARNING
+    logging.getLogger("cflib").setLevel(cflib_level)
+    if settings.crazyflie.toc_cache_dir is None:
+        logging.getLogger("cflib.crazyflie.toccache").setLevel(max(cflib_level, logging.ERROR))
+    try:
+        link = make_link(args.uri, settings, args.drone)
+    except LinkError as exc:
+        print(f"groundstation: {exc}", file=sys.stderr)
+        return 2
+    params = settings.for_drone(args.drone)
+    stop = _stop_on_signals()
+    with ZenohBus(settings.zenoh) as bus:
+        bridge = CrazyflieBridge(
+            settings.crazyflie,
+            bus,
+            args.drone,
+            link,
+            floor_z_m=params.base.floor_z_m,
+            reach=(params.base.position_m, params.tether.length_m),
+        )
+        print(
+            f"groundstation crazyflie: {args.uri} as tether/{args.drone} "
+            f"every {settings.crazyflie.log_period_ms} ms",
+            flush=True,
+        )
+        return bridge.run(stop)
 
 
 # --------------------------------------------------------------------------- parser
@@ -400,9 +502,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--list", action="store_true", help="list the scenarios")
     p.add_argument("--drones", metavar="ID", nargs="+", help="drone ids to simulate")
     p.add_argument("--duration", type=float, metavar="S", help="stop after S simulated seconds")
-    p.add_argument("--speed", type=float, help="real-time factor")
-    p.add_argument("--seed", type=int)
-    p.add_argument("--rate", type=float, metavar="HZ", help="telemetry rate")
+    p.add_argument(
+        "--speed", type=float, metavar="X", help="real-time factor (1 = wall clock, 2 = twice)"
+    )
+    p.add_argument("--seed", type=int, metavar="N", help="random seed of the sensor noise (0)")
+    p.add_argument("--rate", type=float, metavar="HZ", help="telemetry rate (250)")
     p.add_argument("--no-mocap", action="store_true", help="omit motion-capture position_m")
     p.add_argument("--thrust-bias", type=float, metavar="RATIO", help="e.g. 0.02 for +2 %%")
     p.add_argument(
@@ -417,26 +521,58 @@ def build_parser() -> argparse.ArgumentParser:
     _add_common(p)
     p.add_argument("--scenario", metavar="NAME", help="scenario (default hover_spots)")
     p.add_argument("--headless", action="store_true", help="no dashboard")
-    p.add_argument("--web-host", metavar="HOST")
-    p.add_argument("--web-port", metavar="N", type=int)
+    p.add_argument("--web-host", metavar="HOST", help="dashboard bind address (127.0.0.1)")
+    p.add_argument("--web-port", metavar="N", type=int, help="dashboard port (8080, or a free one)")
     p.add_argument("--duration", type=float, metavar="S", help="stop after S wall seconds")
     p.add_argument("--once", action="store_true", help="stop when the scenario ends")
     p.set_defaults(func=cmd_demo)
 
     p = sub.add_parser("record", help="record the bus into MCAP")
     _add_common(p)
-    p.add_argument("--out", required=True, metavar="FILE.mcap")
-    p.add_argument("--key", action="append", metavar="KEYEXPR", help="default tether/**")
+    p.add_argument(
+        "--out", required=True, metavar="FILE.mcap", help="the MCAP file to write (required)"
+    )
+    p.add_argument(
+        "--key",
+        action="append",
+        metavar="KEYEXPR",
+        help="key expression to record (repeatable; default tether/**)",
+    )
     p.set_defaults(func=cmd_record)
 
     p = sub.add_parser("replay", help="play a recording back (or re-estimate it offline)")
     _add_common(p)
-    p.add_argument("file", metavar="FILE.mcap")
-    p.add_argument("--speed", type=float, default=1.0, metavar="X")
-    p.add_argument("--offline", action="store_true", help="re-run estimation, no bus")
-    p.add_argument("--out", metavar="OUT.mcap")
+    p.add_argument("file", metavar="FILE.mcap", help="the recording to play")
+    p.add_argument(
+        "--speed",
+        type=float,
+        default=1.0,
+        metavar="X",
+        help="playback speed (1 = as recorded, 2 = twice as fast)",
+    )
+    p.add_argument(
+        "--offline",
+        action="store_true",
+        help="re-run estimation on the recording, no bus (needs --out)",
+    )
+    p.add_argument(
+        "--out", metavar="OUT.mcap", help="with --offline: write the re-estimated recording here"
+    )
     p.add_argument("--figures", metavar="DIR", help="with --offline: draw figures here")
     p.set_defaults(func=cmd_replay)
+
+    p = sub.add_parser("crazyflie", help="bridge a Crazyflie (cflib) to the bus")
+    _add_common(p)
+    p.add_argument(
+        "--uri",
+        required=True,
+        metavar="URI",
+        help="cflib URI (radio://0/80/2M/E7E7E7E7E7, usb://0, udp://HOST:PORT); "
+        "fake://hover is a test fake, not a drone",
+    )
+    p.add_argument("--drone", required=True, metavar="ID", help="drone id on the bus")
+    p.add_argument("--rate-hz", type=float, metavar="HZ", help="telemetry rate (100)")
+    p.set_defaults(func=cmd_crazyflie)
     return parser
 
 
@@ -479,10 +615,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"groundstation: {exc}", file=sys.stderr)
         return 2
     except Exception as exc:
+        import zenoh
+
         from groundstation.recording import RecordingError
 
         if isinstance(exc, RecordingError):  # names the file and the cause
             print(f"groundstation: {exc}", file=sys.stderr)
+            return 2
+        if isinstance(exc, zenoh.ZError):  # a session that cannot open
+            line = _zenoh_error_line(exc, getattr(args, "loaded_settings", None))
+            print(f"groundstation: {line}", file=sys.stderr)
             return 2
         raise
 

@@ -1,9 +1,10 @@
 """The one root configuration: defaults, then a TOML file, then the environment, then the CLI.
 
-The TOML layout is the public contract (``../shared/INTERFACE.md``, "Configuration file"):
+The TOML layout is the public contract (``docs/contract.md``, "Configuration file"):
 ``[zenoh]``, ``[drone]``, ``[tether]``, ``[base]`` and per-drone overrides under
 ``[drones.<id>]`` with the same sub-tables. Tables added beside the contract: ``[follow]``,
-``[filter]``, ``[web]``, ``[service]``, ``[sim]`` (documented in README.md).
+``[filter]``, ``[calibration]``, ``[web]``, ``[service]``, ``[sim]``, ``[crazyflie]``,
+``[localization]`` (``docs/contract.md``).
 
 Environment overrides use the prefix ``GROUNDSTATION_`` and ``__`` between levels, e.g.
 ``GROUNDSTATION_TETHER__WEIGHT_N_PER_M=0.04`` or ``GROUNDSTATION_ZENOH__CONNECT='["tcp/..."]'``.
@@ -14,12 +15,13 @@ caller passes it on.
 
 from __future__ import annotations
 
+import json
 import math
 import re
 import tomllib
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, get_args
 
 from pydantic import (
     BaseModel,
@@ -41,11 +43,13 @@ __all__ = [
     "BaseSection",
     "CalibrationSection",
     "ConfigError",
+    "CrazyflieSection",
     "DroneOverride",
     "DroneParams",
     "DroneSection",
     "FilterSection",
     "FollowSection",
+    "LocalizationSection",
     "RealisticSection",
     "ServiceSection",
     "Settings",
@@ -64,14 +68,76 @@ class ConfigError(ValueError):
     """A configuration value is invalid; the message names the key and the value."""
 
 
+_STRICT = {"strict_scalars": True}
+"""Validation context of values from a file or the command line (see :class:`_Section`)."""
+
+
+def _scalar_kinds(annotation: Any) -> set[type]:
+    """The scalar types (float, int, bool) an annotation accepts, through Optional/tuple."""
+    if annotation in (float, int, bool):
+        return {annotation}
+    kinds: set[type] = set()
+    for arg in get_args(annotation):
+        if arg is not Ellipsis:
+            kinds |= _scalar_kinds(arg)
+    return kinds
+
+
+def _loose_scalar(kinds: set[type], value: Any) -> str | None:
+    """Why ``value`` is not a real number/bool where ``kinds`` are expected (None if it is)."""
+    if value is None:
+        return None
+    if isinstance(value, list | tuple):
+        for item in value:
+            why = _loose_scalar(kinds, item)
+            if why is not None:
+                return why
+        return None
+    if isinstance(value, str) and kinds:
+        kind = "true or false" if kinds == {bool} else "a number"
+        return f"{kind} is required, not the string {value!r} (write it without quotes)"
+    if bool in kinds and kinds <= {bool} and not isinstance(value, bool):
+        return f"true or false is required, not {value!r}"
+    if isinstance(value, bool) and kinds and bool not in kinds:
+        return f"a number is required, not the boolean {value!r}"
+    return None
+
+
 class _Section(BaseModel):
-    model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
+    """A config table: frozen, no unknown keys, finite floats.
+
+    Values from a TOML file or the command line are validated with the context
+    ``{"strict_scalars": True}``: a number or a bool written as a string (``length_m =
+    "1.6"``, ``mocap = "false"``) is an error, as is a bool where a number belongs. Values
+    from the environment are strings by nature and are converted first (lax), then laid over
+    the file as numbers.
+    """
+
+    model_config = ConfigDict(
+        frozen=True, extra="forbid", allow_inf_nan=False, use_attribute_docstrings=True
+    )
+
+    @field_validator("*", mode="before")
+    @classmethod
+    def _strict_scalars(cls, value: Any, info: ValidationInfo) -> Any:
+        if not (info.context or {}).get("strict_scalars") or info.field_name is None:
+            return value
+        kinds = _scalar_kinds(cls.model_fields[info.field_name].annotation)
+        why = _loose_scalar(kinds, value)
+        if why is not None:
+            raise ValueError(why)
+        return value
+
+
+_ENDPOINT_RE = re.compile(r"[A-Za-z0-9_+-]+/[^\s/?#][^\s]*")
+"""zenoh's endpoint form ``<protocol>/<address>[?<metadata>][#<config>]``, loosely."""
 
 
 class ZenohSection(_Section):
     """``[zenoh]``: how the service joins the bus."""
 
     mode: Literal["peer", "client", "router"] = "peer"
+    """Zenoh mode: a peer, a client of a router, or a router."""
     connect: tuple[str, ...] = ()
     """Endpoints to connect to, e.g. ``tcp/127.0.0.1:7447``."""
     listen: tuple[str, ...] = ()
@@ -83,11 +149,23 @@ class ZenohSection(_Section):
     raw: dict[str, Any] = Field(default_factory=dict)
     """Extra zenoh config entries, ``{"path/in/config": value}``, inserted as JSON5."""
 
+    @field_validator("connect", "listen")
+    @classmethod
+    def _endpoints(cls, value: tuple[str, ...]) -> tuple[str, ...]:
+        for endpoint in value:
+            if not _ENDPOINT_RE.fullmatch(endpoint):
+                raise ValueError(
+                    f"{endpoint!r} is not a zenoh endpoint <protocol>/<address> "
+                    "(e.g. tcp/127.0.0.1:7447)"
+                )
+        return value
+
 
 class DroneSection(_Section):
     """``[drone]``: the vehicle."""
 
     mass_kg: float = Field(0.030, gt=0.0, le=100.0)
+    """Drone mass, kg (m of eq:NE_tether)."""
     accel_noise_mps2: float = Field(0.3, gt=0.0)
     """Accelerometer noise standard deviation per axis: the tension filter's prior until it has
     measured the noise on line (level and colour, over its first seconds in the air)."""
@@ -99,6 +177,7 @@ class TetherSection(_Section):
     """``[tether]``: the tether's weight per length (ω) and its default length."""
 
     weight_n_per_m: float = Field(0.05, gt=0.0)
+    """ω, the tether's weight per unit length, N/m (weigh it: docs/troubleshooting.md)."""
     length_m: float = Field(1.6, gt=0.0)
     """Used until a Reel message arrives."""
 
@@ -107,20 +186,28 @@ class BaseSection(_Section):
     """``[base]``: where the tether leaves the base, and the floor a slack tether rests on."""
 
     position_m: Vec3 = (0.0, 0.0, 0.754)
+    """World position of the base exit point, metres (until a Reel message gives it)."""
     floor_z_m: float = 0.0
+    """Height of the floor a slack tether rests on, metres."""
 
 
 class FollowSection(_Section):
     """``[follow]``: tension following and tug-to-land defaults (off until enabled)."""
 
     threshold_n: float = Field(0.10, gt=0.0)
-    """|T| above which the drone follows the pull, N. Above the whole default tether's
-    weight (ω·L = 0.08 N) so a hanging tether alone never engages it."""
+    """Pull above which the drone follows it, N: the tension beyond the tether's own in quiet
+    hover at the drone's position (catenary there, plus a slowly tracked offset), so a
+    hanging tether alone never engages it, near taut neither."""
     hysteresis_ratio: float = Field(0.2, ge=0.0, lt=1.0)
+    """Following releases below threshold_n · (1 − hysteresis_ratio)."""
     land_below_m: float | None = None
+    """Tug-to-land height (world z), metres; none: tug-to-land off."""
     max_speed_mps: float = Field(0.5, gt=0.0)
+    """Largest setpoint speed, m/s."""
     reach_margin_m: float = Field(0.05, ge=0.0)
+    """Setpoints stay this much inside the tether's reach from the base, metres."""
     stale_after_s: float = Field(0.5, gt=0.0)
+    """Input older than this disengages following, s."""
     admittance_mps_per_n: float = Field(2.0, gt=0.0)
     """Without motion capture the goal moves along the pull at this speed per newton."""
 
@@ -129,7 +216,30 @@ class FilterSection(_Section):
     """``[filter]``: tension-filter knobs beside the noise figures of ``[drone]``."""
 
     ground_thrust_ratio: float = Field(0.5, gt=0.0, lt=1.0)
-    """Below this fraction of the weight the drone is taken to be on the ground."""
+    """Below this fraction of the weight the drone is surely on the ground; at or above it,
+    on the ground until lift-off is seen (groundstation.contact: motion-capture height, the
+    IMU's climb, or the floor no longer carrying it)."""
+
+
+class LocalizationSection(_Section):
+    """``[localization]`` (added): where the azimuth and the catenary's shape come from."""
+
+    azimuth: Literal["auto", "tension", "reel", "mocap"] = "auto"
+    """``auto`` fuses the tension's direction and the reel's exit azimuth by their
+    uncertainty; ``tension``, ``reel`` or ``mocap`` uses that one alone (``mocap`` with
+    ``elevation = false`` is the paper's method: β from Telemetry ``position_m``, r and z from
+    the tension). A source asked for but absent or stale leaves the azimuth undetermined."""
+    elevation: bool = True
+    """Fuse the reel's ``exit_elevation_rad`` with the tension (the base slope constrains
+    the catenary)."""
+    reel_stale_after_s: float = Field(0.5, gt=0.0)
+    """Exit angles older than this (receive time) are not used, s."""
+    exit_azimuth_std_rad: float = Field(0.03, gt=0.0)
+    """σ of ``exit_azimuth_rad`` when the Reel message gives none, rad."""
+    exit_elevation_std_rad: float = Field(0.03, gt=0.0)
+    """σ of ``exit_elevation_rad`` when the Reel message gives none, rad."""
+    mocap_std_m: float = Field(0.002, gt=0.0)
+    """Horizontal σ of the motion-capture position (``azimuth = "mocap"``), m."""
 
 
 class CalibrationSection(_Section):
@@ -172,11 +282,20 @@ class WebSection(_Section):
     """``[web]``: the dashboard."""
 
     host: str = "127.0.0.1"
+    """Dashboard bind address (``0.0.0.0``: every interface)."""
     port: int = Field(8080, ge=0, le=65535)
+    """Dashboard TCP port."""
     scene_rate_hz: float = Field(20.0, gt=0.0, le=30.0)
+    """Scene and chart updates per second."""
     scene_budget_hz: float = Field(80.0, gt=0.0)
     """Drone redraws per second in all: with many drones each is drawn less often, so the
     dashboard's cost stays bounded and estimation keeps its capacity."""
+    panel: Literal["tab", "shared"] = "tab"
+    """(added) ``tab``: each browser tab has its own panel and selected drone; ``shared``:
+    one panel for every tab (a wall display mirroring the operator's)."""
+    forget_after_s: float = Field(60.0, ge=0.0)
+    """(added) A drone silent this long (seconds) is dropped from the scene and the selector;
+    it is drawn faded from ``[service] stale_after_s`` on. 0: never forget."""
 
 
 class ServiceSection(_Section):
@@ -186,13 +305,23 @@ class ServiceSection(_Section):
     """Drones this instance owns: one key-expression chunk such as ``lab-a-*`` (``tether/``
     in front is accepted); ``*`` inside a chunk is zenoh's ``$*``."""
     queue_size: int = Field(8192, ge=16)
+    """Inputs waiting for the worker at most; beyond, dropped as ``queue_overflow``."""
     max_payload_bytes: int = Field(65536, ge=256)
+    """Larger payloads are dropped as ``too_large``."""
     stale_after_s: float = Field(0.5, gt=0.0)
+    """A drone silent this long is stale: no estimates, follow off, s."""
     status_period_s: float = Field(1.0, gt=0.0)
+    """Health bookkeeping period, s."""
     log_level: Literal["DEBUG", "INFO", "WARNING", "ERROR"] = "INFO"
+    """Log level."""
     log_json: bool = False
+    """Log one JSON object per line on stderr."""
     record: str | None = None
     """Record every bus sample to this MCAP file while serving."""
+    follow_threshold_min_n: float = Field(0.02, gt=0.0)
+    """(added) The smallest follow threshold the service accepts, N: a FollowCommand with a
+    lower ``threshold_n`` is refused (and said so on ``tether/{drone}/events``), as is a
+    ``[follow] threshold_n`` below it."""
 
     @field_validator("drones")
     @classmethod
@@ -342,17 +471,102 @@ class SimSection(_Section):
     realistic: RealisticSection = RealisticSection()
 
     scenario: str = "hover"
+    """Scenario (``groundstation sim --list``)."""
     rate_hz: float = Field(250.0, gt=0.0, le=2000.0)
+    """Telemetry rate, Hz."""
     drones: tuple[str, ...] = ("cf1",)
+    """Drone ids to simulate."""
     accel_noise_mps2: float = Field(0.3, ge=0.0)
+    """Simulated accelerometer noise per axis, m/s²."""
     thrust_noise_n: float = Field(0.003, ge=0.0)
+    """Simulated thrust noise, N."""
     thrust_bias_ratio: float = Field(0.0, ge=-0.5, le=0.5)
+    """Relative error of the reported thrust (0.02: reports 2 % too much)."""
     mocap: bool = True
     """Publish the motion-capture ``position_m`` in Telemetry."""
+    exit_angles: bool = False
+    """(added) A base sensor: publish the tether's ``exit_azimuth_rad`` / ``exit_elevation_rad``
+    (and their σ) in Reel, from the simulated tether's first segment, with the noise below
+    (groundstation/sim/base_sensor.py)."""
+    exit_azimuth_noise_rad: float = Field(0.02, ge=0.0)
+    """Azimuth noise σ of the base sensor for a horizontal exit, rad (grows as 1/cos(elevation))."""
+    exit_elevation_noise_rad: float = Field(0.02, ge=0.0)
+    """Elevation noise σ of the base sensor, rad."""
     seed: int = 0
+    """Random seed of the simulated sensor noise."""
     speed: float = Field(1.0, gt=0.0)
     """Real-time factor (1 = wall clock)."""
     duration_s: float | None = None
+    """Stop after this many simulated seconds; none: the scenario's own end, or never."""
+
+
+class CrazyflieSection(_Section):
+    """``[crazyflie]`` (added): the bridge ``groundstation crazyflie`` (docs/real-lab.md).
+
+    The bridge publishes the nominal thrust of ``thrust_map``; the service applies
+    ``[calibration]`` on top, so a thrust scale is never applied twice.
+    """
+
+    thrust_map: tuple[float, float, float] = (2.130295e-11, 1.032633e-6, 5.484560e-4)
+    """``[a, b, c]``: thrust of one motor, ``a·pwm² + b·pwm + c`` newtons, pwm in 0..65535
+    (a motor at pwm 0 gives 0 N). The default is the widely used Crazyflie 2.x fit."""
+    motor_variables: Literal["motor", "pwm"] = "motor"
+    """``motor``: ``motor.m1..m4``; ``pwm``: ``pwm.m1_pwm..m4_pwm``. Where the firmware logs
+    both, ``motor.*`` is the request before its battery compensation (keep
+    ``thrust_vbat_slope_per_v = 0``) and ``pwm.*`` the duty after it (fit the slope); see
+    docs/real-lab.md, "compensating once"."""
+    attitude_source: Literal["estimator", "mocap"] = "estimator"
+    """``estimator``: ``stateEstimate.qw..qz``; ``mocap``: ``quat_wxyz`` of ``mocap_key``."""
+    mocap_key: str | None = None
+    """Zenoh key of the motion-capture pose of this drone, JSON ``{"position_m": [x, y, z],
+    "quat_wxyz": [w, x, y, z] (optional)}``; ``{drone}`` is replaced by the drone id."""
+    mocap_stale_s: float = Field(0.1, gt=0.0)
+    """A pose older than this (host clock) is not used: ``position_m`` is left out."""
+    send_extpos: bool = False
+    """Also forward each motion-capture pose to the drone's estimator (``extpos``)."""
+    armed_source: Literal["auto", "supervisor", "none"] = "auto"
+    """``supervisor``: bit 1 of ``supervisor.info``; ``auto``: that when the firmware logs it,
+    else no ``armed`` field; ``none``: never report ``armed``."""
+    rate_hz: float = Field(100.0, ge=0.5, le=100.0)
+    """Telemetry rate; the log period is the nearest multiple of 10 ms."""
+    slow_period_ms: int = Field(100, ge=10, le=2540)
+    """Period of the slowly changing variables (battery, armed), ms, a multiple of 10."""
+    watchdog_s: float = Field(0.5, gt=0.0)
+    """No fresh setpoint for this long: hold the last one (logged once); a setpoint computed
+    from telemetry older than this is dropped."""
+    yaw_deg: float | None = None
+    """Yaw of the position setpoints, degrees; None holds the yaw the drone has when the first
+    setpoint arrives."""
+    connect_timeout_s: float = Field(10.0, gt=0.0)
+    toc_cache_dir: str | None = None
+    """Directory where cflib caches the firmware's TOCs (faster reconnections); None: none."""
+    data_timeout_s: float = Field(1.0, gt=0.0)
+    """No log data for this long on an open link: taken as lost (a driver may not notice)."""
+    reconnect_max_s: float = Field(5.0, gt=0.0)
+    """Longest wait between reconnection attempts (the back-off doubles from 0.25 s)."""
+    status_period_s: float = Field(1.0, gt=0.0)
+    """Period of ``tether/{drone}/bridge`` status messages."""
+
+    @field_validator("slow_period_ms")
+    @classmethod
+    def _ten_ms_steps(cls, value: int) -> int:
+        if value % 10:
+            raise ValueError(f"{value!r}: Crazyflie log periods are multiples of 10 ms")
+        return value
+
+    @field_validator("thrust_map")
+    @classmethod
+    def _thrust_map(cls, value: tuple[float, float, float]) -> tuple[float, float, float]:
+        a, b, c = value
+        top = a * 65535.0**2 + b * 65535.0 + c
+        if not all(math.isfinite(v) for v in value) or not 0.0 < top < 10.0:
+            raise ValueError(f"{list(value)!r}: thrust at pwm 65535 must be within (0, 10) N")
+        return value
+
+    @property
+    def log_period_ms(self) -> int:
+        """The telemetry log period: ``1000 / rate_hz`` rounded to 10 ms steps, at least 10."""
+        return max(10, 10 * round(100.0 / self.rate_hz))
 
 
 class DroneOverride(_Section):
@@ -393,9 +607,11 @@ class Settings(BaseSettings):
     follow: FollowSection = FollowSection()
     filter: FilterSection = FilterSection()
     calibration: CalibrationSection = CalibrationSection()
+    localization: LocalizationSection = LocalizationSection()
     web: WebSection = WebSection()
     service: ServiceSection = ServiceSection()
     sim: SimSection = SimSection()
+    crazyflie: CrazyflieSection = CrazyflieSection()
     drones: dict[str, DroneOverride] = Field(default_factory=dict)
 
     @field_validator("drones")
@@ -440,7 +656,9 @@ class Settings(BaseSettings):
                 merged[name] = section
                 continue
             try:
-                merged[name] = type(section).model_validate(section.model_dump() | patch)
+                merged[name] = type(section).model_validate(
+                    section.model_dump() | patch, context=_STRICT
+                )
             except ValidationError as exc:
                 raise ConfigError(
                     _describe(exc, prefix=f"drones.{drone_id}.{name}", data=patch)
@@ -469,8 +687,34 @@ def _describe(exc: ValidationError, *, prefix: str = "", data: Any = None) -> st
         value = err.get("input", _lookup(data, loc))
         if isinstance(value, float) and not math.isfinite(value):
             value = repr(value)
-        lines.append(f"{key} = {value!r}: {err['msg']}")
+        lines.append(f"{key} = {value!r}: {err['msg'].removeprefix('Value error, ')}")
     return "invalid configuration: " + "; ".join(lines)
+
+
+def _check_tables_strictly(layered: Mapping[str, Any]) -> None:
+    """Validate each table with the strict-scalars context (``BaseSettings`` drops contexts).
+
+    Raises:
+        ConfigError: names the key and the value.
+    """
+    for name, field in Settings.model_fields.items():
+        section_type, value = field.annotation, layered.get(name)
+        if not (isinstance(value, Mapping) and isinstance(section_type, type)):
+            continue
+        if issubclass(section_type, _Section):
+            try:
+                section_type.model_validate(value, context=_STRICT)
+            except ValidationError as exc:
+                raise ConfigError(_describe(exc, prefix=name, data=value)) from None
+
+
+def _decode_env(raw: Any) -> Any:
+    if not isinstance(raw, str):
+        return raw
+    try:
+        return json.loads(raw)
+    except ValueError:
+        return raw
 
 
 def _deep_merge(base: dict[str, Any], patch: Mapping[str, Any]) -> dict[str, Any]:
@@ -519,12 +763,28 @@ def load_settings(
             # Environment beats the file: validate env alone, then lay it over the file.
             env_only = Settings()
             env_set = env_only.model_dump(exclude_unset=True)
+            # Per-drone overrides stay untyped dicts until resolved: decode their strings
+            # here (a number or a list in JSON), as the typed tables were decoded above.
+            for override in env_set.get("drones", {}).values():
+                for table in override.values():
+                    if isinstance(table, dict):
+                        for key, raw in table.items():
+                            table[key] = _decode_env(raw)
             layered = _deep_merge(layered, env_set)
         layered = _deep_merge(layered, dict(cli_overrides or {}))
+        _check_tables_strictly(layered)
         settings = Settings.model_validate(layered)
     except ValidationError as exc:
         raise ConfigError(_describe(exc, data=layered)) from None
     # Resolve every override once at start-up so a bad per-drone value fails now.
-    for drone_id in settings.drones:
-        settings.for_drone(drone_id)
+    floor_n = settings.service.follow_threshold_min_n
+    for key, follow in [("follow", settings.follow)] + [
+        (f"drones.{d}.follow", settings.for_drone(d).follow) for d in settings.drones
+    ]:
+        if follow.threshold_n < floor_n:
+            raise ConfigError(
+                f"invalid configuration: {key}.threshold_n = {follow.threshold_n!r}: below "
+                f"service.follow_threshold_min_n = {floor_n!r} (a threshold that low follows "
+                "the tether's own pull)"
+            )
     return settings

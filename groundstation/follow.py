@@ -21,10 +21,32 @@ Behaviour, in the order :func:`follow_step` applies it:
 2. **Off.** Not enabled, or stopped after a tug-to-land: nothing is published.
 3. **No position.** A missing or non-finite position never yields a setpoint; the
    follower releases (``active`` False) and the goal stays frozen.
-4. **Hysteresis.** Engage when the tension norm exceeds ``threshold_n``; release
+4. **Pull, with hysteresis.** Engage when the *pull* exceeds ``threshold_n``; release
    when it falls below ``threshold_n * (1 - hysteresis_ratio)``; in between keep the
    previous mode, so noise around the threshold does not chatter the goal. A missing
-   tension estimate releases.
+   tension estimate, or the drone on the ground, releases; on the ground landing is
+   disarmed too (a landed drone's next spool-up is never stopped).
+   The pull is the tension beyond the tether's own: ``T - T_own``, with ``T_own`` the
+   tension the tether exerts in quiet hover at the reference position (step 4a), so the
+   threshold means "a hand pulls with 0.10 N" at any reach. The paper compares |T| with
+   the threshold; near taut the tether alone exceeds the 0.10 N default (0.104 N at 97 %
+   of L = 1.6 m, 0.119 N at 90 % of L = 3 m, omega = 0.05 N/m), so every hover there would
+   engage following and arm tug-to-land with nobody pulling.
+4a. **The tether's own tension.** ``T_own = F_cat(p_ref) + b``: ``F_cat`` the catenary's
+   force (:func:`groundstation.catenary.tether_force`) at the reference position, ``b``
+   the estimate's offset from it: 0 at the first step after enabling with motion capture
+   (the catenary at the measured position is independent of the estimate), the whole
+   difference without it (nobody is taken to pull while following is switched on); then
+   tracked over ``REFERENCE_TIME_CONSTANT_S`` while
+   not following and the pull is within the quiet band (``QUIET_BAND_RATIO``), so a
+   steady model or sensor error (length, thrust scale, mocap offset) is absorbed and a
+   tug is not. The reference position is the motion-capture position
+   when there is one; without motion capture the tether-based position is itself derived
+   from the tension (F_cat there *is* the estimate, so nothing would ever read as pull):
+   the quiet-hover position before the pull (averaged, frozen while following), and the
+   goal while following (the drone tracks it). Where the catenary has no answer (taut
+   chord, an end below the floor) the last ``F_cat`` is kept. Without ``weight_n_per_m``
+   ``F_cat`` is 0 and ``b`` alone is the reference (the slowly tracked quiet tension).
 5. **Tug-to-land.** The first activation with ``land_below_m`` set arms landing. Once
    armed, a position below ``land_below_m`` issues exactly one Stop, and the machine
    stays ``stopped`` (no setpoints, no more Stops) until enabled again.
@@ -41,8 +63,9 @@ Behaviour, in the order :func:`follow_step` applies it:
    would never fire (measured in docs/RESULTS.md before this rule). The paper itself
    says tension following needs an external position. So the goal starts at the
    position before the tug (averaged while quiet) and moves along the pull,
-   ``v = admittance_mps_per_n (T - T_before)``, capped at ``max_speed_mps`` and kept
-   within reach; tug-to-land then watches the goal's height, which the drone tracks.
+   ``v = admittance_mps_per_n (T - T_own)`` (step 4a, with the catenary at the goal),
+   capped at ``max_speed_mps`` and kept within reach; tug-to-land then watches the
+   goal's height, which the drone tracks.
 """
 
 from __future__ import annotations
@@ -53,7 +76,11 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from groundstation import catenary
+
 __all__ = [
+    "QUIET_BAND_RATIO",
+    "REFERENCE_TIME_CONSTANT_S",
     "FollowDecision",
     "FollowParams",
     "FollowState",
@@ -67,7 +94,16 @@ FloatArray = NDArray[np.float64]
 Vec3 = tuple[float, float, float]
 
 QUIET_TIME_CONSTANT_S = 0.5
-"""Averaging time of the pre-tug tension and position (without motion capture), s."""
+"""Averaging time of the pre-tug position (without motion capture), s."""
+
+REFERENCE_TIME_CONSTANT_S = 2.0
+"""Tracking time of the offset ``b`` between the estimate and the catenary's tension while
+not following, s (step 4a): quick beside drift (thrust scale, battery), slow beside a tug."""
+
+QUIET_BAND_RATIO = 0.5
+"""``b`` tracks only while the pull is below this fraction of the release level (0.04 N by
+default). A tug rising to 0.10 N within 0.3 s spends ~0.1 s in that band and loses about
+``(1 / 2 s) * (0.04 N * 0.1 s / 2)`` = 1 mN of itself to the tracking."""
 
 
 @dataclass(frozen=True)
@@ -75,7 +111,8 @@ class FollowParams:
     """Tuning of tension following.
 
     Attributes:
-        threshold_n: Tension norm above which following engages, N, > 0.
+        threshold_n: Pull (the tension beyond the tether's own) above which following
+            engages, N, > 0.
         hysteresis_ratio: Following releases below ``threshold_n * (1 - ratio)``,
             dimensionless in [0, 1).
         land_below_m: Height (world z) below which an armed follower stops the motors,
@@ -117,7 +154,7 @@ class FollowParams:
 
     @property
     def release_n(self) -> float:
-        """Tension norm below which an active follower releases, N."""
+        """Pull below which an active follower releases, N."""
         return self.threshold_n * (1.0 - self.hysteresis_ratio)
 
 
@@ -127,7 +164,7 @@ class FollowState:
 
     Attributes:
         enabled: Following switched on by the operator.
-        active: The tension is above the threshold: the goal follows the drone.
+        active: The pull is above the threshold: the goal follows the drone.
         landing_armed: A tug has happened with tug-to-land configured.
         stopped: A Stop was issued; terminal until enabled again.
         setpoint_world_m: The last published setpoint (the frozen goal), m, or None.
@@ -135,10 +172,14 @@ class FollowState:
         last_stamp_s: Stamp of the previous step, s, or None.
         reason: Why the follower is in this state (human-readable; "" when nothing to
             say).
-        quiet_tension_world_n: Without motion capture: the tension of the last step
-            before the pull (the tether's own), N, or None.
-        quiet_position_world_m: Without motion capture: the tether-based position of
-            the last step before the pull, m, or None.
+        quiet_position_world_m: Without motion capture: the tether-based position
+            before the pull (averaged while quiet), m, or None.
+        own_offset_world_n: ``b`` of step 4a, the estimate minus the catenary's force at
+            the reference position, tracked while not following, N, or None before the
+            first step with a tension.
+        catenary_world_n: The last finite catenary force at the reference position
+            (``F_cat`` of step 4a), N, or None.
+        pull_world_n: This step's pull ``T - T_own``, N, or None.
     """
 
     enabled: bool = False
@@ -149,8 +190,10 @@ class FollowState:
     setpoint_stamp_s: float | None = None
     last_stamp_s: float | None = None
     reason: str = ""
-    quiet_tension_world_n: Vec3 | None = None
     quiet_position_world_m: Vec3 | None = None
+    own_offset_world_n: Vec3 | None = None
+    catenary_world_n: Vec3 | None = None
+    pull_world_n: Vec3 | None = None
 
 
 @dataclass(frozen=True)
@@ -271,6 +314,29 @@ def _finite_vec3(value: ArrayLike | None) -> FloatArray | None:
     return arr
 
 
+def _tether_own_force(
+    reference_world_m: FloatArray,
+    base_world_m: ArrayLike,
+    length_m: float,
+    weight_n_per_m: float | None,
+    floor_z_m: float,
+) -> FloatArray | None:
+    """The catenary's force on a drone at rest at ``reference_world_m`` (step 4a), or None.
+
+    None without ``weight_n_per_m``, or where the catenary has no finite answer (a chord at
+    or beyond the length, an end below the floor, bad inputs).
+    """
+    if weight_n_per_m is None:
+        return None
+    try:
+        force = catenary.tether_force(
+            base_world_m, reference_world_m, length_m, weight_n_per_m, floor_z_m
+        ).force_world_n
+    except (catenary.CatenaryError, ValueError):
+        return None
+    return force if bool(np.all(np.isfinite(force))) else None
+
+
 def follow_step(
     state: FollowState,
     params: FollowParams,
@@ -284,6 +350,8 @@ def follow_step(
     stale: bool = False,
     tension_world_n: ArrayLike | None = None,
     position_is_external: bool = True,
+    weight_n_per_m: float | None = None,
+    on_ground: bool = False,
 ) -> FollowDecision:
     """One step of tension following and tug-to-land (see the module docstring).
 
@@ -292,18 +360,28 @@ def follow_step(
         params: Tuning.
         stamp_s: Stamp of this step's input, s (telemetry clock).
         tension_norm_n: Norm of the estimated tether tension, N, or None when there is
-            no (converged) estimate.
+            no (converged) estimate. With ``tension_world_n`` given, only its presence
+            counts (the pull is computed from the vector); without it, it is taken as
+            the pull itself (a caller that has already removed the tether's own tension,
+            e.g. a test of the state machine).
         position_world_m: Current drone position, world, m, shape (3,): motion capture
             when the telemetry has it, else the tether-based estimate; None if unknown.
         base_world_m: Tether base exit, world, m, shape (3,).
         length_m: Tether length paid out, m.
         floor_z_m: Floor height, m (``-inf`` for none).
         stale: The caller knows this input is stale: disengage.
-        tension_world_n: The estimated tension vector, world, N, shape (3,); needed
-            when ``position_is_external`` is False.
+        tension_world_n: The estimated tension vector, world, N, shape (3,): the pull is
+            this minus the tether's own (step 4a). Needed when ``position_is_external``
+            is False.
         position_is_external: True when ``position_world_m`` comes from motion capture
             (the paper's setting). False for the tether-based estimate, which a hand's
             pull corrupts: the goal then moves along the pull (admittance, step 6b).
+        weight_n_per_m: Tether weight per length omega, N/m, for the catenary's own
+            tension at the reference position (step 4a); None to use the slowly tracked
+            quiet tension alone.
+        on_ground: The drone is on the floor (the floor's push is no pull): no
+            engagement, landing disarmed, the tether's own tension forgotten (it starts
+            again at the first step in the air).
 
     Returns:
         The next state, and the setpoint and/or Stop to publish.
@@ -338,46 +416,88 @@ def follow_step(
     if position is None:
         return FollowDecision(replace(state, active=False, reason="no position: goal frozen"))
 
-    # 4. Hysteresis on the tension norm.
+    # 4. The pull beyond the tether's own tension, with hysteresis.
+    dt_prev_s = max(stamp_s - prev, 0.0) if prev is not None else 0.0
+    tension = _finite_vec3(tension_world_n)
     norm_n = tension_norm_n
-    if norm_n is None or not math.isfinite(norm_n):
+    if norm_n is not None and not math.isfinite(norm_n):
+        norm_n = None
+    pull: FloatArray | None = None
+    pull_n: float | None
+    if tension is not None and norm_n is not None:
+        # 4a. T_own = F_cat(p_ref) + b at the reference position.
+        if position_is_external:
+            reference = position
+        elif state.active and state.setpoint_world_m is not None:
+            reference = np.array(state.setpoint_world_m)  # the goal the drone tracks
+        else:
+            quiet_p = _finite_vec3(state.quiet_position_world_m)
+            reference = quiet_p if quiet_p is not None else position
+        f_cat = _tether_own_force(reference, base_world_m, length_m, weight_n_per_m, floor_z_m)
+        modelled = f_cat is not None
+        if f_cat is None:  # keep the last answer where the catenary has none
+            last_cat = _finite_vec3(state.catenary_world_n)
+            f_cat = last_cat if last_cat is not None else np.zeros(3)
+        offset = _finite_vec3(state.own_offset_world_n)
+        if offset is None:
+            # With motion capture the catenary at the measured position is the tether's own
+            # tension, independently of the estimate: b starts at 0 (a hand already pulling
+            # as following is switched on is a pull). Without it the reference position
+            # comes from the tension itself: nobody is taken to pull at the switch-on.
+            offset = np.zeros(3) if (position_is_external and modelled) else tension - f_cat
+        pull = tension - (f_cat + offset)
+        pull_n = math.sqrt(float(pull @ pull))
+        state = replace(state, catenary_world_n=_vec3(f_cat), own_offset_world_n=_vec3(offset))
+    else:
+        pull_n = norm_n if tension_world_n is None and norm_n is not None else None
+    if on_ground:
+        active = False
+        reason = "on the ground: goal frozen"
+        state = replace(
+            state, own_offset_world_n=None, catenary_world_n=None, quiet_position_world_m=None
+        )
+    elif pull_n is None:
         active = False
         reason = "no tension estimate: goal frozen"
     else:
-        active = bool(norm_n >= params.release_n if state.active else norm_n > params.threshold_n)
+        active = bool(pull_n >= params.release_n if state.active else pull_n > params.threshold_n)
         reason = "following the pull" if active else "below threshold: goal frozen"
-    landing_armed = state.landing_armed or (active and params.land_below_m is not None)
+    # On the floor a tug-to-land has nothing left to do, and an arm kept from an earlier
+    # flight must not stop the next take-off's spool-up: landing disarms.
+    landing_armed = not on_ground and (
+        state.landing_armed or (active and params.land_below_m is not None)
+    )
     was_active = state.active
-    state = replace(state, active=active, landing_armed=landing_armed, reason=reason)
-    tension = _finite_vec3(tension_world_n)
-    admittance = not position_is_external and tension is not None
-    if (
-        not position_is_external
-        and not active
-        and tension is not None
-        and norm_n is not None
-        and norm_n < params.release_n
-    ):
-        # No pull: the tether-based position is valid; remember it and the tether's own
-        # pull, averaged over QUIET_TIME_CONSTANT_S so the first samples of a tug (the
-        # filter needs a few to see it) barely move them.
-        prev_t = _finite_vec3(state.quiet_tension_world_n)
-        prev_p = _finite_vec3(state.quiet_position_world_m)
-        dt_q = stamp_s - prev if prev is not None else 0.0
-        w = (
-            1.0
-            if prev_t is None or prev_p is None
-            else min(1.0, max(dt_q, 0.0) / QUIET_TIME_CONSTANT_S)
-        )
-        state = replace(
-            state,
-            quiet_tension_world_n=_vec3(
-                tension if prev_t is None else prev_t + w * (tension - prev_t)
-            ),
-            quiet_position_world_m=_vec3(
-                position if prev_p is None else prev_p + w * (position - prev_p)
-            ),
-        )
+    state = replace(
+        state,
+        active=active,
+        landing_armed=landing_armed,
+        reason=reason,
+        pull_world_n=_vec3(pull) if pull is not None else None,
+    )
+    admittance = not position_is_external and tension is not None and pull is not None
+    if not active and not on_ground and tension is not None and pull is not None:
+        # Not following: b tracks the estimate's offset from the catenary slowly, and
+        # (without motion capture, where the tether-based position is valid while nobody
+        # pulls) the quiet position is averaged over QUIET_TIME_CONSTANT_S, so the first
+        # samples of a tug (the filter needs a few to see it) barely move it.
+        f_cat_now = np.array(state.catenary_world_n)
+        offset_now = np.array(state.own_offset_world_n)
+        # Only inside the quiet band: a tug's rise passes the band in a fraction of the
+        # filter's ~0.3 s and is held out of b from there on.
+        quiet = pull_n is not None and pull_n < QUIET_BAND_RATIO * params.release_n
+        w_b = min(1.0, dt_prev_s / REFERENCE_TIME_CONSTANT_S) if quiet else 0.0
+        offset_now = offset_now + w_b * (tension - f_cat_now - offset_now)  # b += w (T - F - b)
+        state = replace(state, own_offset_world_n=_vec3(offset_now))
+        if not position_is_external:
+            prev_p = _finite_vec3(state.quiet_position_world_m)
+            w = 1.0 if prev_p is None else min(1.0, dt_prev_s / QUIET_TIME_CONSTANT_S)
+            state = replace(
+                state,
+                quiet_position_world_m=_vec3(
+                    position if prev_p is None else prev_p + w * (position - prev_p)
+                ),
+            )
 
     # 6. While active, the goal: within reach and at a bounded speed.
     radius_m = length_m - params.reach_margin_m if math.isfinite(length_m) else math.nan
@@ -393,16 +513,14 @@ def follow_step(
         if admittance:
             # 6b. The tether-based position is wrong while a hand pulls (the pull is not
             # the catenary's), so the goal starts where the drone was before the tug and
-            # moves along the pull: v = k (T - T_before), capped at max_speed_mps.
-            assert tension is not None
+            # moves along the pull: v = k (T - T_own), capped at max_speed_mps.
+            assert pull is not None
             start = last if was_active else None
             if start is None:  # the tug begins: from the last position before it
                 start = _finite_vec3(state.quiet_position_world_m)
                 dt_s = 0.0
             if start is None:
                 start = position
-            quiet = _finite_vec3(state.quiet_tension_world_n)
-            pull = tension - quiet if quiet is not None else tension
             velocity = params.admittance_mps_per_n * pull
             speed = math.sqrt(float(velocity @ velocity))
             if speed > params.max_speed_mps:
@@ -427,7 +545,8 @@ def follow_step(
             return FollowDecision(state)
 
     # 5. Tug-to-land: exactly one Stop, then terminal until enabled again. Without motion
-    # capture the height during a pull is the goal's (the drone tracks it).
+    # capture the height during a pull is the goal's (the drone tracks it). On the
+    # ground landing is disarmed (step 4), so nothing stops a spool-up.
     z_m = float(target[2]) if (admittance and target is not None) else float(position[2])
     if state.landing_armed and params.land_below_m is not None and z_m < params.land_below_m:
         stop_reason = f"tug-to-land: z {z_m:.3f} m below land_below_m {params.land_below_m} m"

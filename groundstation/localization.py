@@ -1,4 +1,4 @@
-"""3-D drone position from the estimated tether tension (paper sec. pos_est).
+"""3-D drone position from the estimated tether tension and the base (paper sec. pos_est).
 
 Pure physics: numpy and :mod:`groundstation.catenary` only.
 
@@ -13,24 +13,37 @@ the drone's radial distance r and height z relative to the base
 
 Departures from the paper:
 
-* **Azimuth from the estimate.** The paper took beta from motion capture. The
-  horizontal tension on the drone points from the drone to the base, so the drone
-  lies at ``base + r * (-T_xy / |T_xy|)``: the estimate carries its own azimuth.
-* **Near-plumb tether.** When H is within its noise the azimuth is undetermined; the
-  result says so (``azimuth_determined=False``), places the drone straight above or
-  below the base, and widens the horizontal uncertainty to the radius the tether
-  could reach at a horizontal tension ``plumb_k`` standard deviations above zero.
-  The paper's filter, started from T = 0, was always in this case at first and
-  reported z = 0.754 - 1.6 = -0.846 m (``eq:in_instants``); the tension filter of
-  this project starts from the first observation instead.
-* **Uncertainty.** The tension covariance is carried to the position with the
-  unscented transform (7 sigma points, kappa = 0) through one vectorised catenary
-  call, so the large non-linearity of r in H near a taut tether is respected.
+* **Azimuth from every source.** The paper took beta from motion capture. The horizontal
+  tension on the drone points from the drone to the base, so the estimate carries its own
+  azimuth, ``-T_xy / |T_xy|``, with a standard deviation of the sideways tension noise over
+  H. A base that measures the tether's exit azimuth gives another, independent of the
+  drone's sensors. ``azimuth="auto"`` fuses the two by inverse variance; ``"tension"``,
+  ``"reel"`` and ``"mocap"`` (the paper's: beta from the motion-capture position) use one.
+* **Exit elevation.** With L known, the slope where the tether leaves the base,
+  ``theta = atan2(s2 - L, a)``, is one more equation in (a, s2): the base alone fixes the
+  catenary up to its sag, and the tension fixes the rest; both are fused by their
+  covariance (:func:`_fuse_elevation`) while no tether rests on the floor.
+* **Near-plumb tether, continuously.** When the azimuth's standard deviation exceeds
+  ``1 / plumb_k`` rad (for the tension alone: H within ``plumb_k`` standard deviations of
+  its noise) the result says so (``azimuth_determined=False``). The horizontal offset
+  ``r u(beta)`` is blended toward the base's xy as that standard deviation grows (1 at
+  ``1 / (2 k)``, 0 at ``2 / k``, smoothstep between), and the horizontal uncertainty widens
+  with it to the radius the tether could reach at a horizontal tension ``plumb_k``
+  standard deviations above zero: no jump between the two near r = 0.2 m. The paper's
+  filter, started from T = 0, was always in this case at first and reported z = 0.754 -
+  1.6 = -0.846 m (``eq:in_instants``); the tension filter of this project starts from the
+  first observation instead.
+* **Uncertainty.** The tension covariance is carried to (r, z), and with the tension's
+  azimuth to the horizontal position, by the unscented transform (7 sigma points,
+  kappa = 0) through one vectorised catenary call, so the large non-linearity of r in H
+  near a taut tether, and the correlation of r with the direction under an anisotropic
+  noise, are respected; the other azimuth sources add their variance across.
 
 Cost: :func:`try_localize` runs once per telemetry message. Its 3-vector and 3x3
-arithmetic is done in Python floats, and the one catenary call on the 7 (or 9) points
-goes to ``catenary.locate_free``, the body of :func:`catenary.locate` without its input
-checks, which this module has already made (see :func:`_locate_points`).
+arithmetic is done in Python floats, and the one catenary call on 8 points goes to
+``catenary.locate_free``, the body of :func:`catenary.locate` without its input checks,
+which this module has already made (see :func:`_locate_points`); the elevation's fusion
+adds a 2x2 Gauss-Newton and a 5-point call.
 """
 
 from __future__ import annotations
@@ -45,7 +58,10 @@ from numpy.typing import ArrayLike, NDArray
 from groundstation import catenary
 
 __all__ = [
+    "AZIMUTH_MODES",
     "PLUMB_K",
+    "AngleObservation",
+    "AzimuthMode",
     "LocalizationFailure",
     "PositionEstimate",
     "localize",
@@ -89,7 +105,12 @@ class PositionEstimate:
         azimuth_determined: False when H is within its noise (tether near plumb).
         floor_contact: Part of the tether rests on the floor.
         floor_run_m: Length of tether on the floor, m (0 without contact).
-        case: ``"free"``, ``"floor"`` or ``"plumb"``: which branch produced it.
+        case: ``"free"``, ``"floor"`` or ``"plumb"`` (azimuth undetermined).
+        azimuth_std_rad: Standard deviation of the fused azimuth, rad (inf without a
+            source); the horizontal offset is ``exp(-std^2 / 2) r`` along it.
+        azimuth_source: The most certain source of the azimuth: ``"tension"``,
+            ``"reel"``, ``"mocap"``, or ``"none"``.
+        elevation_used: The reel's exit elevation was fused into (a, s2).
     """
 
     position_world_m: FloatArray
@@ -102,6 +123,9 @@ class PositionEstimate:
     floor_contact: bool
     floor_run_m: float
     case: Literal["free", "floor", "plumb"]
+    azimuth_std_rad: float = math.inf
+    azimuth_source: str = "tension"
+    elevation_used: bool = False
 
 
 @dataclass(frozen=True)
@@ -119,38 +143,6 @@ def _frozen(a: ArrayLike) -> FloatArray:
     out = np.array(a, dtype=np.float64)
     out.setflags(write=False)
     return out
-
-
-def _locate(
-    horizontal_n: FloatArray,
-    vertical_n: FloatArray,
-    weight_n_per_m: float,
-    length_m: float,
-    base_z_m: float,
-    floor_z_m: float,
-) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
-    """r, z, r_min, r_max, floor_contact (0/1), floor_run for arrays of (H, T_v).
-
-    The free-hanging :func:`catenary.locate` runs first; the floor-aware
-    :func:`catenary.locate_with_floor` (twice the cost) only when some free solution
-    comes within 1 um of the floor. Away from the floor both give the same answer.
-    """
-    r, z = catenary.locate(horizontal_n, vertical_n, weight_n_per_m, length_m, base_z_m)
-    r = np.asarray(r, dtype=np.float64)
-    z = np.asarray(z, dtype=np.float64)
-    if floor_z_m != -math.inf:
-        # Lowest point of the free curve (NOTES): the drone when s2 < 0, the base when
-        # s2 > L, else the vertex, sqrt(a^2 + s2^2) - a below the drone.
-        a = horizontal_n / weight_n_per_m
-        s2 = vertical_n / weight_n_per_m
-        vertex = z - (np.hypot(a, s2) - a)
-        lowest = np.where(s2 < 0.0, z, np.where(s2 > length_m, base_z_m, vertex))
-        if not (lowest > floor_z_m + 1e-6).all():
-            return _locate_floor(
-                horizontal_n, vertical_n, weight_n_per_m, length_m, base_z_m, floor_z_m
-            )
-    zeros = np.zeros_like(r)
-    return r, z, r, r, zeros, zeros
 
 
 def _locate_floor(
@@ -246,9 +238,13 @@ def _locate_points(
     base_z_m: float,
     floor_z_m: float,
 ) -> tuple[list[float], list[float], list[float], list[float], list[float], list[float]]:
-    """:func:`_locate` for the few points of one estimate, returned as lists of floats.
+    """r, z, r_min, r_max, floor_contact (0/1), floor_run for the few points of one
+    estimate, as lists of floats.
 
-    The free-hanging solution comes from ``catenary.locate_free``, the body of
+    The free-hanging solution comes first, and the floor-aware
+    :func:`catenary.locate_with_floor` (twice the cost) only when some free solution comes
+    within 1 um of the floor; away from the floor both give the same answer. The
+    free-hanging solution comes from ``catenary.locate_free``, the body of
     :func:`catenary.locate` after its input checks: ``try_localize`` has already checked
     omega, L and z_i, and the caller checks H >= 0 and T_v finite for every point, so the
     checks (about two thirds of ``locate``'s cost on 7 points) would only repeat them.
@@ -277,6 +273,149 @@ def _locate_points(
     return r, z, r, r, zeros, zeros
 
 
+@dataclass(frozen=True)
+class AngleObservation:
+    """An angle measured at the base, with its standard deviation.
+
+    Attributes:
+        value_rad: The angle, rad.
+        std_rad: Its standard deviation, rad, > 0.
+    """
+
+    value_rad: float
+    std_rad: float
+
+
+AzimuthMode = Literal["auto", "tension", "reel", "mocap"]
+"""Which sources give the azimuth: ``auto`` fuses the tension's direction and the reel's
+exit azimuth by their uncertainty; ``tension``, ``reel``, ``mocap`` use that one alone
+(``mocap``: the paper's method, beta from the motion-capture position)."""
+
+AZIMUTH_MODES: tuple[AzimuthMode, ...] = ("auto", "tension", "reel", "mocap")
+
+
+def _valid_angle(obs: AngleObservation | None) -> AngleObservation | None:
+    if obs is None:
+        return None
+    if math.isfinite(obs.value_rad) and math.isfinite(obs.std_rad) and obs.std_rad > 0.0:
+        return obs
+    return None
+
+
+def _wrap(angle_rad: float) -> float:
+    """Angle wrapped to [-pi, pi)."""
+    return (angle_rad + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def _fuse_angles(
+    sources: list[tuple[str, float, float]],
+) -> tuple[float, float, str]:
+    """Inverse-variance fusion of azimuths ``(name, value_rad, std_rad)``.
+
+    In the tangent space about the most certain source (the azimuths agree to well within
+    a radian whenever fusing them matters): ``beta = beta_0 + sum w_i wrap(beta_i - beta_0)
+    / sum w_i``, ``w_i = 1 / std_i^2``, ``std = (sum w_i)^-1/2``.
+
+    Returns:
+        ``(beta_rad, std_rad, name of the most certain source)``; ``(0, inf, "none")``
+        without a source.
+    """
+    usable = [s for s in sources if math.isfinite(s[1]) and s[2] < math.inf]
+    if not usable:
+        return 0.0, math.inf, "none"
+    usable.sort(key=lambda s: s[2])
+    name0, beta0, std0 = usable[0]
+    if not std0 > 0.0:  # an exact source: nothing else counts
+        return beta0, 0.0, name0
+    # Weights relative to the best source's (w_0 = 1), so no 1 / std^2 overflows.
+    w_sum = 0.0
+    d_sum = 0.0
+    for _, beta, std in usable:
+        w = (std0 / std) ** 2
+        w_sum += w
+        d_sum += w * _wrap(beta - beta0)
+    beta = beta0 + d_sum / w_sum
+    return math.atan2(math.sin(beta), math.cos(beta)), std0 / math.sqrt(w_sum), name0
+
+
+def _blend(x: float, full: float, none: float) -> float:
+    """1 for ``x <= full``, 0 for ``x >= none``, smoothstep (3t^2 - 2t^3) between."""
+    if x <= full:
+        return 1.0
+    if not x < none:
+        return 0.0
+    t = (none - x) / (none - full)
+    return t * t * (3.0 - 2.0 * t)
+
+
+def _fuse_elevation(
+    a_m: float,
+    s2_m: float,
+    cov_as_m2: tuple[float, float, float],
+    length_m: float,
+    elevation: AngleObservation,
+) -> tuple[float, float, tuple[float, float, float]] | None:
+    """Catenary parameters ``(a, s2)`` from the tension, refined by the base's exit slope.
+
+    The tether leaves the base at signed arc length ``s2 - L`` from the lowest point, so
+    its slope there is ``(s2 - L) / a`` (eq:cat_expression differentiated; NOTES "Tension
+    along the tether"): ``theta = atan2(s2 - L, a)``. With L known this is one equation in
+    the two unknowns: the base alone fixes the catenary up to its sag (from the straight
+    line at theta, a -> inf, to the plumb hang above the base, a -> 0), and the tension's
+    ``(a, s2)`` (eq:a_param, eq:s2_param) with their covariance fix the rest. Gauss-Newton
+    on ``|x - x_T|^2_{P_T^-1} + (theta(x) - theta_m)^2 / sigma_theta^2``, x = (a, s2).
+
+    Args:
+        a_m: ``H / omega`` from the tension, m.
+        s2_m: ``T_v / omega`` from the tension, m.
+        cov_as_m2: Covariance of (a, s2) from the tension, ``(var_a, cov, var_s2)``, m^2.
+        length_m: Tether length, m.
+        elevation: The measured exit elevation and its standard deviation, rad.
+
+    Returns:
+        ``(a, s2, (var_a, cov, var_s2))`` after fusion, or None when the tension's
+        covariance is not positive definite (an exact tension needs no help) or the
+        iteration leaves the domain.
+    """
+    paa, pas, pss = cov_as_m2
+    det = paa * pss - pas * pas
+    if not (paa > 0.0 and pss > 0.0 and det > 1e-30 * paa * pss):
+        return None
+    # P_T^-1
+    iaa, ias, iss = pss / det, -pas / det, paa / det
+    w_theta = 1.0 / (elevation.std_rad * elevation.std_rad)
+    a, s2 = a_m, s2_m
+    tiny = 1e-9 * length_m
+    for _ in range(20):
+        a = max(a, tiny)
+        y = s2 - length_m
+        d2 = a * a + y * y
+        ja, js = -y / d2, a / d2  # d theta / d(a, s2)
+        e = _wrap(elevation.value_rad - math.atan2(y, a))
+        # (P_T^-1 + J' J w) dx = P_T^-1 (x_T - x) + J' w e
+        naa, nas, nss = iaa + w_theta * ja * ja, ias + w_theta * ja * js, iss + w_theta * js * js
+        da0, ds0 = a_m - a, s2_m - s2
+        ga = iaa * da0 + ias * ds0 + w_theta * ja * e
+        gs = ias * da0 + iss * ds0 + w_theta * js * e
+        ndet = naa * nss - nas * nas
+        if not (ndet > 0.0 and math.isfinite(ndet)):
+            return None
+        step_a = (nss * ga - nas * gs) / ndet
+        step_s = (naa * gs - nas * ga) / ndet
+        a, s2 = a + step_a, s2 + step_s
+        if abs(step_a) + abs(step_s) < 1e-12 * length_m:
+            break
+    a = max(a, tiny)
+    y = s2 - length_m
+    d2 = a * a + y * y
+    ja, js = -y / d2, a / d2
+    naa, nas, nss = iaa + w_theta * ja * ja, ias + w_theta * ja * js, iss + w_theta * js * js
+    ndet = naa * nss - nas * nas
+    if not (ndet > 0.0 and math.isfinite(a) and math.isfinite(s2)):
+        return None
+    return a, s2, (nss / ndet, -nas / ndet, naa / ndet)
+
+
 def try_localize(
     tension_world_n: ArrayLike | None,
     tension_cov_n2: ArrayLike,
@@ -285,8 +424,14 @@ def try_localize(
     base_world_m: ArrayLike,
     floor_z_m: float = -math.inf,
     plumb_k: float = PLUMB_K,
+    *,
+    azimuth: AzimuthMode = "auto",
+    exit_azimuth: AngleObservation | None = None,
+    exit_elevation: AngleObservation | None = None,
+    mocap_world_m: ArrayLike | None = None,
+    mocap_std_m: float = 0.002,
 ) -> PositionEstimate | LocalizationFailure:
-    """Drone position and its uncertainty from the tension at the drone.
+    """Drone position and its uncertainty from the tension at the drone and the base.
 
     Args:
         tension_world_n: Force of the tether on the drone, world frame, N, shape (3,),
@@ -297,17 +442,27 @@ def try_localize(
         length_m: Tether length from the base exit to the drone, m, > 0.
         base_world_m: Base (tether exit) position, world, m, shape (3,).
         floor_z_m: Height of the floor a slack tether rests on, m; ``-inf`` for none.
-        plumb_k: H below ``plumb_k`` standard deviations of H leaves the azimuth
-            undetermined (see :data:`PLUMB_K`).
+        plumb_k: The azimuth counts as determined while its standard deviation is at
+            most ``1 / plumb_k`` rad (for the tension's direction: H above ``plumb_k``
+            standard deviations of H; see :data:`PLUMB_K`).
+        azimuth: Which sources give the azimuth (:data:`AzimuthMode`).
+        exit_azimuth: The reel's exit azimuth (base -> drone, world), or None.
+        exit_elevation: The reel's exit elevation above horizontal, or None; fused with
+            the tension in the catenary's parameters while no tether rests on the floor.
+        mocap_world_m: Motion-capture position, world, m, shape (3,), for
+            ``azimuth="mocap"``; None otherwise.
+        mocap_std_m: Its horizontal standard deviation, m, > 0.
 
     Returns:
         The estimate, or a :class:`LocalizationFailure` with the reason. Never NaN.
     """
     # This runs once per telemetry message on 3-vectors and a 3x3: the arithmetic is on
-    # Python floats, and numpy is kept for the one vectorised catenary call (7 or 9
-    # points), where it pays. The formulas are those of the array version line for line.
+    # Python floats, and numpy is kept for the one vectorised catenary call (8 points),
+    # where it pays.
     if tension_world_n is None:
         return LocalizationFailure("no tension estimate")
+    if azimuth not in AZIMUTH_MODES:
+        return LocalizationFailure(f"azimuth must be one of {AZIMUTH_MODES}, got {azimuth!r}")
     t_in = _finite_floats(tension_world_n, (3,))
     c_in = _finite_floats(tension_cov_n2, (3, 3))
     b_in = _finite_floats(base_world_m, (3,))
@@ -348,11 +503,10 @@ def try_localize(
     # sigma_H: the largest horizontal standard deviation, whatever the direction.
     lam_max = 0.5 * (cxx + cyy) + math.sqrt(max(0.25 * (cxx - cyy) ** 2 + cxy * cxy, 0.0))
     sigma_h_n = math.sqrt(max(lam_max, 0.0))
-    plumb = horizontal_n <= max(plumb_k * sigma_h_n, MIN_HORIZONTAL_N)
 
     # All catenary evaluations in one vectorised call:
-    #   0: the estimate; 1..6: sigma points T +- sqrt(3) S e_i; and when plumb,
-    #   7: (k sigma_H, T_v), 8: (0, T_v).
+    #   0: the estimate; 1..6: sigma points T +- sqrt(3) S e_i; 7: (k sigma_H, T_v), the
+    #   reach of a tether whose azimuth is unknown.
     sq = _cholesky3(cov)
     if sq is None:  # singular (e.g. zero) covariance
         sq = _sqrt_psd(np.array(cov).reshape(3, 3)).ravel().tolist()
@@ -362,21 +516,15 @@ def try_localize(
     py = [ty, ty + b0, ty + b1, ty + b2, ty - b0, ty - b1, ty - b2]
     pz = [tz, tz + c0, tz + c1, tz + c2, tz - c0, tz - c1, tz - c2]
     n_pts = 2 * _N + 1
-    h_arr = np.hypot(px, py)
-    h_pts: list[float] = h_arr.tolist()
-    v_all = [-v for v in pz]
-    if plumb:  # the plumb points only when needed
-        h_all = [*h_pts, plumb_k * sigma_h_n, 0.0]
-        v_all += [vertical_n, vertical_n]
-        h_arr = np.array(h_all)
-    else:
-        h_all = h_pts
+    h_pts: list[float] = np.hypot(px, py).tolist()
+    h_all = [*h_pts, max(plumb_k * sigma_h_n, horizontal_n)]
+    v_all = [-v for v in pz] + [vertical_n]
     try:
         if not (_all_finite(h_all) and _all_finite(v_all)):
             # Out of the fast path's preconditions (overflow): catenary.locate says why.
             catenary.locate(h_all, v_all, weight_n_per_m, length_m, bz)
         r, z, r_min, r_max, contact, run = _locate_points(
-            h_arr, np.array(v_all), weight_n_per_m, length_m, bz, floor_z_m
+            np.array(h_all), np.array(v_all), weight_n_per_m, length_m, bz, floor_z_m
         )
     except (catenary.CatenaryError, ValueError, FloatingPointError) as exc:
         return LocalizationFailure(
@@ -389,78 +537,199 @@ def try_localize(
             f"omega={weight_n_per_m!r} N/m, L={length_m!r} m"
         )
 
-    if plumb:
-        # Azimuth undetermined: straight above/below the base, horizontal std the
-        # radius reachable at H = k sigma_H (including any slack on the floor).
-        r_reach = max(r_max[n_pts], r[n_pts])
-        z_best = z[n_pts + 1]
-        var_z = 0.0
-        for zi in z[1:n_pts]:
-            var_z += (zi - z[0]) * (zi - z[0])
-        var_z = _SIGMA_WEIGHT * var_z
-        pos_cov = [r_reach**2, 0.0, 0.0, 0.0, r_reach**2, 0.0, 0.0, 0.0, var_z]
-        return PositionEstimate(
-            position_world_m=_frozen([bx, by, z_best]),
-            std_world_m=_frozen([math.sqrt(pos_cov[0]), math.sqrt(pos_cov[4]), math.sqrt(var_z)]),
-            cov_world_m2=_frozen(np.array(pos_cov).reshape(3, 3)),
-            radial_m=0.0,
-            radial_interval_m=(0.0, r_reach),
-            azimuth_rad=None,
-            azimuth_determined=False,
-            floor_contact=bool(contact[n_pts + 1] > 0.5),
-            floor_run_m=float(run[n_pts + 1]),
-            case="plumb",
-        )
-
-    # Direction from the base to the drone: opposite the horizontal pull.
-    u0x, u0y = -tx / horizontal_n, -ty / horizontal_n
-    # The estimate's position p_0 (h_pts[0] = H > 0 here), then the unscented covariance
-    # about it, W sum_i d_i d_i' with d_i = p_i - p_0 over the sigma points (a sigma point
-    # at H = 0 keeps the estimate's direction).
-    r0 = r[0]
-    x0, y0, z0 = bx + r0 * (-tx / h_pts[0]), by + r0 * (-ty / h_pts[0]), z[0]
-    sxx = sxy = sxz = syy = syz = szz = 0.0
-    for xi, yi, hi, ri, zi in zip(px[1:], py[1:], h_pts[1:], r[1:n_pts], z[1:n_pts], strict=True):
-        if hi > 0.0:
-            dx, dy = (bx + ri * (-xi / hi)) - x0, (by + ri * (-yi / hi)) - y0
-        else:
-            dx, dy = (bx + ri * u0x) - x0, (by + ri * u0y) - y0
-        dz = zi - z0
-        sxx += dx * dx
-        sxy += dx * dy
-        sxz += dx * dz
-        syy += dy * dy
-        syz += dy * dz
-        szz += dz * dz
-    w = _SIGMA_WEIGHT
-    sxx, sxy, sxz, syy, syz, szz = w * sxx, w * sxy, w * sxz, w * syy, w * syz, w * szz
+    # (r, z) and their covariance from the tension's sigma points (unscented transform).
+    r0, z0 = max(r[0], 0.0), z[0]  # r >= 0 (rounding gives -1e-306 at H ~ 1e-308)
+    var_r = cov_rz = var_z = 0.0
+    for ri, zi in zip(r[1:n_pts], z[1:n_pts], strict=True):
+        dr, dz = ri - r0, zi - z0
+        var_r += dr * dr
+        cov_rz += dr * dz
+        var_z += dz * dz
+    var_r, cov_rz, var_z = _SIGMA_WEIGHT * var_r, _SIGMA_WEIGHT * cov_rz, _SIGMA_WEIGHT * var_z
+    r_reach = max(r_max[n_pts], r[n_pts])
     interval = (r_min[0], r_max[0])
     floor_contact = bool(contact[0] > 0.5)
+    floor_run_m = run[0]
+
+    # The base's exit elevation refines (a, s2) while the tether hangs free.
+    elevation = _valid_angle(exit_elevation)
+    elevation_used = False
+    if elevation is not None and not floor_contact:
+        if horizontal_n > MIN_HORIZONTAL_N:
+            hx, hy = tx / horizontal_n, ty / horizontal_n
+            var_h = hx * hx * cxx + 2.0 * hx * hy * cxy + hy * hy * cyy
+            cov_hv = -(hx * cxz + hy * cyz)
+        else:
+            var_h, cov_hv = lam_max, 0.0
+        w2 = weight_n_per_m * weight_n_per_m
+        fused = _fuse_elevation(
+            horizontal_n / weight_n_per_m,
+            vertical_n / weight_n_per_m,
+            (var_h / w2, cov_hv / w2, czz / w2),
+            length_m,
+            elevation,
+        )
+        if fused is not None:
+            stats = _free_stats(fused, weight_n_per_m, length_m, bz, floor_z_m)
+            if stats is not None:
+                r0, z0, var_r, cov_rz, var_z = stats
+                interval = (r0, r0)
+                elevation_used = True
+
+    # The azimuth from every source asked for, fused by its uncertainty.
+    sources: list[tuple[str, float, float]] = []
+    source_t = azimuth in ("auto", "tension") and horizontal_n > MIN_HORIZONTAL_N
+    beta_t = std_t = math.inf
+    if source_t:
+        # Opposite the horizontal pull; its std is the pull's sideways std over H.
+        ux_t, uy_t = -tx / horizontal_n, -ty / horizontal_n
+        var_side = uy_t * uy_t * cxx - 2.0 * ux_t * uy_t * cxy + ux_t * ux_t * cyy
+        std_t = math.sqrt(max(var_side, 0.0)) / horizontal_n
+        beta_t = math.atan2(uy_t + 0.0, ux_t)  # + 0.0: no -pi from a -0.0
+        sources.append(("tension", beta_t, std_t))
+    reel_az = _valid_angle(exit_azimuth)
+    if azimuth in ("auto", "reel") and reel_az is not None:
+        sources.append(("reel", reel_az.value_rad, reel_az.std_rad))
+    if azimuth == "mocap" and mocap_world_m is not None:
+        m_in = _finite_floats(mocap_world_m, (3,))
+        if m_in is not None and math.isfinite(mocap_std_m) and mocap_std_m > 0.0:
+            dx_m, dy_m = m_in[0] - bx, m_in[1] - by
+            r_m = math.hypot(dx_m, dy_m)
+            if r_m > 0.0:
+                sources.append(("mocap", math.atan2(dy_m, dx_m), mocap_std_m / r_m))
+    beta, std_beta, source = _fuse_angles(sources)
+    determined = std_beta <= 1.0 / plumb_k
+
+    # The horizontal offset: r u(beta_hat) while the azimuth is certain, blended to the
+    # base's xy as it is lost, with a weight rho that falls smoothly (C1) from 1 at
+    # std = 1 / (2 k) to 0 at std = 2 / k, so the position never jumps between the two at
+    # a plumb threshold (a fixed threshold did, near r = 0.2 m). Not rho = exp(-std^2 / 2),
+    # the mean of a wrapped normal: it would bias every determined estimate a little, and
+    # the tension's linearised std (sideways sigma / H) says too little when H ~ sigma.
+    rho = _blend(std_beta, 0.5 / plumb_k, 2.0 / plumb_k)
+    ux, uy = math.cos(beta), math.sin(beta)
+    vx, vy = -uy, ux
+    # Covariance with the azimuth known (cov_det): the unscented transform over the
+    # tension's sigma points, each with its own r, z and (through the tension's share
+    # w_t of the fused azimuth) its own azimuth, so the correlation of r with the
+    # direction under an anisotropic tension noise is kept; the other sources' share of
+    # the azimuth variance adds across.
+    if source_t and std_t > 0.0:
+        w_t = (std_beta / std_t) ** 2
+        var_other = max(std_beta * std_beta - w_t * w_t * std_t * std_t, 0.0)
+    else:
+        w_t = 0.0
+        var_other = std_beta * std_beta if std_beta < math.inf else 0.0
+    if elevation_used or not source_t:
+        # (r, z) from the fused (a, s2): no sigma points to carry the direction with; the
+        # whole azimuth variance goes across.
+        k_uu = var_r
+        k_vv = r0 * r0 * (std_beta * std_beta if std_beta < math.inf else 0.0)
+        dxx = k_uu * ux * ux + k_vv * vx * vx
+        dyy = k_uu * uy * uy + k_vv * vy * vy
+        dxy = k_uu * ux * uy + k_vv * vx * vy
+        dxz, dyz = cov_rz * ux, cov_rz * uy
+    else:
+        hx0, hy0 = r0 * ux, r0 * uy
+        dxx = dxy = dyy = dxz = dyz = 0.0
+        for xi, yi, hi, ri, zi in zip(
+            px[1:], py[1:], h_pts[1:], r[1:n_pts], z[1:n_pts], strict=True
+        ):
+            beta_i = beta
+            if hi > 0.0:
+                beta_i += w_t * _wrap(math.atan2(-yi + 0.0, -xi) - beta_t)
+            dx, dy = ri * math.cos(beta_i) - hx0, ri * math.sin(beta_i) - hy0
+            dz = zi - z[0]
+            dxx += dx * dx
+            dxy += dx * dy
+            dyy += dy * dy
+            dxz += dx * dz
+            dyz += dy * dz
+        w = _SIGMA_WEIGHT
+        dxx, dxy, dyy, dxz, dyz = w * dxx, w * dxy, w * dyy, w * dxz, w * dyz
+        k_vv = r0 * r0 * var_other
+        dxx += k_vv * vx * vx
+        dyy += k_vv * vy * vy
+        dxy += k_vv * vx * vy
     if floor_contact:
         # The 1-sigma radial extent covers the slack interval on either side.
         extent2 = max(r0 - interval[0], interval[1] - r0, 0.0) ** 2
-        sxx += extent2 * (u0x * u0x)
-        sxy += extent2 * (u0x * u0y)
-        syy += extent2 * (u0y * u0y)
-    pos_cov = [sxx, sxy, sxz, sxy, syy, syz, sxz, syz, szz]
-    position = [x0, y0, z0]
+        dxx += extent2 * ux * ux
+        dxy += extent2 * ux * uy
+        dyy += extent2 * uy * uy
+    # Covariance with the azimuth unknown: per axis, the radius the tether reaches at
+    # H = k sigma_H (slack on the floor included). The two blend with rho, as the mean.
+    undet = max(r_reach * r_reach, r0 * r0 + var_r)
+    mean_r = rho * r0
+    sxx = rho * dxx + (1.0 - rho) * undet
+    syy = rho * dyy + (1.0 - rho) * undet
+    sxy = rho * dxy
+    sxz, syz = rho * dxz, rho * dyz
+    pos_cov = [sxx, sxy, sxz, sxy, syy, syz, sxz, syz, var_z]
+    position = [bx + mean_r * ux, by + mean_r * uy, z0]
     if not (all(map(math.isfinite, position)) and all(map(math.isfinite, pos_cov))):
         return LocalizationFailure(
             f"non-finite position for T={[tx, ty, tz]} N, L={length_m!r} m"
         )  # pragma: no cover - guarded above; kept so NaN can never leave
-    std = [math.sqrt(max(v, 0.0)) for v in (sxx, syy, szz)]
+    std = [math.sqrt(max(v, 0.0)) for v in (sxx, syy, var_z)]
+    if not determined:
+        interval = (0.0, max(r_reach, interval[1]))
     return PositionEstimate(
         position_world_m=_frozen(position),
         std_world_m=_frozen(std),
         cov_world_m2=_frozen(np.array(pos_cov).reshape(3, 3)),
         radial_m=r0,
         radial_interval_m=interval,
-        azimuth_rad=math.atan2(u0y + 0.0, u0x),  # + 0.0: no -pi from a -0.0
-        azimuth_determined=True,
+        azimuth_rad=beta if determined else None,
+        azimuth_determined=determined,
         floor_contact=floor_contact,
-        floor_run_m=run[0],
-        case="floor" if floor_contact else "free",
+        floor_run_m=floor_run_m,
+        case="plumb" if not determined else ("floor" if floor_contact else "free"),
+        azimuth_std_rad=std_beta,
+        azimuth_source=source,
+        elevation_used=elevation_used,
     )
+
+
+def _free_stats(
+    fused: tuple[float, float, tuple[float, float, float]],
+    weight_n_per_m: float,
+    length_m: float,
+    base_z_m: float,
+    floor_z_m: float,
+) -> tuple[float, float, float, float, float] | None:
+    """``(r, z, var_r, cov_rz, var_z)`` of a free-hanging tether with parameters (a, s2)
+    ~ N(x, P), by the unscented transform on 5 points (eq:posfull_radial, eq:posfull_z in
+    the closed form); None if any point reaches the floor (the free model then no longer
+    holds) or the result is not finite."""
+    a, s2, (paa, pas, pss) = fused
+    # Lower Cholesky factor of the 2x2 [[paa, pas], [pas, pss]] (PD from _fuse_elevation).
+    l00 = math.sqrt(max(paa, 0.0))
+    l10 = pas / l00 if l00 > 0.0 else 0.0
+    l11 = math.sqrt(max(pss - l10 * l10, 0.0))
+    k = math.sqrt(2.0)  # sqrt(n + kappa), n = 2, kappa = 0
+    da = [0.0, k * l00, 0.0, -k * l00, 0.0]
+    ds = [0.0, k * l10, k * l11, -k * l10, -k * l11]
+    a_pts = np.abs(np.array([a + d for d in da]))  # H = omega |a| >= 0
+    s_pts = np.array([s2 + d for d in ds])
+    r_arr, z_arr = catenary.locate_free(
+        a_pts, s_pts, np.asarray(length_m, dtype=np.float64), np.asarray(base_z_m, dtype=np.float64)
+    )
+    if floor_z_m != -math.inf:
+        vertex = z_arr - (np.hypot(a_pts, s_pts) - a_pts)
+        lowest = np.where(s_pts < 0.0, z_arr, np.where(s_pts > length_m, base_z_m, vertex))
+        if not bool(np.all(lowest > floor_z_m + 1e-6)):
+            return None
+    r_l: list[float] = r_arr.tolist()
+    z_l: list[float] = z_arr.tolist()
+    if not (_all_finite(r_l) and _all_finite(z_l)):
+        return None
+    r0, z0 = r_l[0], z_l[0]
+    w = 0.25  # 1 / (2 n)
+    var_r = w * sum((ri - r0) ** 2 for ri in r_l[1:])
+    cov_rz = w * sum((ri - r0) * (zi - z0) for ri, zi in zip(r_l[1:], z_l[1:], strict=True))
+    var_z = w * sum((zi - z0) ** 2 for zi in z_l[1:])
+    return r0, z0, var_r, cov_rz, var_z
 
 
 def localize(
@@ -471,6 +740,12 @@ def localize(
     base_world_m: ArrayLike,
     floor_z_m: float = -math.inf,
     plumb_k: float = PLUMB_K,
+    *,
+    azimuth: AzimuthMode = "auto",
+    exit_azimuth: AngleObservation | None = None,
+    exit_elevation: AngleObservation | None = None,
+    mocap_world_m: ArrayLike | None = None,
+    mocap_std_m: float = 0.002,
 ) -> PositionEstimate | None:
     """Like :func:`try_localize`, with None in place of a failure (never NaN).
 
@@ -483,12 +758,28 @@ def localize(
         base_world_m: Base exit position, world, m, shape (3,).
         floor_z_m: Floor height, m, or ``-inf``.
         plumb_k: See :data:`PLUMB_K`.
+        azimuth: See :func:`try_localize`.
+        exit_azimuth: See :func:`try_localize`.
+        exit_elevation: See :func:`try_localize`.
+        mocap_world_m: See :func:`try_localize`.
+        mocap_std_m: See :func:`try_localize`.
 
     Returns:
         The estimate, or None when there is no tension estimate or the math failed
         (:func:`try_localize` gives the reason).
     """
     out = try_localize(
-        tension_world_n, tension_cov_n2, weight_n_per_m, length_m, base_world_m, floor_z_m, plumb_k
+        tension_world_n,
+        tension_cov_n2,
+        weight_n_per_m,
+        length_m,
+        base_world_m,
+        floor_z_m,
+        plumb_k,
+        azimuth=azimuth,
+        exit_azimuth=exit_azimuth,
+        exit_elevation=exit_elevation,
+        mocap_world_m=mocap_world_m,
+        mocap_std_m=mocap_std_m,
     )
     return out if isinstance(out, PositionEstimate) else None

@@ -1,29 +1,39 @@
-"""Payloads of the public contract (``../shared/INTERFACE.md``) as frozen pydantic v2 models.
+"""Payloads of the public contract (``docs/contract.md``) as frozen pydantic v2 models.
 
 Inputs are validated strictly: finite floats only, exact vector lengths, ranges (thrust ≥ 0,
 length > 0, threshold > 0), no type coercion from strings or bools; unknown fields are
 ignored, as the contract says. Outputs serialise to compact UTF-8 JSON.
 
-Fields added beside the contract are marked "(added)"; they are documented in README.md.
+Fields added beside the contract are marked "(added)". These models are the one definition of
+each payload: the field tables of ``docs/contract.md`` are generated from them
+(``python scripts/contract.py``; ``tests/test_contract.py`` fails when they disagree) and so
+are the recorder's JSON schemas (:func:`groundstation.recording.schema_for_key`).
 """
 
 from __future__ import annotations
 
+import json
 import re
-from typing import Annotated, Any, Self
+from typing import Annotated, Any, Literal, Self
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 __all__ = [
     "DRONE_ID_RE",
+    "EVENT_KINDS",
     "KEY_KINDS",
     "Estimate",
+    "Event",
     "FollowCommand",
     "FollowInfo",
     "InvalidMessage",
+    "LandIn",
+    "MocapPoseIn",
     "Reel",
     "Setpoint",
+    "Status",
     "Stop",
+    "TakeoffIn",
     "Telemetry",
     "TetherParams",
     "Truth",
@@ -41,6 +51,7 @@ KEY_KINDS = (
     "cmd/setpoint",
     "cmd/stop",
     "truth",
+    "events",
 )
 _KEY_RE = re.compile(r"tether/([^/]+)/(" + "|".join(KEY_KINDS) + ")")
 
@@ -50,12 +61,26 @@ Vec4 = tuple[Finite, Finite, Finite, Finite]
 
 
 class InvalidMessage(ValueError):
-    """A payload or key that the contract does not allow; ``kind`` names the reason."""
+    """A payload or key that the contract does not allow; ``kind`` names the reason.
 
-    def __init__(self, kind: str, detail: str) -> None:
+    ``field`` names the first offending field (dotted, e.g. ``threshold_n`` or
+    ``accel_mps2.2``) where one is to blame; ``ignored`` lists unknown top-level fields the
+    payload carried (ignored, as the contract says, but often a typo worth telling).
+    """
+
+    def __init__(
+        self,
+        kind: str,
+        detail: str,
+        *,
+        field: str | None = None,
+        ignored: tuple[str, ...] = (),
+    ) -> None:
         super().__init__(f"{kind}: {detail}")
         self.kind = kind
         self.detail = detail
+        self.field = field
+        self.ignored = ignored
 
 
 def parse_key(key: str) -> tuple[str, str]:
@@ -77,33 +102,81 @@ def parse_key(key: str) -> tuple[str, str]:
 class _In(BaseModel):
     """Base of inbound payloads: strict, finite, frozen, unknown fields ignored."""
 
-    model_config = ConfigDict(frozen=True, strict=True, extra="ignore", allow_inf_nan=False)
+    model_config = ConfigDict(
+        frozen=True,
+        strict=True,
+        extra="ignore",
+        allow_inf_nan=False,
+        use_attribute_docstrings=True,
+    )
 
     @classmethod
     def parse(cls, payload: bytes) -> Self:
         """Validate a JSON payload.
 
         Raises:
-            InvalidMessage: ``not_json`` or ``invalid`` with pydantic's reasons.
+            InvalidMessage: ``not_json`` or ``invalid`` with pydantic's reasons, the first
+                offending field, and the unknown fields the payload carried.
         """
         try:
             return cls.model_validate_json(payload)
         except ValidationError as exc:
-            errors = exc.errors(include_url=False, include_input=False)
-            if errors and errors[0]["type"] in {"json_invalid", "json_type"}:
-                raise InvalidMessage("not_json", errors[0]["msg"]) from None
-            detail = "; ".join(
-                f"{'.'.join(str(p) for p in e['loc']) or '<root>'}: {e['msg']}" for e in errors[:4]
-            )
-            raise InvalidMessage("invalid", f"{cls.__name__}: {detail}") from None
+            raise _invalid(cls.__name__, exc, ignored=cls.unknown_fields(payload)) from None
+
+    @classmethod
+    def unknown_fields(cls, payload: bytes) -> tuple[str, ...]:
+        """Top-level keys of a JSON object payload that are not fields of this model.
+
+        The contract ignores them; a command that carries one was often mistyped
+        (``{"enable": true}``). Empty for anything that is not a JSON object.
+        """
+        try:
+            obj = json.loads(payload)
+        except ValueError:
+            return ()
+        if not isinstance(obj, dict):
+            return ()
+        return tuple(sorted(str(k) for k in obj if k not in cls.model_fields))[:8]
+
+
+def _invalid(model: str, exc: ValidationError, *, ignored: tuple[str, ...] = ()) -> InvalidMessage:
+    """The InvalidMessage for a failed validation: pydantic's reasons, the first offending
+    field, and the unknown fields the payload carried (``ignored``)."""
+    errors = exc.errors(include_url=False, include_input=False)
+    if errors and errors[0]["type"] in {"json_invalid", "json_type"}:
+        return InvalidMessage("not_json", errors[0]["msg"])
+    detail = "; ".join(
+        f"{'.'.join(str(p) for p in e['loc']) or '<root>'}: {e['msg']}" for e in errors[:4]
+    )
+    if ignored:
+        detail += f" (unknown fields ignored: {', '.join(map(repr, ignored))})"
+    field = ".".join(str(p) for p in errors[0]["loc"]) if errors else ""
+    return InvalidMessage("invalid", f"{model}: {detail}", field=field or None, ignored=ignored)
 
 
 class _Out(BaseModel):
-    model_config = ConfigDict(frozen=True, allow_inf_nan=False, extra="forbid")
+    model_config = ConfigDict(
+        frozen=True, allow_inf_nan=False, extra="forbid", use_attribute_docstrings=True
+    )
 
     def to_json(self) -> bytes:
         """Compact UTF-8 JSON."""
         return self.model_dump_json().encode()
+
+    @classmethod
+    def read(cls, payload: bytes) -> Self:
+        """(added) Validate a payload another process published (the dashboard reads
+        Estimates, Truth, status): strict and finite as an input, unknown fields ignored at
+        every level, as the contract says, so a newer publisher's additions do not break a
+        reader. What this process publishes is still checked with ``extra="forbid"``.
+
+        Raises:
+            InvalidMessage: ``not_json`` or ``invalid`` with pydantic's reasons.
+        """
+        try:
+            return cls.model_validate_json(payload, strict=True, extra="ignore")
+        except ValidationError as exc:
+            raise _invalid(cls.__name__, exc) from None
 
 
 class Telemetry(_In):
@@ -124,6 +197,7 @@ class Telemetry(_In):
     position_m: Vec3 | None = None
     """External (motion-capture) position, world frame, metres."""
     armed: bool = True
+    """Motors armed."""
     vbat_v: Finite | None = Field(default=None, gt=0.0)
     """(added) Battery voltage, volts, where the drone reports it (battery-aware thrust)."""
 
@@ -132,6 +206,7 @@ class Reel(_In):
     """Reel → ground station, ``tether/{drone}/reel``."""
 
     stamp_s: Finite
+    """Reel clock, seconds."""
     length_m: Finite = Field(gt=0.0)
     """Tether paid out from the base exit point to the drone, metres."""
     base_m: Vec3 | None = None
@@ -151,7 +226,10 @@ class FollowCommand(_In):
     """Anyone → ground station, ``tether/{drone}/follow``."""
 
     enabled: bool
+    """Follow mode on or off (required)."""
     threshold_n: Finite | None = Field(default=None, gt=0.0)
+    """Tension norm above which the drone follows the pull, newtons; absent keeps the current
+    setting. The service refuses values below ``[service] follow_threshold_min_n``."""
     land_below_m: Finite | None = None
     """Tug-to-land height, metres (world z); absent keeps the current setting."""
     land: bool | None = None
@@ -165,13 +243,20 @@ class TetherParams(_In):
     """
 
     weight_n_per_m: Finite | None = Field(default=None, gt=0.0)
+    """Tether weight per length ω, N/m."""
     length_m: Finite | None = Field(default=None, gt=0.0)
+    """Tether length paid out, metres (ignored while a reel reports one)."""
 
 
 class FollowInfo(_Out):
+    """The ``follow`` object of an Estimate (and of ``status``)."""
+
     enabled: bool
+    """Follow mode switched on by an operator."""
     active: bool
+    """The pull is above the threshold: the goal follows it."""
     threshold_n: float
+    """Threshold in use, newtons."""
     land_below_m: float | None = None
     """(added) Tug-to-land height, or None when tug-to-land is off."""
     landing_armed: bool = False
@@ -186,10 +271,13 @@ class Estimate(_Out):
     """Ground station → anyone, ``tether/{drone}/estimate``, one per accepted Telemetry."""
 
     seq: int
+    """The ``seq`` of the Telemetry it was computed from."""
     stamp_s: float
+    """That Telemetry's ``stamp_s``, seconds."""
     tension_n: tuple[float, float, float]
     """Force the tether applies to the drone, world frame, newtons (filtered)."""
     tension_std_n: tuple[float, float, float]
+    """Its standard deviation per axis, newtons."""
     horizontal_n: float
     """H = |tension_n[:2]|."""
     vertical_n: float
@@ -197,6 +285,7 @@ class Estimate(_Out):
     position_m: tuple[float, float, float] | None
     """Tether-based position, world frame; null while undetermined."""
     follow: FollowInfo
+    """Follow mode (see FollowInfo)."""
     position_std_m: tuple[float, float, float] | None = None
     """(added) Per-axis standard deviation of ``position_m``."""
     radial_m: float | None = None
@@ -204,11 +293,17 @@ class Estimate(_Out):
     radial_interval_m: tuple[float, float] | None = None
     """(added) Interval of the radial distance (wide when the tether rests slack on the floor)."""
     azimuth_determined: bool | None = None
-    """(added) False when H is within its noise (tether near plumb: azimuth unknown)."""
+    """(added) False when the azimuth's σ exceeds 1/3 rad (e.g. H within its noise, the
+    tether near plumb, with no other source)."""
+    azimuth_source: str | None = None
+    """(added) The most certain source of the azimuth: ``tension``, ``reel``, ``mocap``, or
+    ``none``; null without a position."""
     floor_contact: bool | None = None
     """(added) Part of the tether rests on the floor."""
     on_ground: bool = False
-    """(added) Drone disarmed or thrust below half its weight: no tension estimate."""
+    """(added) The floor carries the drone (disarmed, thrust below ``[filter]
+    ground_thrust_ratio`` of its weight, or spooling up before lift-off is seen; see
+    groundstation.contact): no tension estimate, ``tension_n`` zero."""
     converged: bool = False
     """(added) The filter has seen enough samples for its std to be meaningful."""
     length_m: float | None = None
@@ -224,30 +319,43 @@ class Setpoint(_Out):
     """Ground station → drone, ``tether/{drone}/cmd/setpoint``."""
 
     stamp_s: float
+    """The stamp of the Telemetry it answers, seconds."""
     position_m: tuple[float, float, float]
+    """The position the drone should hold, world frame, metres."""
 
 
 class Stop(_Out):
     """Ground station → drone, ``tether/{drone}/cmd/stop``: stop the motors now."""
 
     stamp_s: float
+    """Seconds (the Telemetry's stamp, or the sender's clock for an operator's Stop)."""
     reason: str
+    """Why (``tug-to-land``, ``operator``, ...)."""
 
 
 class Truth(_Out):
     """Simulator → anyone, ``tether/{drone}/truth`` (added beside the contract)."""
 
     stamp_s: float
+    """Simulation time, seconds."""
     position_m: tuple[float, float, float]
+    """True position, world frame, metres."""
     velocity_mps: tuple[float, float, float]
+    """True velocity, world frame, m/s."""
     tension_n: tuple[float, float, float]
-    """True force of the tether on the drone, world frame."""
+    """True force of the tether (plus any pull) on the drone, world frame, newtons."""
     length_m: float
+    """Tether paid out, metres."""
     base_m: tuple[float, float, float]
+    """Base exit point, world frame, metres."""
     floor_contact: bool
+    """Part of the tether rests on the floor."""
     taut: bool
+    """The tether is taut (straight)."""
     armed: bool
+    """Motors armed."""
     on_ground: bool
+    """The drone sits on the floor."""
     phase: str = ""
     """Scenario phase label."""
     profile: str | None = None
@@ -262,6 +370,41 @@ class Truth(_Out):
         return self.model_dump_json(exclude_none=True).encode()
 
 
+EVENT_KINDS = ("rejected", "warning", "follow", "params", "stop", "rearm")
+"""Kinds of :class:`Event`."""
+
+
+class Event(_Out):
+    """(added) Ground station → anyone, ``tether/{drone}/events``: what the service did with an
+    operator's input, and why; the operator action log.
+
+    One per action: a command refused (``rejected``, with the reason and the offending
+    field) or applied with a caveat (``warning``, e.g. unknown fields ignored), follow
+    switched on/off or re-tuned (``follow``), tether parameters changed (``params``), a Stop
+    seen or issued (``stop``), a re-arm requested (``rearm``, on the Crazyflie bridge's
+    ``tether/{drone}/cmd/rearm``). Not per sample: rejected telemetry or reel messages give one
+    event per drone and kind, then are only counted (``status``).
+    """
+
+    stamp_s: float
+    """When, UNIX time (the service's wall clock), seconds."""
+    kind: Literal["rejected", "warning", "follow", "params", "stop", "rearm"]
+    """What happened (see above)."""
+    input: str
+    """The key the action came in on, after ``tether/{drone}/``: ``follow``, ``params``,
+    ``cmd/stop``, ``cmd/rearm``, ``telemetry``, ``reel``; ``service`` for the service's own
+    decisions."""
+    who: str = "unknown"
+    """Who: the zenoh session id (hex) of the sender where the sample carries it (groundstation
+    tools attach it), the service's own id for its own actions, else ``unknown``."""
+    reason: str = ""
+    """Why, in words (the rejection reason, the Stop's reason, ...)."""
+    field: str | None = None
+    """The offending field of a rejected input (dotted path), or None."""
+    changes: dict[str, float | bool | str | None] = Field(default_factory=dict)
+    """What changed, with the new values (``{"enabled": true, "threshold_n": 0.15}``)."""
+
+
 class StopIn(_In):
     """A Stop read back from the bus (simulator side)."""
 
@@ -274,3 +417,89 @@ class SetpointIn(_In):
 
     stamp_s: Finite
     position_m: Vec3
+
+
+class Status(_Out):
+    """(added) Ground station → anyone, the queryable ``tether/{drone}/status`` (zenoh ``get``):
+    health of one drone. Every field but ``drone`` may be absent (older or newer services)."""
+
+    drone: str
+    """The drone id."""
+    stale: bool | None = None
+    """No telemetry for longer than ``[service] stale_after_s`` (follow mode is then off)."""
+    telemetry_hz: float | None = None
+    """Accepted telemetry per second (2 s window)."""
+    estimate_hz: float | None = None
+    """Estimates published per second (2 s window)."""
+    last_seen_age_s: float | None = None
+    """Seconds since the last telemetry; None: never."""
+    received: int | None = None
+    """Telemetry messages received (valid JSON of the right shape)."""
+    accepted: int | None = None
+    """Telemetry messages accepted (in order, a sound observation)."""
+    estimates: int | None = None
+    """Estimates published."""
+    setpoints: int | None = None
+    """Setpoints published."""
+    stops: int | None = None
+    """Stops published by the service (tug-to-land)."""
+    seq_gaps: int | None = None
+    """Telemetry messages missing from the ``seq`` sequence."""
+    drops: dict[str, int] | None = None
+    """Rejected inputs per kind (``invalid``, ``not_json``, ``seq_backwards``,
+    ``follow_refused``, ...)."""
+    invalid: int | None = None
+    """Sum of ``drops`` except ``queue_overflow``."""
+    queue_overflow: int | None = None
+    """Inputs dropped because the processing queue was full."""
+    filter: dict[str, Any] | None = None
+    """Filter state (``initialized``, ``change_detections``; the measured observation noise
+    ``noise_std_n`` and ``noise_autocorrelation`` per world axis, ``time_constant_s``)."""
+    follow: FollowInfo | None = None
+    """Follow mode, as in the Estimate."""
+    contact: dict[str, Any] | None = None
+    """Ground/air state: ``on_ground`` and the ``reason`` that decided it (``disarmed``,
+    ``low_thrust``, ``resting``, ``mocap_height``, ``climbing``, ``push_free``, ``air``)."""
+    length_m: float | None = None
+    """Tether length in use, metres."""
+    length_source: str | None = None
+    """``config``, ``reel`` or ``operator``."""
+    base_m: tuple[float, float, float] | None = None
+    """Base exit point in use, world frame, metres."""
+    weight_n_per_m: float | None = None
+    """Tether weight per length ω in use, N/m."""
+    calibration: str | None = None
+    """(added) Which ``[calibration]`` the observation applies (its ``source``, ``config`` for
+    unlabelled values) or ``none``, as in the Estimate."""
+    service: str | None = None
+    """The answering service instance (liveliness token ``groundstation/service/{instance}``)."""
+    peers: int | None = None
+    """Zenoh peers and routers the service's session is connected to (0: nobody can reach it;
+    None on an in-memory bus)."""
+    events_suppressed: int | None = None
+    """Events for this drone not published because of the per-drone cap (a flood)."""
+
+
+class MocapPoseIn(_In):
+    """(added) Motion capture → Crazyflie bridge, on ``[crazyflie] mocap_key``."""
+
+    position_m: Vec3
+    """World frame (the contract's), metres."""
+    quat_wxyz: Vec4 | None = None
+    """Body → world, scalar first (needed with ``attitude_source = "mocap"``)."""
+
+
+class TakeoffIn(_In):
+    """(added) Operator → Crazyflie bridge, ``tether/{drone}/cmd/takeoff``: climb straight up."""
+
+    height_m: Finite = Field(gt=0.0, le=3.0)
+    """Target height, world z, metres."""
+    speed_mps: Finite = Field(default=0.25, gt=0.0, le=1.0)
+    """Climb speed, m/s."""
+
+
+class LandIn(_In):
+    """(added) Operator → Crazyflie bridge, ``tether/{drone}/cmd/land``: down, motors off."""
+
+    speed_mps: Finite = Field(default=0.25, gt=0.0, le=1.0)
+    """Descent speed, m/s."""

@@ -22,18 +22,21 @@ from typing import Any
 
 import numpy as np
 
+from groundstation import contact as contact_mod
 from groundstation import follow as follow_mod
 from groundstation.bus import Sample
 from groundstation.config import CalibrationSection, DroneParams, Settings
-from groundstation.localization import PositionEstimate, localize
+from groundstation.localization import AngleObservation, PositionEstimate, localize
 from groundstation.messages import (
     Estimate,
+    Event,
     FollowCommand,
     FollowInfo,
     InvalidMessage,
     Reel,
     Setpoint,
     Stop,
+    StopIn,
     Telemetry,
     TetherParams,
     parse_key,
@@ -64,6 +67,8 @@ _KEY_CACHE_SIZE = 4 * MAX_DRONES
 """Parsed keys remembered (each drone has four input kinds)."""
 _MAX_GAP_S = 1.0
 """A telemetry gap longer than this restarts the filter (the tension may have changed)."""
+_COMMAND_KINDS = frozenset({"follow", "params"})
+"""Inputs from operators: every rejection of one is told on ``tether/{drone}/events``."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -72,8 +77,12 @@ class Parsed:
 
     drone: str
     kind: str
-    message: Telemetry | Reel | FollowCommand | TetherParams
+    message: Telemetry | Reel | FollowCommand | TetherParams | StopIn
     received_s: float
+    source: str | None = None
+    """The sender's zenoh session id, where the sample carried it."""
+    ignored: tuple[str, ...] = ()
+    """Unknown fields of a follow/params command (ignored, but told to the sender)."""
 
 
 class _Rate:
@@ -108,6 +117,18 @@ class DroneRuntime:
     base_world_m: np.ndarray
     weight_n_per_m: float
     length_source: str = "config"
+    contact_params: contact_mod.ContactParams = field(default_factory=contact_mod.ContactParams)
+    contact: contact_mod.ContactState = field(default_factory=contact_mod.ContactState)
+    """Ground/air state (groundstation.contact): on the floor no tension is published."""
+    rested: bool = False
+    """Seen certainly on the ground (disarmed, low thrust) since the last lift-off: the filter
+    then restarts from the lift-off prior."""
+    exit_azimuth: AngleObservation | None = None
+    """The reel's last exit azimuth (with its σ) and when it was received."""
+    exit_azimuth_received_s: float = -math.inf
+    exit_elevation: AngleObservation | None = None
+    """The reel's last exit elevation (with its σ) and when it was received."""
+    exit_elevation_received_s: float = -math.inf
     last_seq: int | None = None
     last_stamp_s: float | None = None
     last_seen_s: float | None = None
@@ -163,14 +184,30 @@ class Pipeline:
         settings: the root configuration.
         on_drop: called as ``on_drop(drone_or_None, kind, detail)`` for every rejected
             input (the service logs the first of each kind).
+        on_event: called as ``on_event(drone, event)`` with each
+            :class:`~groundstation.messages.Event` for ``tether/{drone}/events`` (the operator
+            action log): every rejected or applied command, follow switched off by staleness,
+            a Stop issued; for rejected telemetry/reel only the first per drone and kind.
+            Called from :meth:`validate`'s thread for rejections at validation, else from
+            :meth:`process`'s / :meth:`tick`'s.
+        wall_clock: UNIX seconds for the events' ``stamp_s``; None stamps them with the
+            receive clock ``now_s`` (offline runs).
     """
 
     def __init__(
         self,
         settings: Settings,
         on_drop: Any = None,
+        *,
+        on_event: Any = None,
+        wall_clock: Any = None,
     ) -> None:
         self.settings = settings
+        self._on_event = on_event
+        self._wall_clock = wall_clock
+        self.self_id = "service"
+        """``who`` of the events about the service's own actions (the service sets its id)."""
+        self._told: set[tuple[str, str]] = set()  # (drone, kind) of rejections told once
         self.drones: dict[str, DroneRuntime] = {}
         self.global_drops: Counter[str] = Counter()
         self.last_received_s: dict[str, float] = {}
@@ -208,12 +245,53 @@ class Pipeline:
             message = model.parse(sample.payload)
         except InvalidMessage as exc:
             self.count_drop(drone, exc.kind, exc.detail)
+            if drone is not None and self._on_event is not None:
+                self._tell_rejection(drone, sample, exc, now_s)
             return None
         if kind == "telemetry" and (
             drone in self.last_received_s or len(self.last_received_s) < MAX_DRONES
         ):
             self.last_received_s[drone] = now_s
-        return Parsed(drone, kind, message, now_s)
+        ignored = model.unknown_fields(sample.payload) if kind in _COMMAND_KINDS else ()
+        return Parsed(drone, kind, message, now_s, sample.source, ignored)
+
+    def _tell_rejection(
+        self, drone: str, sample: Sample, exc: InvalidMessage, now_s: float
+    ) -> None:
+        kind = sample.key[len("tether/") + len(drone) + 1 :]
+        if kind not in _COMMAND_KINDS:
+            with self._lock:
+                if (drone, exc.kind) in self._told or len(self._told) >= 16 * MAX_DRONES:
+                    return
+                self._told.add((drone, exc.kind))
+        reason = exc.detail if kind in _COMMAND_KINDS else f"{exc.detail} (further ones counted)"
+        self._emit(drone, "rejected", kind, now_s, sample.source, reason, field=exc.field)
+
+    def _emit(
+        self,
+        drone: str,
+        kind: str,
+        input_kind: str,
+        now_s: float,
+        who: str | None,
+        reason: str,
+        *,
+        field: str | None = None,
+        changes: dict[str, Any] | None = None,
+    ) -> None:
+        """Hand one operator-log Event to ``on_event`` (nothing when there is no listener)."""
+        if self._on_event is None:
+            return
+        event = Event(
+            stamp_s=self._wall_clock() if self._wall_clock is not None else now_s,
+            kind=kind,
+            input=input_kind,
+            who=who or "unknown",
+            reason=reason[:500],
+            field=field,
+            changes=changes or {},
+        )
+        self._on_event(drone, event)
 
     def count_drop(self, drone: str | None, kind: str, detail: str) -> None:
         """Count a rejected input per drone and kind (thread-safe) and report it."""
@@ -251,20 +329,125 @@ class Pipeline:
             runtime.length_source = "reel"
             if msg.base_m is not None:
                 runtime.base_world_m = np.array(msg.base_m, dtype=float)
+            loc = self.settings.localization
+            if msg.exit_azimuth_rad is not None:
+                runtime.exit_azimuth = AngleObservation(
+                    msg.exit_azimuth_rad, msg.exit_azimuth_std_rad or loc.exit_azimuth_std_rad
+                )
+                runtime.exit_azimuth_received_s = parsed.received_s
+            if msg.exit_elevation_rad is not None:
+                runtime.exit_elevation = AngleObservation(
+                    msg.exit_elevation_rad,
+                    msg.exit_elevation_std_rad or loc.exit_elevation_std_rad,
+                )
+                runtime.exit_elevation_received_s = parsed.received_s
             return []
         if isinstance(msg, TetherParams):
+            changes: dict[str, Any] = {}
             if msg.weight_n_per_m is not None:
                 runtime.weight_n_per_m = msg.weight_n_per_m
+                changes["weight_n_per_m"] = msg.weight_n_per_m
             if msg.length_m is not None:
                 if runtime.length_source == "reel":
                     self.count_drop(runtime.drone, "length_from_reel", "a reel reports length")
+                    self._emit(
+                        runtime.drone,
+                        "warning",
+                        "params",
+                        now_s,
+                        parsed.source,
+                        f"length_m {msg.length_m} ignored: a reel reports the length "
+                        f"({runtime.length_m:.3f} m)",
+                        field="length_m",
+                    )
                 else:
                     runtime.length_m = msg.length_m
                     runtime.length_source = "operator"
+                    changes["length_m"] = msg.length_m
+            self._tell_ignored(runtime.drone, parsed, now_s)
+            if changes:
+                self._emit(
+                    runtime.drone,
+                    "params",
+                    "params",
+                    now_s,
+                    parsed.source,
+                    "applied",
+                    changes=changes,
+                )
+            return []
+        if isinstance(msg, StopIn):
+            self._seen_stop(runtime, msg, parsed, now_s)
             return []
         assert isinstance(msg, FollowCommand)
-        self._follow_command(runtime, msg)
+        self._follow_command(runtime, msg, parsed, now_s)
         return []
+
+    def _seen_stop(self, runtime: DroneRuntime, stop: StopIn, parsed: Parsed, now_s: float) -> None:
+        """Someone else's Stop on ``cmd/stop``: switch follow off, log who stopped the drone.
+
+        Follow must not be on when the drone flies again after a Stop (re-armed, taken off):
+        the operator enables it again, as after a stale drone.
+        """
+        changes: dict[str, Any] = {}
+        if runtime.follow_state.enabled:
+            state = follow_mod.set_enabled(runtime.follow_state, False)
+            runtime.follow_state = replace(state, reason=f"Stop ({stop.reason}): follow off")
+            changes["enabled"] = False
+        self._emit(
+            runtime.drone, "stop", "cmd/stop", now_s, parsed.source, stop.reason, changes=changes
+        )
+
+    def _tell_ignored(self, drone: str, parsed: Parsed, now_s: float) -> None:
+        if parsed.ignored:
+            model = type(parsed.message)
+            self._emit(
+                drone,
+                "warning",
+                parsed.kind,
+                now_s,
+                parsed.source,
+                f"unknown fields ignored: {', '.join(map(repr, parsed.ignored))} "
+                f"(a {model.__name__} has {', '.join(model.model_fields)})",
+                field=parsed.ignored[0],
+            )
+
+    def _refuse_follow(
+        self, runtime: DroneRuntime, cmd: FollowCommand, now_s: float
+    ) -> tuple[str, str] | None:
+        """Why a FollowCommand must not be applied, as ``(field, reason)``, or None.
+
+        Checked at the command boundary, before :func:`follow.set_enabled`:
+
+        - a threshold below ``[service] follow_threshold_min_n``;
+        - enabling follow on a drone that is stale or has never sent telemetry (the README's
+          rule: a stale drone drops follow and the operator enables it again; an unknown drone
+          is the most stale of all, and would otherwise fly off in follow mode the moment it
+          starts).
+
+        That a threshold is not below the tether's own pull is :mod:`groundstation.follow`'s
+        business: the threshold applies to the pull beyond the tether's own tension there.
+        """
+        floor_n = self.settings.service.follow_threshold_min_n
+        if cmd.threshold_n is not None and cmd.threshold_n < floor_n:
+            return "threshold_n", (
+                f"threshold_n {cmd.threshold_n:g} N is below the service's floor {floor_n:g} N "
+                "([service] follow_threshold_min_n): that low a threshold follows the sensor "
+                "noise and any error in the tether's own tension; not applied"
+            )
+        if not cmd.enabled:
+            return None
+        if runtime.last_seen_s is None:
+            return "enabled", (
+                f"{runtime.drone} has sent no telemetry: follow stays off (enable it once the "
+                "drone is flying); not applied"
+            )
+        if runtime.stale:
+            return "enabled", (
+                f"{runtime.drone} is stale (silent for {now_s - runtime.last_seen_s:.1f} s): "
+                "follow stays off until it is heard again; not applied"
+            )
+        return None
 
     def tick(self, now_s: float) -> list[Sample]:
         """Mark drones silent for ``stale_after_s`` as stale; disengage their follow mode."""
@@ -275,7 +458,19 @@ class Pipeline:
             heard_s = max(runtime.last_seen_s, self.last_received_s.get(runtime.drone, -math.inf))
             if now_s - heard_s > stale_after:
                 runtime.stale = True
+                was_on = runtime.follow_state.enabled
                 runtime.follow_state = follow_mod.mark_stale(runtime.follow_state)
+                if was_on:
+                    self._emit(
+                        runtime.drone,
+                        "follow",
+                        "service",
+                        now_s,
+                        self.self_id,
+                        f"{runtime.drone} silent for {now_s - heard_s:.2f} s: follow off; "
+                        "enable it again once the drone is heard",
+                        changes={"enabled": False},
+                    )
         return []
 
     # ---------------------------------------------------------------- internals
@@ -301,12 +496,40 @@ class Pipeline:
             weight_n_per_m=params.tether.weight_n_per_m,
             calibration=calibration,
             calibration_source=calibration_source,
+            contact_params=contact_mod.ContactParams(
+                ground_thrust_ratio=params.filter.ground_thrust_ratio
+            ),
         )
         with self._lock:
             self.drones[drone] = runtime
         return runtime
 
-    def _follow_command(self, runtime: DroneRuntime, cmd: FollowCommand) -> None:
+    def _follow_command(
+        self, runtime: DroneRuntime, cmd: FollowCommand, parsed: Parsed, now_s: float
+    ) -> None:
+        self._tell_ignored(runtime.drone, parsed, now_s)
+        refusal = self._refuse_follow(runtime, cmd, now_s)
+        if refusal is not None:
+            field, reason = refusal
+            self.count_drop(runtime.drone, "follow_refused", reason)
+            self._emit(
+                runtime.drone, "rejected", "follow", now_s, parsed.source, reason, field=field
+            )
+            return
+        before = self._follow_info(runtime)
+        self._apply_follow(runtime, cmd)
+        after = self._follow_info(runtime)
+        changes: dict[str, Any] = {"enabled": after.enabled}
+        for name in ("threshold_n", "land_below_m"):
+            if getattr(after, name) != getattr(before, name):
+                changes[name] = getattr(after, name)
+        if before.enabled != after.enabled:
+            reason = "follow on" if after.enabled else "follow off"
+        else:
+            reason = "re-tuned" if len(changes) > 1 else "no change"
+        self._emit(runtime.drone, "follow", "follow", now_s, parsed.source, reason, changes=changes)
+
+    def _apply_follow(self, runtime: DroneRuntime, cmd: FollowCommand) -> None:
         fp = runtime.follow_params
         if cmd.threshold_n is not None:
             fp = replace(fp, threshold_n=cmd.threshold_n)
@@ -333,6 +556,7 @@ class Pipeline:
                 armed=msg.armed,
                 calibration=runtime.calibration,
                 vbat_v=msg.vbat_v,
+                ground_thrust_ratio=runtime.contact_params.ground_thrust_ratio,
             )
         except DegenerateQuaternionError as exc:
             self.count_drop(runtime.drone, "bad_quaternion", str(exc))
@@ -371,16 +595,43 @@ class Pipeline:
         runtime.accepted += 1
         runtime.telemetry_rate.add(now_s)
 
+        # Ground or air, with hysteresis: between ground_thrust_ratio and the weight the
+        # floor may still carry the drone (its push is no tension) until lift-off is seen.
+        runtime.contact = contact_mod.contact_step(
+            runtime.contact,
+            runtime.contact_params,
+            dt_s=dt_s,
+            armed=msg.armed,
+            thrust_n=obs.thrust_n,  # calibrated
+            mass_kg=runtime.params.drone.mass_kg,
+            vertical_accel_mps2=contact_mod.vertical_accel_mps2(msg.accel_mps2, msg.quat_wxyz),
+            upward_force_n=float(obs.tension_world_n[2])
+            if obs.tension_world_n is not None
+            else None,
+            height_m=msg.position_m[2] if msg.position_m is not None else None,
+            floor_z_m=runtime.params.base.floor_z_m,
+        )
+        on_ground = runtime.contact.on_ground or obs.tension_world_n is None
+
         position: PositionEstimate | None = None
         tension: Sequence[float] = _ZEROS3
         std: Sequence[float] = _ZEROS3
         converged = False
-        if obs.tension_world_n is None:
+        if on_ground or obs.tension_world_n is None:
             # On the ground the floor carries the drone: no tension estimate. The filter
             # restarts at lift-off rather than from the floor's reaction, from the prior
-            # that a tether resting on the floor pulls on the drone with next to nothing.
-            runtime.filter.reset(prior_world_n=(0.0, 0.0, 0.0), prior_std_n=LIFTOFF_PRIOR_STD_N)
+            # that a tether resting on the floor pulls on the drone with next to nothing:
+            # if the drone was seen resting (disarmed or below the thrust ratio). Found in
+            # the air without that (a service started mid-flight) it starts from its first
+            # observation instead.
+            if runtime.contact.reason in ("disarmed", "low_thrust"):
+                runtime.rested = True
+            if runtime.rested:
+                runtime.filter.reset(prior_world_n=(0.0, 0.0, 0.0), prior_std_n=LIFTOFF_PRIOR_STD_N)
+            else:
+                runtime.filter.reset()
         else:
+            runtime.rested = False
             est = runtime.filter.update(
                 obs.tension_world_n, dt_s, thrust_axis_world=obs.thrust_axis_world
             )
@@ -392,6 +643,9 @@ class Pipeline:
             std = est.std_n.tolist()
             converged = est.converged
             if converged:
+                # Exit angles only while fresh: the reel reports at its own rate.
+                loc = self.settings.localization
+                fresh_s = now_s - loc.reel_stale_after_s
                 position = localize(
                     est.tension_world_n,
                     est.cov_n2,
@@ -399,6 +653,15 @@ class Pipeline:
                     runtime.length_m,
                     runtime.base_world_m,
                     runtime.params.base.floor_z_m,
+                    azimuth=loc.azimuth,
+                    exit_azimuth=runtime.exit_azimuth
+                    if runtime.exit_azimuth_received_s >= fresh_s
+                    else None,
+                    exit_elevation=runtime.exit_elevation
+                    if loc.elevation and runtime.exit_elevation_received_s >= fresh_s
+                    else None,
+                    mocap_world_m=msg.position_m,
+                    mocap_std_m=loc.mocap_std_m,
                 )
 
         follow_position = (
@@ -417,10 +680,12 @@ class Pipeline:
             floor_z_m=runtime.params.base.floor_z_m,
             tension_world_n=tension if converged else None,
             position_is_external=msg.position_m is not None,
+            weight_n_per_m=runtime.weight_n_per_m,
+            on_ground=on_ground,
         )
         runtime.follow_state = decision.state
         out: list[Sample] = []
-        estimate = self._estimate(runtime, msg, tension, std, position, obs.on_ground, converged)
+        estimate = self._estimate(runtime, msg, tension, std, position, on_ground, converged)
         if estimate is not None:
             runtime.last_estimate = estimate
             runtime.estimates += 1
@@ -434,6 +699,7 @@ class Pipeline:
             runtime.stops += 1
             stop = Stop(stamp_s=msg.stamp_s, reason=decision.stop_reason)
             out.append(Sample(f"tether/{runtime.drone}/cmd/stop", stop.to_json()))
+            self._emit(runtime.drone, "stop", "service", now_s, self.self_id, decision.stop_reason)
         return out
 
     def _estimate(
@@ -474,6 +740,7 @@ class Pipeline:
             radial_m=float(position.radial_m) if position is not None else None,
             radial_interval_m=(float(lo_hi[0]), float(lo_hi[1])) if lo_hi is not None else None,
             azimuth_determined=position.azimuth_determined if position is not None else None,
+            azimuth_source=position.azimuth_source if position is not None else None,
             floor_contact=bool(position.floor_contact) if position is not None else None,
             on_ground=on_ground,
             converged=converged,
@@ -537,6 +804,7 @@ class Pipeline:
                 **_noise_status(runtime.filter),
             },
             "follow": self._follow_info(runtime).model_dump(),
+            "contact": {"on_ground": runtime.contact.on_ground, "reason": runtime.contact.reason},
             "length_m": runtime.length_m,
             "length_source": runtime.length_source,
             "base_m": list(map(float, runtime.base_world_m)),

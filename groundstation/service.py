@@ -4,6 +4,13 @@ Bus callbacks only validate and hand over through a bounded queue (an overflow i
 as the drop kind ``queue_overflow``); estimation runs on the service's own worker thread.
 Health per drone is answered by the queryable ``tether/{drone}/status``; the service holds
 the liveliness token ``groundstation/service/{instance}``.
+
+The operator action log: every command the service refuses or applies (follow on/off,
+thresholds, tether parameters), follow switched off by a silent drone, and every Stop (its
+own and anyone's on ``tether/{drone}/cmd/stop``) is one line in the log and one
+:class:`~groundstation.messages.Event` on ``tether/{drone}/events``, which the recorder
+records with the rest of ``tether/**``. Events are capped per drone
+(``EVENTS_PER_S``) so a flood of bad commands cannot flood the bus.
 """
 
 from __future__ import annotations
@@ -14,17 +21,30 @@ import queue
 import threading
 import time
 import uuid
+from collections import deque
 from collections.abc import Callable
 from typing import Any
 
-from groundstation.bus import Bus, Sample, Subscription, keyexpr_matches
+from groundstation.bus import (
+    Bus,
+    PeerWatch,
+    Sample,
+    Subscription,
+    describe_endpoints,
+    keyexpr_matches,
+)
 from groundstation.config import Settings
+from groundstation.messages import Event, InvalidMessage, StopIn
 from groundstation.pipeline import Parsed, Pipeline
 
-__all__ = ["Service"]
+__all__ = ["EVENTS_PER_S", "Service"]
 
 _log = logging.getLogger("groundstation.service")
+_actions = logging.getLogger("groundstation.actions")
 _INPUT_KINDS = ("telemetry", "reel", "follow", "params")
+EVENTS_PER_S = 20.0
+"""Events published per drone and second at most (a burst of twice that is allowed); the
+rest are counted in ``status`` as ``events_suppressed``."""
 
 
 class Service:
@@ -34,6 +54,8 @@ class Service:
         settings: the root configuration.
         bus: the bus to serve on (the service does not close it).
         clock: monotonic seconds (a parameter so tests can drive time).
+        instance: the instance id (default: random).
+        alone_ok: no peer is normal (``demo``): "no peer / no router" is only a debug line.
     """
 
     def __init__(
@@ -43,12 +65,35 @@ class Service:
         *,
         clock: Callable[[], float] = time.monotonic,
         instance: str | None = None,
+        alone_ok: bool = False,
     ) -> None:
         self.settings = settings
         self.bus = bus
         self.clock = clock
         self.instance = instance or uuid.uuid4().hex[:12]
-        self.pipeline = Pipeline(settings, on_drop=self._on_drop)
+        self.pipeline = Pipeline(
+            settings, on_drop=self._on_drop, on_event=self._on_event, wall_clock=time.time
+        )
+        zid = getattr(bus, "zid", None)
+        self.pipeline.self_id = zid if isinstance(zid, str) else f"service {self.instance}"
+        self._event_lock = threading.Lock()
+        self._event_budget: dict[str, tuple[float, float]] = {}  # drone: (tokens, at_s)
+        self.events_suppressed: dict[str, int] = {}
+        self.events = 0
+        self._own_stops: deque[bytes] = deque(maxlen=64)
+        count = getattr(bus, "peer_count", None)
+        z = settings.zenoh
+        self.peer_watch = (
+            PeerWatch(
+                count,
+                describe_endpoints(z.mode, z.connect, z.listen),
+                "groundstation serve",
+                _log,
+                alone_ok=alone_ok,
+            )
+            if callable(count)
+            else None
+        )
         self._queue: queue.Queue[Parsed] = queue.Queue(maxsize=settings.service.queue_size)
         self._lock = threading.Lock()  # pipeline state: worker vs status queries
         self._stop = threading.Event()
@@ -73,6 +118,8 @@ class Service:
         self._worker.start()
         for kind in _INPUT_KINDS:
             self._handles.append(self.bus.subscribe(f"tether/{drones}/{kind}", self._on_sample))
+        self._handles.append(self.bus.subscribe(f"tether/{drones}/cmd/stop", self._on_stop))
+        self._handles.append(self.bus.subscribe(f"tether/{drones}/cmd/rearm", self._on_rearm))
         self._handles.append(self.bus.queryable(f"tether/{drones}/status", self._on_status))
         self._handles.append(self.bus.liveliness_token(f"groundstation/service/{self.instance}"))
         _log.info(
@@ -125,6 +172,8 @@ class Service:
                 status = self.pipeline.status(drone, now_s)
                 if status is not None:
                     status["service"] = self.instance
+                    status["peers"] = None if self.peer_watch is None else self.peer_watch.peers
+                    status["events_suppressed"] = self.events_suppressed.get(drone, 0)
                     replies.append(Sample(key, json.dumps(status).encode()))
         return replies
 
@@ -138,6 +187,68 @@ class Service:
             drone or "?",
             detail,
         )
+
+    def _on_stop(self, sample: Sample) -> None:
+        # Anyone's Stop (ours were logged when issued): the worker switches follow off for
+        # that drone and logs it. A Stop nobody can read stops no drone either: only told.
+        with self._event_lock:
+            if sample.payload in self._own_stops:
+                return
+        drone = sample.key.split("/")[1]
+        try:
+            stop = StopIn.parse(sample.payload)
+        except InvalidMessage as exc:
+            reason = f"a Stop nobody can read ({exc.detail}): the drone ignores it too"
+            self._tell(drone, "stop", "cmd/stop", sample.source, reason)
+            return
+        parsed = Parsed(drone, "cmd/stop", stop, self.clock(), sample.source)
+        try:
+            self._queue.put_nowait(parsed)
+        except queue.Full:
+            self.pipeline.count_drop(drone, "queue_overflow", "processing queue full")
+
+    def _on_rearm(self, sample: Sample) -> None:
+        # ``cmd/rearm`` (the Crazyflie bridge's, added) lifts a drone's stop latch: logged.
+        drone = sample.key.split("/")[1]
+        self._tell(drone, "rearm", "cmd/rearm", sample.source, "re-arm requested")
+
+    def _tell(self, drone: str, kind: str, input_kind: str, who: str | None, reason: str) -> None:
+        event = Event(
+            stamp_s=time.time(),
+            kind=kind,
+            input=input_kind,
+            who=who or "unknown",
+            reason=reason[:500],
+        )
+        self._on_event(drone, event)
+
+    def _on_event(self, drone: str, event: Event) -> None:
+        """Log one action line and publish the Event (any thread; capped per drone)."""
+        now_s = self.clock()
+        with self._event_lock:
+            tokens, at_s = self._event_budget.get(drone, (2 * EVENTS_PER_S, now_s))
+            tokens = min(2 * EVENTS_PER_S, tokens + (now_s - at_s) * EVENTS_PER_S)
+            if tokens < 1.0:
+                self._event_budget[drone] = (tokens, now_s)
+                self.events_suppressed[drone] = self.events_suppressed.get(drone, 0) + 1
+                return
+            if drone not in self._event_budget and len(self._event_budget) >= 1024:
+                return  # bounded memory against a flood of drone ids
+            self._event_budget[drone] = (tokens - 1.0, now_s)
+            self.events += 1
+        level = logging.INFO if event.kind in ("follow", "params") else logging.WARNING
+        _actions.log(
+            level,
+            "%s %s on %s from %s: %s%s%s",
+            drone,
+            event.kind,
+            event.input,
+            event.who,
+            event.reason,
+            f" [field {event.field}]" if event.field else "",
+            f" {event.changes}" if event.changes else "",
+        )
+        self.bus.publish(f"tether/{drone}/events", event.to_json())
 
     # ------------------------------------------------------------------ worker
 
@@ -153,6 +264,8 @@ class Service:
                 self._step(parsed)
             now_s = self.clock()
             if now_s >= next_tick:
+                if self.peer_watch is not None:
+                    self.peer_watch.poll(now_s)
                 with self._lock:
                     outputs = self.pipeline.tick(now_s)
                 self._publish(outputs)
@@ -172,5 +285,8 @@ class Service:
 
     def _publish(self, outputs: list[Sample]) -> None:
         for out in outputs:
+            if out.key.endswith("/cmd/stop"):
+                with self._event_lock:
+                    self._own_stops.append(out.payload)
             self.bus.publish(out.key, out.payload)
             self.published += 1

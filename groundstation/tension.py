@@ -295,6 +295,7 @@ def observe_tension(
     gravity_mps2: float = GRAVITY_MPS2,
     calibration: ObservationCalibration | None = None,
     vbat_v: float | None = None,
+    ground_thrust_ratio: float = 0.5,
 ) -> TensionObservation:
     """Raw tension observation from one IMU + thrust sample (``eq:NE_tether``).
 
@@ -312,7 +313,9 @@ def observe_tension(
 
     On the ground the floor's reaction (about the weight, ~0.3 N) would show up as
     upward "tension". So a sample from a disarmed drone, or with (calibrated) thrust below
-    half the weight ``m * gravity / 2``, yields no tension, flagged with the reason.
+    ``ground_thrust_ratio`` of the weight (``[filter] ground_thrust_ratio``, 0.5), yields
+    no tension, flagged with the reason. Between that and the weight the floor may still
+    carry the drone: :mod:`groundstation.contact` decides that, with hysteresis.
 
     Args:
         accel_body_mps2: IMU specific force in the body frame, m/s^2, shape (3,)
@@ -325,6 +328,8 @@ def observe_tension(
         calibration: Sensor corrections, or None for none.
         vbat_v: Battery voltage of the sample, V (> 0), or None; used only by the
             calibration's battery slope.
+        ground_thrust_ratio: Below this fraction of the weight the floor carries the
+            drone, in (0, 1).
 
     Returns:
         The observation (tension in the world frame, N) or the ground-contact reason.
@@ -373,7 +378,7 @@ def observe_tension(
         )
     if not armed:
         return TensionObservation(None, True, "disarmed", axis_world, thrust_n)
-    if thrust_n < 0.5 * mass_kg * gravity_mps2:
+    if thrust_n < ground_thrust_ratio * mass_kg * gravity_mps2:
         return TensionObservation(None, True, "low_thrust", axis_world, thrust_n)
     # T = R (m f - b F): one rotation instead of two.
     fx = mass_kg * accel[0] - bx * thrust_n

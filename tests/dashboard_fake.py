@@ -13,6 +13,7 @@ import json
 import math
 import threading
 import time
+from collections.abc import Collection
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -50,6 +51,7 @@ class _DroneState:
     weight_n_per_m: float = 0.05
     length_m: float = 1.6
     seq: int = 0
+    armed: bool = True
 
 
 class FakeService:
@@ -61,12 +63,19 @@ class FakeService:
         drones: tuple[str, ...] = ("cf1",),
         *,
         rate_hz: float = 50.0,
-        mocap: bool = True,
+        mocap: bool | Collection[str] = True,
+        obey_stop: bool = True,
+        peers: int | None = 1,
     ) -> None:
         self.bus = bus
         self.drones = drones
         self.rate_hz = rate_hz
-        self.mocap = mocap
+        self.mocap = set(drones) if mocap is True else set() if mocap is False else set(mocap)
+        """Drones whose telemetry carries a motion-capture position."""
+        self.obey_stop = obey_stop
+        """A Stop disarms the drone (its telemetry then says armed: false, thrust 0)."""
+        self.peers = peers
+        """The status' ``peers`` (None: not reported, as a service before issue 14)."""
         self.follow_commands: list[tuple[str, dict[str, Any]]] = []
         self.params: list[tuple[str, dict[str, Any]]] = []
         self.stops: list[tuple[str, dict[str, Any]]] = []
@@ -128,6 +137,13 @@ class FakeService:
                 state.follow.stopped = True
                 state.follow.enabled = False
                 state.follow.reason = "stop"
+                if self.obey_stop:
+                    state.armed = False
+
+    def rearm(self, drone: str) -> None:
+        """Arm ``drone`` again (what the operator does on the drone after a Stop)."""
+        with self._lock:
+            self._state[drone].armed = True
 
     def wait_for(self, predicate: Any, timeout_s: float = 10.0) -> bool:
         """Wait until ``predicate(self)`` holds (evaluated on every recorded command)."""
@@ -156,6 +172,8 @@ class FakeService:
                     "weight_n_per_m": state.weight_n_per_m,
                     "length_source": "config",
                 }
+                if self.peers is not None:
+                    status["peers"] = self.peers
                 replies.append(Sample(f"tether/{drone}/status", json.dumps(status).encode()))
         return replies
 
@@ -181,6 +199,7 @@ class FakeService:
                 seq = state.seq
                 follow = state.follow.as_json()
                 length_m = state.length_m
+                armed = state.armed
             if k == 0:
                 h_n, tv_n = FIXED_H_N, FIXED_TV_N
             else:
@@ -194,8 +213,9 @@ class FakeService:
                 "stamp_s": t_s,
                 "accel_mps2": [0.0, 0.0, 9.81],
                 "quat_wxyz": list(quat),
-                "thrust_n": 0.5,
-                "position_m": list(pos) if self.mocap else None,
+                "thrust_n": 0.5 if armed else 0.0,
+                "position_m": list(pos) if drone in self.mocap else None,
+                "armed": armed,
             }
             estimate = {
                 "seq": seq,

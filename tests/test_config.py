@@ -58,6 +58,14 @@ def test_layers_file_env_cli(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) ->
         ("[drones.cf1.tether]\nweight_n_per_m = 0.0\n", "drones.cf1.tether.weight_n_per_m = 0.0"),
         ('[drones."bad id!"]\n', "bad id!"),
         ("[tether\n", "not valid TOML"),
+        ('[tether]\nlength_m = "1.6"\n', "tether.length_m = '1.6': a number is required"),
+        ('[sim]\nmocap = "false"\n', "sim.mocap = 'false': true or false is required"),
+        ("[sim]\nmocap = 1\n", "sim.mocap = 1: true or false is required"),
+        ("[web]\nport = true\n", "web.port = True: a number is required"),
+        ('[base]\nposition_m = [0.0, "0", 0.7]\n', "base.position_m = [0.0, '0', 0.7]"),
+        ('[drones.cf2.tether]\nlength_m = "2"\n', "drones.cf2.tether.length_m = '2'"),
+        ('[zenoh]\nconnect = ["bogus"]\n', "zenoh.connect = ['bogus']: 'bogus' is not a zenoh"),
+        ("[follow]\nthreshold_n = 0.01\n", "follow.threshold_n = 0.01: below"),
     ],
 )
 def test_bad_config_names_key_and_value(tmp_path: Path, text: str, needle: str) -> None:
@@ -77,3 +85,26 @@ def test_bad_env_value(monkeypatch: pytest.MonkeyPatch) -> None:
 def test_missing_file() -> None:
     with pytest.raises(ConfigError, match="cannot read config file"):
         load_settings("/nonexistent/gs.toml", use_env=False)
+
+
+def test_env_values_are_strings_and_still_accepted(monkeypatch: pytest.MonkeyPatch) -> None:
+    # Strict scalars apply to the file and the CLI; the environment only has strings.
+    monkeypatch.setenv("GROUNDSTATION_SIM__MOCAP", "false")
+    monkeypatch.setenv("GROUNDSTATION_DRONES__CF2__TETHER__LENGTH_M", "2.5")
+    s = load_settings(None)
+    assert s.sim.mocap is False
+    assert s.for_drone("cf2").tether.length_m == pytest.approx(2.5)
+
+
+def test_integers_are_fine_where_floats_are_expected(tmp_path: Path) -> None:
+    cfg = tmp_path / "c.toml"
+    cfg.write_text("[tether]\nlength_m = 2\n[base]\nposition_m = [0, 0, 1]\n")
+    s = load_settings(cfg, use_env=False)
+    assert s.tether.length_m == 2.0 and s.base.position_m == (0.0, 0.0, 1.0)
+
+
+def test_localization_section() -> None:
+    s = load_settings(None, {"localization": {"azimuth": "mocap"}}, use_env=False)
+    assert s.localization.azimuth == "mocap" and s.localization.elevation is True
+    with pytest.raises(ConfigError, match=r"localization\.azimuth = 'compass'"):
+        load_settings(None, {"localization": {"azimuth": "compass"}}, use_env=False)

@@ -1,7 +1,10 @@
-"""Dashboard without a browser: parsing, commands, throttling, and the update pass on fake data.
+"""Dashboard without a browser: reading payloads, commands, follow checks, throttling, and the
+update pass on fake data.
 
 The Dashboard runs with ``update_thread=False`` so each test drives :meth:`Dashboard.update`
-with its own clock; the viser server binds an ephemeral port on 127.0.0.1.
+with its own clock; the viser server binds an ephemeral port on 127.0.0.1. With no browser
+connected there is no per-tab panel, so these tests use ``[web] panel = "shared"`` (the
+per-tab panels are driven by the browser tests).
 """
 
 from __future__ import annotations
@@ -20,42 +23,60 @@ import pytest
 
 from groundstation.bus import InMemoryBus, Sample
 from groundstation.config import Settings, load_settings
-from groundstation.dashboard import app as dash_mod
-from groundstation.dashboard.app import (
-    Dashboard,
-    FollowView,
-    History,
-    LinkStats,
-    Pending,
-    Throttle,
-    camera_framing,
-    fill_gaps,
+from groundstation.dashboard import scene as scene_mod
+from groundstation.dashboard.app import Dashboard
+from groundstation.dashboard.commands import (
+    MIN_THRESHOLD_N,
+    FollowLimits,
     follow_command,
+    params_command,
+    stop_command,
+)
+from groundstation.dashboard.model import (
+    DroneState,
+    History,
+    Inbox,
+    Pending,
+    StopSeen,
+    Throttle,
+    fill_gaps,
+    reconcile,
+)
+from groundstation.dashboard.panel import PENDING_HOLD_S, Panel
+from groundstation.dashboard.readouts import (
+    LinkStats,
     follow_html,
     health_html,
-    load_quadrotor_mesh,
-    params_command,
-    parse_estimate,
-    parse_reel,
-    parse_telemetry,
-    parse_truth,
-    polyline_segments,
-    reconcile,
-    stop_command,
-    tension_arrow,
+    link_warning_html,
+    stop_html,
     tension_html,
+)
+from groundstation.dashboard.scene import (
+    ARROW_M_PER_N,
+    LABEL_CLEARANCE_M,
+    LABEL_STEP_M,
+    camera_framing,
+    label_tiers,
+    load_quadrotor_mesh,
+    polyline_segments,
+    tension_arrow,
     tether_points,
 )
+from groundstation.evaluation import settings_for
 from groundstation.messages import (
     Estimate,
     FollowCommand,
     FollowInfo,
+    InvalidMessage,
+    Status,
     StopIn,
+    TetherParams,
     Truth,
 )
+from groundstation.pipeline import Pipeline
 from tests.dashboard_fake import FIXED_NORM_N, FakeService
 
-# ------------------------------------------------------------------------------ parsing
+# ------------------------------------------------------------------------------ reading
 
 
 def _estimate(**overrides: Any) -> Estimate:
@@ -81,38 +102,33 @@ def _estimate(**overrides: Any) -> Estimate:
     return Estimate(**fields)
 
 
-def test_parse_estimate_reads_the_contract_model() -> None:
-    view = parse_estimate(_estimate().to_json())
-    assert view.seq == 7
-    assert view.tension_n == pytest.approx((0.09, -0.12, -0.2))
-    assert view.tension_norm_n == pytest.approx(math.sqrt(0.09**2 + 0.12**2 + 0.2**2))
-    assert view.position_m == pytest.approx((0.8, 0.1, 1.0))
-    assert view.position_std_m == pytest.approx((0.02, 0.03, 0.01))
-    assert view.radial_interval_m == pytest.approx((0.8, 0.82))
-    assert view.follow == FollowView(enabled=True, active=False, threshold_n=0.15, land_below_m=0.3)
-    assert view.base_m == pytest.approx((0.0, 0.0, 0.754))
-    assert view.converged and not view.on_ground
+def _truth(**overrides: Any) -> Truth:
+    fields: dict[str, Any] = {
+        "stamp_s": 1.0,
+        "position_m": (0.8, 0.1, 1.05),
+        "velocity_mps": (0.0, 0.0, 0.0),
+        "tension_n": (0.0, 0.0, -0.3),
+        "length_m": 1.6,
+        "base_m": (0.0, 0.0, 0.754),
+        "floor_contact": True,
+        "taut": False,
+        "armed": True,
+        "on_ground": False,
+    }
+    fields.update(overrides)
+    return Truth(**fields)
 
 
-def test_parse_estimate_with_only_contract_fields() -> None:
-    payload = json.dumps(
-        {
-            "seq": 1,
-            "stamp_s": 0.0,
-            "tension_n": [0.0, 0.0, -0.1],
-            "tension_std_n": [0.01, 0.01, 0.01],
-            "horizontal_n": 0.0,
-            "vertical_n": 0.1,
-            "position_m": None,
-            "follow": {"enabled": False, "active": False, "threshold_n": 0.2},
-            "unknown_extra": {"ignored": True},
-        }
-    ).encode()
-    view = parse_estimate(payload)
-    assert view.position_m is None
-    assert view.position_std_m is None
-    assert view.follow.land_below_m is None
-    assert view.follow.threshold_n == 0.2
+def test_estimate_read_round_trips_and_ignores_unknown_fields_at_every_level() -> None:
+    est = _estimate()
+    assert Estimate.read(est.to_json()) == est
+    body = json.loads(est.to_json())
+    body["added_by_a_newer_service"] = {"x": 1}
+    body["follow"]["added_too"] = True
+    read = Estimate.read(json.dumps(body).encode())
+    assert read == est
+    with pytest.raises(ValueError):  # what this process publishes stays forbidding extras
+        Estimate.model_validate_json(json.dumps(body))
 
 
 @pytest.mark.parametrize(
@@ -123,56 +139,92 @@ def test_parse_estimate_with_only_contract_fields() -> None:
         b'{"seq": 1}',
         json.dumps({**json.loads(_estimate().to_json()), "tension_n": [0.0, 1.0]}).encode(),
         json.dumps({**json.loads(_estimate().to_json()), "seq": "7"}).encode(),
+        json.dumps({**json.loads(_estimate().to_json()), "horizontal_n": "0.15"}).encode(),
         json.dumps({**json.loads(_estimate().to_json()), "follow": []}).encode(),
         b'{"seq": 1, "stamp_s": NaN}',
     ],
 )
-def test_parse_estimate_rejects_malformed(payload: bytes) -> None:
-    with pytest.raises(ValueError):
-        parse_estimate(payload)
+def test_estimate_read_rejects_malformed(payload: bytes) -> None:
+    with pytest.raises(InvalidMessage):
+        Estimate.read(payload)
 
 
-def test_parse_telemetry_normalises_the_quaternion() -> None:
-    view = parse_telemetry(
-        json.dumps(
-            {
-                "seq": 3,
-                "stamp_s": 0.1,
-                "accel_mps2": [0, 0, 9.81],
-                "quat_wxyz": [2.0, 0.0, 0.0, 0.0],
-                "thrust_n": 0.3,
-                "position_m": [1.0, 2.0, 3.0],
-            }
-        ).encode()
+def test_the_services_own_estimate_and_status_are_read() -> None:
+    """The dashboard's readers accept what the real pipeline publishes (no drift)."""
+    pipe = Pipeline(settings_for())
+    telemetry = {
+        "seq": 0,
+        "stamp_s": 0.0,
+        "accel_mps2": [0.0, 0.0, 10.81],
+        "quat_wxyz": [1.0, 0.0, 0.0, 0.0],
+        "thrust_n": 0.33,
+    }
+    out = pipe.handle(Sample("tether/cf1/telemetry", json.dumps(telemetry).encode()), 0.0)
+    assert len(out) == 1
+    est = Estimate.read(out[0].payload)
+    assert est.seq == 0
+    status_dict = pipe.status("cf1", 0.0)
+    assert status_dict is not None
+    status = Status.read(json.dumps(status_dict).encode())
+    assert status.drone == "cf1" and status.accepted == 1
+    assert status.follow is not None and status.follow.enabled is False
+
+
+def _drone(**inbox: Any) -> DroneState:
+    box = Inbox()
+    for key, value in inbox.items():
+        setattr(box, key, value)
+    return DroneState("cf1", box, (0, 0, 0), capacity=16, weight_n=0.03 * 9.81)
+
+
+def _log_sink() -> tuple[list[str], Any]:
+    kinds: list[str] = []
+    return kinds, lambda kind, *_args: kinds.append(kind)
+
+
+def test_ingest_reads_each_kind_and_counts_what_does_not_validate() -> None:
+    telemetry = {
+        "seq": 3,
+        "stamp_s": 0.1,
+        "accel_mps2": [0, 0, 9.81],
+        "quat_wxyz": [2.0, 0.0, 0.0, 0.0],
+        "thrust_n": 0.3,
+        "position_m": [1.0, 2.0, 3.0],
+        "field_from_the_future": 1,
+    }
+    drone = _drone(
+        estimate=_estimate().to_json(),
+        n_estimate=1,
+        telemetry=json.dumps(telemetry).encode(),
+        n_telemetry=1,
+        telemetry_rx_s=1.0,
+        truth=_truth().to_json(),
+        n_truth=1,
+        reel=b'{"stamp_s": 0.0, "length_m": 1.2, "base_m": [0, 0, 0.5]}',
+        n_reel=1,
     )
-    assert view.quat_wxyz == (1.0, 0.0, 0.0, 0.0)
-    assert view.position_m == (1.0, 2.0, 3.0)
-    with pytest.raises(ValueError):
-        parse_telemetry(b'{"quat_wxyz": [0, 0, 0, 0]}')
-    no_mocap = parse_telemetry(b'{"seq": 1, "quat_wxyz": [1, 0, 0, 0]}')
-    assert no_mocap.position_m is None
+    kinds, log = _log_sink()
+    changed, stop = drone.ingest(1.0, log)
+    assert changed and stop is None and kinds == [] and drone.invalid == {}
+    assert drone.quat_wxyz == (1.0, 0.0, 0.0, 0.0)  # normalised for drawing
+    assert drone.telemetry is not None and drone.telemetry.position_m == (1.0, 2.0, 3.0)
+    assert drone.truth is not None and drone.truth.tension_n == (0.0, 0.0, -0.3)
+    assert drone.reel is not None and drone.reel.base_m == (0.0, 0.0, 0.5)
+    assert drone.estimate == _estimate()
 
-
-def test_parse_truth_and_reel() -> None:
-    truth = Truth(
-        stamp_s=1.0,
-        position_m=(1.0, 0.0, 1.0),
-        velocity_mps=(0.0, 0.0, 0.0),
-        tension_n=(-0.1, 0.0, -0.2),
-        length_m=1.6,
-        base_m=(0.0, 0.0, 0.754),
-        floor_contact=False,
-        taut=False,
-        armed=True,
-        on_ground=False,
-    )
-    view = parse_truth(truth.to_json())
-    assert view.position_m == (1.0, 0.0, 1.0)
-    assert view.tension_n == (-0.1, 0.0, -0.2)
-    reel = parse_reel(b'{"stamp_s": 0.0, "length_m": 1.2, "base_m": [0, 0, 0.5]}')
-    assert reel.length_m == 1.2 and reel.base_m == (0.0, 0.0, 0.5)
-    with pytest.raises(ValueError):
-        parse_reel(b'{"stamp_s": 0.0, "length_m": 0.0}')
+    drone.inbox.telemetry = b'{"seq": 4, "quat_wxyz": [0, 0, 0, 0]}'
+    drone.inbox.n_telemetry += 1
+    drone.inbox.reel = b'{"stamp_s": 0.0, "length_m": 0.0}'
+    drone.inbox.n_reel += 1
+    drone.ingest(1.1, log)
+    assert drone.invalid == {"telemetry": 1, "reel": 1}
+    assert drone.reel.base_m == (0.0, 0.0, 0.5)  # the last good one stays
+    bad_quat = dict(telemetry, seq=5, quat_wxyz=[0.0, 0.0, 0.0, 0.0])
+    drone.inbox.telemetry = json.dumps(bad_quat).encode()
+    drone.inbox.n_telemetry += 1
+    drone.ingest(1.2, log)
+    assert drone.invalid["telemetry"] == 2
+    assert sorted(set(kinds)) == ["invalid-reel", "invalid-telemetry"]
 
 
 # ------------------------------------------------------------------------------ commands
@@ -189,27 +241,46 @@ def test_follow_command_is_a_valid_contract_follow_command() -> None:
         "land_below_m": 0.25,
     }
     parsed = FollowCommand.parse(full)
-    assert isinstance(parsed, FollowCommand)
     assert parsed.threshold_n == 0.2 and parsed.land is True
     with pytest.raises(ValueError):
         follow_command(True, threshold_n=0.0)
+    with pytest.raises(ValueError):
+        follow_command(True, threshold_n=-1.0)
     with pytest.raises(ValueError):
         follow_command(True, land_below_m=math.nan)
 
 
 def test_params_and_stop_commands() -> None:
     assert json.loads(params_command(weight_n_per_m=0.04)) == {"weight_n_per_m": 0.04}
-    assert json.loads(params_command(weight_n_per_m=0.04, length_m=1.8)) == {
-        "weight_n_per_m": 0.04,
-        "length_m": 1.8,
-    }
+    both = params_command(weight_n_per_m=0.04, length_m=1.8)
+    assert TetherParams.parse(both) == TetherParams(weight_n_per_m=0.04, length_m=1.8)
     with pytest.raises(ValueError):
         params_command()
     with pytest.raises(ValueError):
         params_command(length_m=-1.0)
     stop = StopIn.parse(stop_command(1234.5))
-    assert isinstance(stop, StopIn)
     assert stop.stamp_s == 1234.5 and stop.reason == "operator"
+
+
+def test_follow_limits_refuse_with_a_reason_and_never_clamp() -> None:
+    # sigma_T = |(4, 4, 3)| mN = 6.4 mN -> floor 3 sigma = 19.2 mN.
+    limits = FollowLimits.for_drone((0.004, 0.004, 0.003), 0.0, 0.754, 1.6)
+    assert limits.threshold_floor_n == pytest.approx(3.0 * math.hypot(0.004, 0.004, 0.003))
+    assert limits.check_threshold(0.10) is None
+    for bad in (-1.0, 0.0, math.nan):
+        message = limits.check_threshold(bad)
+        assert message is not None and "> 0" in message
+    low = limits.check_threshold(0.015)
+    assert low is not None and "0.019 N" in low and "σ" in low
+    quiet = FollowLimits.for_drone((1e-4, 1e-4, 1e-4), 0.0, 0.754, 1.6)
+    assert quiet.threshold_floor_n == MIN_THRESHOLD_N
+    assert quiet.check_threshold(0.005) is not None
+    assert FollowLimits.for_drone(None, 0.0, 0.754, 1.6).threshold_floor_n == MIN_THRESHOLD_N
+    # Land height: above the floor, below base + tether (0.754 + 1.6 m).
+    assert limits.check_land_height(0.25) is None
+    for bad in (0.0, -0.1, 2.36, 5.0, math.inf):
+        message = limits.check_land_height(bad)
+        assert message is not None and "refused" in message
 
 
 # ------------------------------------------------------------------------------ helpers
@@ -277,18 +348,16 @@ def test_tether_points_draw_the_floor_run_and_clamp_to_the_floor() -> None:
     assert below[-1, 2] == pytest.approx(0.0) and np.all(below[:, 2] >= -1e-9)
 
 
-def test_tether_points_fall_back_to_a_straight_line(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(dash_mod, "_catenary_checked", True)
-    monkeypatch.setattr(dash_mod, "_catenary_points", None)
+def test_tether_points_fall_back_to_the_chord(monkeypatch: pytest.MonkeyPatch) -> None:
+    def no_curve(*_args: Any, **_kwargs: Any) -> np.ndarray:
+        raise ValueError("no curve for these inputs")
+
+    monkeypatch.setattr(scene_mod, "catenary_tether_points", no_curve)
     pts = tether_points((0.0, 0.0, 0.0), (1.0, 0.0, 1.0), 2.0, n=5)
     np.testing.assert_allclose(pts[:, 0], pts[:, 2])
-
-    def no_curve(*_args: Any, **_kwargs: Any) -> np.ndarray:
-        raise ValueError("length shorter than the chord")
-
-    monkeypatch.setattr(dash_mod, "_catenary_points", no_curve)
-    pts = tether_points((0.0, 0.0, 0.0), (1.0, 0.0, 1.0), 1.0, n=5)
     np.testing.assert_allclose(pts[-1], (1.0, 0.0, 1.0))
+    # A bad length (the catenary's own error) is drawn as the chord too, not an exception.
+    np.testing.assert_allclose(tether_points((0, 0, 0), (1, 0, 1), -1.0, n=3)[1], (0.5, 0, 0.5))
 
 
 def test_polyline_segments_and_arrow() -> None:
@@ -310,6 +379,19 @@ def test_camera_framing_sees_every_point() -> None:
     assert position[2] > look_at[2]  # from above
 
 
+def test_label_tiers_separate_neighbours_only() -> None:
+    far = label_tiers({"cf1": (0.0, 0.0, 1.0), "cf2": (3.0, 0.0, 1.0)})
+    assert far == {"cf1": 0, "cf2": 0}
+    close = {"cf1": (0.0, 0.0, 1.0), "cf2": (0.2, 0.1, 1.02), "cf3": (0.1, -0.2, 0.98)}
+    tiers = label_tiers(close)
+    heights = sorted(close[d][2] + tiers[d] * LABEL_STEP_M for d in close)
+    assert len(set(tiers.values())) == 3
+    assert min(np.diff(heights)) >= LABEL_STEP_M - 0.05  # at least about one step apart
+    # Neighbours at clearly different heights need no stacking.
+    assert label_tiers({"cf1": (0.0, 0.0, 0.5), "cf2": (0.1, 0.0, 1.2)}) == {"cf1": 0, "cf2": 0}
+    assert LABEL_CLEARANCE_M > 0.2
+
+
 def test_quadrotor_mesh_from_web_and_fallback(tmp_path: Path) -> None:
     vertices, faces = load_quadrotor_mesh()
     assert vertices.shape[1] == 3 and faces.shape[1] == 3
@@ -324,45 +406,58 @@ def test_quadrotor_mesh_from_web_and_fallback(tmp_path: Path) -> None:
 
 
 def test_readouts_escape_text_from_the_bus() -> None:
-    view = parse_estimate(_estimate().to_json())
-    text = tension_html(view)
-    assert "|T|" in text and f"{view.tension_norm_n:.3f} N" in text
+    est = _estimate()
+    text = tension_html(est)
+    assert "|T|" in text and "<b>0.250 N</b>" in text  # |(0.09, -0.12, -0.2)| = 0.25
     assert "0.150 N" in text and "0.200 N" in text
-    evil = FollowView(enabled=True, reason="<script>alert(1)</script>")
-    out = follow_html(evil, (0.0, "<img src=x>"), 1.0)
-    assert "<script>" not in out and "<img" not in out
-    assert "&lt;script&gt;" in out
+    evil = FollowInfo(enabled=True, active=False, threshold_n=0.1, reason="<script>x</script>")
+    out = follow_html(evil)
+    assert "<script>" not in out and "&lt;script&gt;" in out
+    stop = stop_html(StopSeen(0.0, "<img src=x>"), 1.0, 0.01)
+    assert "<img" not in stop and "Stop sent" in stop
 
 
 def test_readouts_compare_with_simulator_truth() -> None:
-    view = parse_estimate(_estimate(position_m=(0.8, 0.1, 1.0)).to_json())
-    truth = dash_mod.TruthView(
-        position_m=(0.8, 0.1, 1.05),
-        tension_n=(0.0, 0.0, -0.3),
-        length_m=1.6,
-        base_m=None,
-        floor_contact=True,
-    )
-    text = tension_html(view, truth)
+    text = tension_html(_estimate(position_m=(0.8, 0.1, 1.0)), _truth())
     assert "0.300 N" in text and "5.0 cm" in text and "tether on floor (sim)" in text
+
+
+def test_stop_readout_says_sent_then_acknowledged() -> None:
+    sent = stop_html(StopSeen(10.0, "operator"), 11.0, telemetry_age_s=0.01)
+    assert "Stop sent 1.0 s ago" in sent and "waiting for telemetry" in sent
+    assert "acknowledged" not in sent
+    lost = stop_html(StopSeen(10.0, "operator"), 13.0, telemetry_age_s=3.5)
+    assert "no telemetry since" in lost and "acknowledged" not in lost
+    done = stop_html(StopSeen(10.0, "operator", 10.3, "disarmed"), 12.0, 0.01)
+    assert "Stop acknowledged: disarmed 0.3 s after" in done
 
 
 def test_health_html_with_and_without_status() -> None:
     local = LinkStats(telemetry_hz=250.0, estimate_hz=249.0, telemetry_age_s=0.01)
     assert "no reply" in health_html(None, local, 0.5)
-    status = {
-        "stale": False,
-        "telemetry_hz": 250.0,
-        "received": 10,
-        "accepted": 8,
-        "drops": {"invalid": 2, "<b>": 1},
-        "queue_overflow": 0,
-    }
+    status = Status(
+        drone="cf1",
+        stale=False,
+        telemetry_hz=250.0,
+        received=10,
+        accepted=8,
+        drops={"invalid": 2, "<b>": 1},
+        queue_overflow=0,
+        peers=2,
+    )
     out = health_html(status, local, 0.5)
     assert "live" in out and "10 / 8" in out and "3 (" in out and "<b>" not in out
-    stale = health_html({**status, "stale": True}, local, 0.5)
+    assert "peers (service)" in out and ">2<" in out
+    stale = health_html(status.model_copy(update={"stale": True}), local, 0.5)
     assert "STALE" in stale
     assert "STALE" in health_html(None, LinkStats(0.0, 0.0, 2.0), 0.5)
+
+
+def test_link_warning_for_no_service_and_no_peers() -> None:
+    assert link_warning_html(any_status=True, peers=3) == ""
+    assert link_warning_html(any_status=True, peers=None) == ""
+    assert "No service answers" in link_warning_html(any_status=False, peers=None)
+    assert "0 peers" in link_warning_html(any_status=True, peers=0)
 
 
 # ------------------------------------------------------------------------------ the dashboard
@@ -370,7 +465,7 @@ def test_health_html_with_and_without_status() -> None:
 
 @pytest.fixture
 def settings() -> Settings:
-    return load_settings(use_env=False, cli_overrides={"web": {"port": 0}})
+    return load_settings(use_env=False, cli_overrides={"web": {"port": 0, "panel": "shared"}})
 
 
 @pytest.fixture
@@ -393,6 +488,11 @@ def fake(bus: InMemoryBus) -> Iterator[FakeService]:
     service = FakeService(bus, ("cf1", "cf2"))
     yield service
     service.close()
+
+
+def _panel(dashboard: Dashboard) -> Panel:
+    (panel,) = dashboard.panels
+    return panel
 
 
 def _record(bus: InMemoryBus, keyexpr: str) -> list[Sample]:
@@ -422,6 +522,12 @@ def _node(dashboard: Dashboard, name: str) -> Any:
     return handle
 
 
+def _feed(dash: Dashboard, bus: InMemoryBus, fake: FakeService, t_s: float, now_s: float) -> None:
+    fake.publish_once(t_s)
+    assert bus.flush()
+    dash.update(now_s)
+
+
 def test_url_binds_loopback_and_close_is_idempotent(settings: Settings, bus: InMemoryBus) -> None:
     dashboard = Dashboard(settings, bus, port=0, update_thread=True)
     with pytest.raises(RuntimeError):
@@ -443,36 +549,38 @@ def test_update_draws_the_scene_and_fills_the_panel(
     fake.publish_once(0.0)
     assert bus.flush()
     assert dash.poll_status() == 2
-    now_s = time.monotonic()
-    dash.update(now_s)
+    dash.update(time.monotonic())
+    panel = _panel(dash)
     assert dash.drones == ["cf1", "cf2"]
-    assert dash.selected == "cf1"
+    assert panel.selected == "cf1"
 
     arrow = _node(dash, "/drones/cf1/tension")
     length_m = float(np.linalg.norm(arrow.points[0, 1] - arrow.points[0, 0]))
-    assert length_m == pytest.approx(FIXED_NORM_N * dash_mod.ARROW_M_PER_N, rel=1e-5)
-    assert _node(dash, "/drones/cf1/tension_label").text == "|T| 0.250 N"
+    assert length_m == pytest.approx(FIXED_NORM_N * ARROW_M_PER_N, rel=1e-5)
+    label = _node(dash, "/drones/cf1/body/label").text
+    assert label.startswith("cf1\n") and "|T| 0.250 N" in label and "mocap Δ" in label
     tether = _node(dash, "/drones/cf1/tether")
     np.testing.assert_allclose(tether.points[0, 0], (0.0, 0.0, 0.754), atol=1e-6)
     body = _node(dash, "/drones/cf1/body")
     np.testing.assert_allclose(tether.points[-1, 1], body.position, atol=1e-5)
     assert _node(dash, "/drones/cf1/mocap").visible
-    assert _node(dash, "/drones/cf1/mocap_label").text.startswith("mocap Δ")
     assert _node(dash, "/drones/cf1/body/quad") is not None
     assert _node(dash, "/drones/cf2/tension").visible
+    assert _node(dash, "/world_axes") is not None
+    assert _node(dash, "/world_axes/x_label").text == "x"
 
-    assert "0.250 N" in dash._tension_html.content
-    assert "bad_key: 1" in dash._health_html.content
-    assert dash._follow.handle.value is False
-    assert not dash._follow.handle.disabled
+    assert "0.250 N" in panel.tension_html.content
+    assert "bad_key: 1" in panel.health_html.content
+    assert "peers (service)" in panel.health_html.content
+    assert panel.warning.content == ""
+    assert panel.follow.handle.value is False
+    assert not panel.follow.handle.disabled
 
 
 def test_callbacks_only_store_and_parsing_happens_at_the_scene_rate(
     dash: Dashboard, bus: InMemoryBus, fake: FakeService
 ) -> None:
-    fake.publish_once(0.0)
-    assert bus.flush()
-    dash.update(100.0)
+    _feed(dash, bus, fake, 0.0, 100.0)
     for seq in range(500):  # a burst of garbage: callbacks must just store it
         bus.publish("tether/cf1/telemetry", b"{garbage %d" % seq)
     bus.publish("tether/not a drone!/telemetry", b"{}")
@@ -480,10 +588,11 @@ def test_callbacks_only_store_and_parsing_happens_at_the_scene_rate(
     period_s = 1.0 / dash._scene_rate_hz
     dash.update(100.0 + 0.5 * period_s)  # throttled: nothing parsed yet
     assert dash.stats().ticks == 1
-    assert "unparsable" not in dash._health_html.content
+    cf1 = dash.drone("cf1")
+    assert cf1 is not None and cf1.invalid == {}
     dash.update(100.0 + 1.1 * period_s)
     assert dash.stats().ticks == 2
-    assert dash._drones["cf1"].invalid == {"telemetry": 1}  # only the latest was parsed
+    assert cf1.invalid == {"telemetry": 1}  # only the latest was parsed
     assert dash.drones == ["cf1", "cf2"]
 
 
@@ -491,16 +600,14 @@ def test_follow_checkbox_shows_the_report_and_publishes_on_click(
     dash: Dashboard, bus: InMemoryBus, fake: FakeService
 ) -> None:
     follow_seen = _record(bus, "tether/*/follow")
-    fake.publish_once(0.0)
-    assert bus.flush()
     t0 = time.monotonic()
-    dash.update(t0)
-    checkbox = dash._follow.handle
+    _feed(dash, bus, fake, 0.0, t0)
+    checkbox = _panel(dash).follow.handle
 
     # A browser ticks the box: one FollowCommand, and the box holds the request.
     checkbox.value = True  # what viser does on the client's message (our sync ignores it)
     assert bus.flush() and follow_seen == []  # programmatic set: nothing published
-    dash._on_follow_toggled(_client_event())
+    _panel(dash)._on_follow_toggled(_client_event())
     assert bus.flush()
     assert [json.loads(s.payload) for s in follow_seen] == [{"enabled": True}]
     assert follow_seen[0].key == "tether/cf1/follow"
@@ -509,17 +616,13 @@ def test_follow_checkbox_shows_the_report_and_publishes_on_click(
     dash.update(t0 + 0.5)
     assert checkbox.value is True
     # ...then the fake service echoes it in the next Estimates.
-    fake.publish_once(0.1)
-    assert bus.flush()
-    dash.update(t0 + 1.0)
-    assert checkbox.value is True and dash._follow.pending is None
+    _feed(dash, bus, fake, 0.1, t0 + 1.0)
+    assert checkbox.value is True and _panel(dash).follow.pending is None
 
     # Switched off elsewhere (another browser / CLI): every dashboard follows the report.
     bus.publish("tether/cf1/follow", follow_command(False))
     assert bus.flush()
-    fake.publish_once(0.2)
-    assert bus.flush()
-    dash.update(t0 + 1.5)
+    _feed(dash, bus, fake, 0.2, t0 + 1.5)
     assert checkbox.value is False
 
 
@@ -532,16 +635,17 @@ def test_follow_request_not_confirmed_reverts_to_the_report(
     assert bus.flush()
     t0 = time.monotonic()
     dash.update(t0)
-    dash._follow.handle.value = True
-    dash._on_follow_toggled(_client_event())
+    panel = _panel(dash)
+    panel.follow.handle.value = True
+    panel._on_follow_toggled(_client_event())
     bus.publish("tether/cf9/estimate", estimate.to_json())
     assert bus.flush()
     dash.update(t0 + 0.2)
-    assert dash._follow.handle.value is True
+    assert panel.follow.handle.value is True
     bus.publish("tether/cf9/estimate", estimate.to_json())
     assert bus.flush()
-    dash.update(t0 + dash_mod.PENDING_HOLD_S + 1.0)
-    assert dash._follow.handle.value is False
+    dash.update(t0 + PENDING_HOLD_S + 1.0)
+    assert panel.follow.handle.value is False
 
 
 def test_settings_forms_publish_follow_and_params(
@@ -553,24 +657,64 @@ def test_settings_forms_publish_follow_and_params(
     assert bus.flush()
     dash.poll_status()
     dash.update(time.monotonic())
+    panel = _panel(dash)
 
-    dash._threshold.handle.value = 0.3
-    dash._on_follow_submit(None)
-    dash._land.handle.value = True
-    dash._land_height.handle.value = 0.4
-    dash._on_land_toggled(_client_event())
-    dash._weight.handle.value = 0.04
-    dash._length.handle.value = 1.9
-    dash._on_tether_submit(None)
+    panel.threshold.handle.value = 0.3
+    panel._on_follow_submit(None)
+    panel.land.handle.value = True
+    panel.land_height.handle.value = 0.4
+    panel._on_land_toggled(_client_event())
+    panel.weight.handle.value = 0.04
+    panel.length.handle.value = 1.9
+    panel._on_tether_submit(None)
     assert bus.flush()
     assert [json.loads(s.payload) for s in follow_seen] == [
         {"enabled": False, "threshold_n": 0.3, "land": False},
-        {"enabled": False, "land": True, "land_below_m": 0.4},
+        {"enabled": False, "land_below_m": 0.4, "land": True},
     ]
     assert [json.loads(s.payload) for s in params_seen] == [
         {"weight_n_per_m": 0.04, "length_m": 1.9}
     ]
     assert fake.params == [("cf1", {"weight_n_per_m": 0.04, "length_m": 1.9})]
+
+
+@pytest.mark.parametrize(
+    ("threshold_n", "expect"),
+    [(-1.0, "&gt; 0"), (0.0, "&gt; 0"), (0.005, "below"), (0.015, "below")],
+)
+def test_follow_threshold_below_the_floor_is_refused_on_the_panel(
+    dash: Dashboard, bus: InMemoryBus, fake: FakeService, threshold_n: float, expect: str
+) -> None:
+    follow_seen = _record(bus, "tether/*/follow")
+    _feed(dash, bus, fake, 0.0, time.monotonic())
+    panel = _panel(dash)
+    panel.threshold.handle.value = threshold_n
+    panel._on_threshold_typed(_client_event())  # said while typing...
+    assert expect in panel.follow_message.content and "refused" in panel.follow_message.content
+    panel._on_follow_submit(None)  # ...and refused on Apply
+    assert bus.flush()
+    assert follow_seen == [], "a refused threshold went out"
+    assert "Nothing was sent" in panel.follow_message.content
+    assert panel.threshold.handle.value == threshold_n  # not clamped behind the operator's back
+    assert "beyond the tether's own tension" in panel.follow_help.content
+
+
+def test_land_height_out_of_reach_is_refused(
+    dash: Dashboard, bus: InMemoryBus, fake: FakeService
+) -> None:
+    follow_seen = _record(bus, "tether/*/follow")
+    _feed(dash, bus, fake, 0.0, time.monotonic())
+    panel = _panel(dash)
+    panel.land_height.handle.value = 3.0  # base 0.754 m + tether 1.6 m = 2.354 m
+    panel.land.handle.value = True
+    panel._on_land_toggled(_client_event())
+    assert bus.flush()
+    assert follow_seen == []
+    assert "outside the tether's reach" in panel.follow_message.content
+    assert panel.land.handle.value is False  # the box shows the report again
+    panel.land_height.handle.value = 0.0  # at the floor: never below it
+    panel._on_land_height_typed(_client_event())
+    assert "refused" in panel.follow_message.content
 
 
 def test_length_is_not_editable_when_a_reel_reports_it(
@@ -581,53 +725,195 @@ def test_length_is_not_editable_when_a_reel_reports_it(
     bus.publish("tether/cf1/reel", b'{"stamp_s": 0.0, "length_m": 1.25}')
     assert bus.flush()
     dash.update(time.monotonic())
-    assert dash._length.handle.disabled
-    assert "reel" in dash._tether_html.content
-    dash._weight.handle.value = 0.06
-    dash._on_tether_submit(None)
+    panel = _panel(dash)
+    assert panel.length.handle.disabled
+    assert "reel" in panel.tether_html.content
+    panel.weight.handle.value = 0.06
+    panel._on_tether_submit(None)
     assert bus.flush()
     assert [json.loads(s.payload) for s in params_seen] == [{"weight_n_per_m": 0.06}]
 
 
-def test_stop_is_published_and_shown(dash: Dashboard, bus: InMemoryBus, fake: FakeService) -> None:
-    fake.publish_once(0.0)
-    assert bus.flush()
+def test_stop_is_sent_then_acknowledged_by_telemetry(
+    dash: Dashboard, bus: InMemoryBus, fake: FakeService
+) -> None:
     t0 = time.monotonic()
-    dash.update(t0)
+    _feed(dash, bus, fake, 0.0, t0)
     payload = dash.request_stop("cf1")
     assert bus.flush()
     assert fake.stops and fake.stops[0][0] == "cf1"
     stop = StopIn.parse(payload)
-    assert isinstance(stop, StopIn)
     assert stop.reason == "operator" and abs(stop.stamp_s - time.time()) < 5.0
-    fake.publish_once(0.1)
-    assert bus.flush()
-    dash.update(t0 + 1.0)
-    assert "Stop sent" in dash._follow_html.content
+    dash.update(t0 + 1.0)  # the Stop seen, no telemetry since
+    panel = _panel(dash)
+    assert "Stop sent" in panel.stop_html.content
+    assert "acknowledged" not in panel.stop_html.content
     assert "STOPPED" in _node(dash, "/drones/cf1/body/label").text
+    _feed(dash, bus, fake, 0.1, t0 + 2.0)  # the fake obeys: its telemetry says disarmed
+    assert "Stop acknowledged: disarmed" in panel.stop_html.content
+    # Re-armed and flying again: the stop is over.
+    fake.rearm("cf1")
+    _feed(dash, bus, fake, 0.2, t0 + 3.0)
+    assert panel.stop_html.content == ""
 
 
-def test_charts_hold_20_s_and_hide_missing_mocap(settings: Settings, bus: InMemoryBus) -> None:
-    service = FakeService(bus, ("cf1",), mocap=False)
+def test_stop_not_obeyed_is_never_acknowledged(settings: Settings, bus: InMemoryBus) -> None:
+    service = FakeService(bus, ("cf1",), obey_stop=False)
+    dashboard = Dashboard(settings, bus, port=0, update_thread=False)
+    dashboard.start()
+    try:
+        t0 = time.monotonic()
+        _feed(dashboard, bus, service, 0.0, t0)
+        dashboard.request_stop("cf1")
+        for k in range(1, 6):  # telemetry keeps coming, armed and with thrust
+            _feed(dashboard, bus, service, 0.1 * k, t0 + k)
+        content = _panel(dashboard).stop_html.content
+        assert "Stop sent" in content and "waiting for telemetry" in content
+        assert "acknowledged" not in content
+    finally:
+        dashboard.close()
+        service.close()
+
+
+def test_stop_all_stops_every_drone_stale_ones_too(
+    dash: Dashboard, bus: InMemoryBus, fake: FakeService
+) -> None:
+    _feed(dash, bus, fake, 0.0, time.monotonic())
+    cf2 = dash.drone("cf2")
+    assert cf2 is not None and cf2.inbox.telemetry_rx_s is not None
+    cf2.inbox.telemetry_rx_s -= 10.0  # lost telemetry: may still be flying
+    assert dash.stop_all() == ["cf1", "cf2"]
+    assert bus.flush()
+    assert sorted(d for d, _ in fake.stops) == ["cf1", "cf2"]
+
+
+def test_stale_drones_fade_then_are_forgotten(
+    settings: Settings, bus: InMemoryBus, fake: FakeService
+) -> None:
+    short = settings.model_copy(
+        update={"web": settings.web.model_copy(update={"forget_after_s": 30.0})}
+    )
+    dashboard = Dashboard(short, bus, port=0, update_thread=False)
+    dashboard.start()
+    try:
+        t0 = time.monotonic()
+        _feed(dashboard, bus, fake, 0.0, t0)
+        cf2 = dashboard.drone("cf2")
+        assert cf2 is not None and cf2.inbox.telemetry_rx_s is not None
+        # cf2 went quiet 5 s ago (arrival times moved back instead of waiting).
+        cf2.inbox.telemetry_rx_s -= 5.0
+        cf2.inbox.last_rx_s -= 5.0
+        fake.drones = ("cf1",)
+        _feed(dashboard, bus, fake, 0.1, t0 + 1.5)
+        label = _node(dashboard, "/drones/cf2/body/label").text
+        assert "stale" in label and "|T|" not in label
+        assert _node(dashboard, "/drones/cf2/body/quad").opacity == pytest.approx(0.25)
+        assert not _node(dashboard, "/drones/cf2/tension").visible
+        assert _node(dashboard, "/drones/cf1/body/quad").opacity is None
+        assert dashboard.drones == ["cf1", "cf2"]
+        # ...and 40 s ago: past forget_after_s, dropped from scene and selector. The service
+        # still answers for it (its status table keeps every drone): that keeps no one alive.
+        cf2.inbox.last_rx_s -= 35.0
+        assert dashboard.poll_status() == 2
+        _feed(dashboard, bus, fake, 0.2, t0 + 3.0)
+        assert dashboard.drones == ["cf1"]
+        assert dashboard.poll_status() == 1, "a status reply brought a forgotten drone back"
+        _feed(dashboard, bus, fake, 0.3, t0 + 4.0)
+        assert dashboard.drones == ["cf1"]
+        assert dashboard.server.scene.get_handle_by_name("/drones/cf2/body") is None
+        assert tuple(_panel(dashboard).drone_select.options) == ("cf1",)
+    finally:
+        dashboard.close()
+
+
+def test_forget_stale_on_request_and_a_forgotten_drone_comes_back(
+    dash: Dashboard, bus: InMemoryBus, fake: FakeService
+) -> None:
+    t0 = time.monotonic()
+    _feed(dash, bus, fake, 0.0, t0)
+    panel = _panel(dash)
+    dash.select("cf2")
+    assert panel.selected == "cf2"
+    cf2 = dash.drone("cf2")
+    assert cf2 is not None and cf2.inbox.telemetry_rx_s is not None
+    cf2.inbox.telemetry_rx_s -= 5.0
+    assert dash.forget_stale() == ["cf2"]
+    assert dash.drones == ["cf1"] and panel.selected == "cf1"
+    _feed(dash, bus, fake, 0.1, t0 + 1.0)  # cf2 speaks again
+    assert dash.drones == ["cf1", "cf2"]
+    assert tuple(panel.drone_select.options) == ("cf1", "cf2")
+
+
+def test_labels_of_neighbouring_drones_are_stacked(settings: Settings, bus: InMemoryBus) -> None:
+    dashboard = Dashboard(settings, bus, port=0, update_thread=False)
+    dashboard.start()
+    try:
+        for k, drone in enumerate(("cf1", "cf2")):
+            est = _estimate(position_m=(0.5 + 0.1 * k, 0.0, 1.0), position_std_m=None)
+            bus.publish(f"tether/{drone}/estimate", est.to_json())
+        assert bus.flush()
+        dashboard.update(time.monotonic())
+        heights = dashboard.scene.label_heights_m()
+        assert abs(heights["cf1"] - heights["cf2"]) >= LABEL_STEP_M - 1e-9
+        label = _node(dashboard, "/drones/cf2/body/label")
+        assert label.position[2] == pytest.approx(heights["cf2"])
+    finally:
+        dashboard.close()
+
+
+def test_no_status_reply_shows_a_warning(dash: Dashboard, bus: InMemoryBus) -> None:
+    bus.publish("tether/cf1/estimate", _estimate().to_json())
+    assert bus.flush()
+    assert dash.poll_status() == 0  # nobody answers
+    dash.update(time.monotonic())
+    assert "No service answers" in _panel(dash).warning.content
+
+
+def test_zero_peers_shows_a_warning(settings: Settings, bus: InMemoryBus) -> None:
+    service = FakeService(bus, ("cf1",), peers=0)
+    dashboard = Dashboard(settings, bus, port=0, update_thread=False)
+    dashboard.start()
+    try:
+        service.publish_once(0.0)
+        assert bus.flush()
+        assert dashboard.poll_status() == 1
+        dashboard.update(time.monotonic())
+        assert "0 peers" in _panel(dashboard).warning.content
+    finally:
+        dashboard.close()
+        service.close()
+
+
+def test_charts_hold_20_s_and_switch_with_motion_capture(
+    settings: Settings, bus: InMemoryBus
+) -> None:
+    service = FakeService(bus, ("cf1", "cf2"), mocap=("cf1",))
     dashboard = Dashboard(settings, bus, port=0, update_thread=False)
     dashboard.start()
     try:
         t0 = 1000.0
         period_s = 1.0 / dashboard._scene_rate_hz
         for k in range(int(30.0 / period_s)):
-            service.publish_once(k * period_s)
-            assert bus.flush()
-            dashboard.update(t0 + k * period_s)
-        tension = dashboard._tension_chart.data
+            _feed(dashboard, bus, service, k * period_s, t0 + k * period_s)
+        charts = _panel(dashboard).charts
+        tension = charts.tension.data
         assert len(tension) == 6
         t = tension[0]
-        assert t[0] >= -dash_mod.HISTORY_S - 1e-9 and t[-1] <= 0.0
-        assert t[-1] - t[0] > dash_mod.HISTORY_S - 1.0
+        assert t[0] >= -20.0 - 1e-9 and t[-1] <= 0.0
+        assert t[-1] - t[0] > 19.0
         np.testing.assert_allclose(tension[4], FIXED_NORM_N, rtol=1e-6)
         np.testing.assert_allclose(tension[5], 0.15)  # threshold
-        position = dashboard._position_chart.data
-        assert all(np.all(np.isfinite(col)) for col in position)
-        assert [s.get("show", True) for s in dashboard._position_chart.series[4:]] == [False] * 3
+        assert charts.position_mocap.visible and not charts.position.visible
+        assert len(charts.position_mocap.data) == 7
+        assert all(np.all(np.isfinite(col)) for col in charts.position_mocap.data)
+        # cf2 has no motion capture: the other chart, with a full window, never re-seriesed.
+        dashboard.select("cf2")
+        now_s = t0 + 30.0
+        _feed(dashboard, bus, service, 30.0, now_s)
+        assert charts.position.visible and not charts.position_mocap.visible
+        data = charts.position.data
+        assert len(data) == 4 and data[0][0] < -19.0 and data[0][-1] <= 0.0
+        assert [len(c.series) for c in (charts.position, charts.position_mocap)] == [4, 7]
     finally:
         dashboard.close()
         service.close()

@@ -374,3 +374,149 @@ def test_without_mocap_tug_to_land_uses_the_goal_height() -> None:
     assert len(stops) == 1
     # from z = 0.5 down at 0.5 m/s: below 0.25 after ~0.5 s
     assert stops[0][0] == pytest.approx(0.4 + 0.5, abs=0.02)
+
+
+# ---------------------------------------------------------------- the tether's own tension
+
+NEAR_TAUT = [  # (length, fraction of it, tether force there) with omega = 0.05 N/m
+    pytest.param(1.6, 0.97, id="97%-of-1.6m"),
+    pytest.param(3.0, 0.90, id="90%-of-3m"),
+]
+
+
+def _near_taut_spot(length_m: float, fraction: float) -> np.ndarray:
+    """A drone 0.3 m above the base at ``fraction`` of the length from it."""
+    chord = fraction * length_m
+    return BASE_M + np.array([math.sqrt(chord**2 - 0.3**2), 0.0, 0.3])
+
+
+@pytest.mark.parametrize("pull_n", [0.09, 0.105])
+@pytest.mark.parametrize("external", [True, False], ids=["mocap", "no-mocap"])
+@pytest.mark.parametrize(("length_m", "fraction"), NEAR_TAUT)
+def test_near_taut_nobody_pulling_never_engages_and_a_pull_does(
+    length_m: float, fraction: float, external: bool, pull_n: float
+) -> None:
+    """The threshold (0.10 N) means a hand's pull, near taut too: 6 s of hover with nobody
+    pulling never engages, arms landing or moves the goal; then a pull rising in 0.3 s
+    engages at 0.105 N (the tracking of b takes ~1 mN of its rise) and not at 0.09 N."""
+    from groundstation.catenary import tether_force
+
+    spot = _near_taut_spot(length_m, fraction)
+    own = np.asarray(tether_force(BASE_M, spot, length_m, 0.05, FLOOR_M).force_world_n)
+    params = FollowParams(threshold_n=0.10, land_below_m=0.9)
+    assert np.linalg.norm(own) > params.threshold_n, "the premise: |T| alone exceeds it"
+    rng = np.random.default_rng(7)
+    state = set_enabled(FollowState(), True)
+    engaged_at = None
+    for k in range(2500):  # 6 s quiet, then the pull toward the base for 4 s
+        t = k * DT_S
+        hand = np.array([-pull_n * min(1.0, max(0.0, t - 6.0) / 0.3), 0.0, 0.0])
+        # The filtered estimate (~0.5 mN per axis) and 1 mm of motion-capture noise; the
+        # tether-based position without motion capture (what the catenary makes of T).
+        tension = own + hand + rng.normal(0.0, 5e-4, 3)
+        position = spot + rng.normal(0.0, 1e-3, 3)
+        d = follow_step(
+            state,
+            params,
+            stamp_s=t,
+            tension_norm_n=float(np.linalg.norm(tension)),
+            position_world_m=position,
+            base_world_m=BASE_M,
+            length_m=length_m,
+            floor_z_m=FLOOR_M,
+            tension_world_n=tension,
+            position_is_external=external,
+            weight_n_per_m=0.05,
+        )
+        state = d.state
+        if t < 6.0:
+            assert not state.active and not state.landing_armed, (t, state.pull_world_n)
+            assert d.setpoint_world_m is None and d.stop_reason is None
+        elif state.active and engaged_at is None:
+            engaged_at = t
+    if pull_n > params.threshold_n:
+        assert engaged_at is not None and engaged_at - 6.0 < 0.5, engaged_at
+        assert state.landing_armed
+    else:
+        assert engaged_at is None and not state.landing_armed
+
+
+def test_pull_is_measured_from_the_catenary_at_the_motion_capture_position() -> None:
+    """With motion capture the reference moves with the drone: flying slowly from a slack
+    spot to near taut (|T| from 0.02 to 0.10 N) is no pull; a steady model error (here a
+    5 mN thrust bias) is the pull at first and is absorbed into b over a few seconds."""
+    from groundstation.catenary import tether_force
+
+    params = FollowParams(threshold_n=0.10, hysteresis_ratio=0.2)
+    state = set_enabled(FollowState(), True)
+    start, end = BASE_M + np.array([0.8, 0.0, 0.3]), _near_taut_spot(1.6, 0.97)
+    bias = np.array([0.0, 0.0, 0.005])
+    n = 2500
+    for k in range(n):
+        p = start + (end - start) * k / (n - 1)  # 0.75 m in 10 s
+        own = np.asarray(tether_force(BASE_M, p, 1.6, 0.05, FLOOR_M).force_world_n)
+        d = follow_step(
+            state,
+            params,
+            stamp_s=k * DT_S,
+            tension_norm_n=float(np.linalg.norm(own + bias)),
+            position_world_m=p,
+            base_world_m=BASE_M,
+            length_m=1.6,
+            floor_z_m=FLOOR_M,
+            tension_world_n=own + bias,
+            weight_n_per_m=0.05,
+        )
+        state = d.state
+        assert not state.active and d.setpoint_world_m is None
+        assert state.pull_world_n is not None
+        assert np.linalg.norm(state.pull_world_n) <= 0.005 + 1e-9
+    assert state.own_offset_world_n == pytest.approx(tuple(bias), abs=1e-4)
+
+
+def test_on_the_ground_nothing_engages_or_arms_and_the_reference_restarts() -> None:
+    params = FollowParams(threshold_n=0.10, land_below_m=0.5)
+    state = set_enabled(FollowState(), True)
+    floor_push = (0.0, 0.0, 0.144)  # 0.51 of the weight on the floor, seen as "tension"
+    for k in range(100):
+        d = follow_step(
+            state,
+            params,
+            stamp_s=k * DT_S,
+            tension_norm_n=0.144,
+            position_world_m=(0.3, 0.0, 0.0),
+            base_world_m=BASE_M,
+            length_m=1.6,
+            floor_z_m=FLOOR_M,
+            tension_world_n=floor_push if k > 10 else (0.0, 0.0, 0.0),
+            weight_n_per_m=0.05,
+            on_ground=True,
+        )
+        state = d.state
+        assert not state.active and not state.landing_armed
+        assert d.setpoint_world_m is None and d.stop_reason is None
+    assert state.own_offset_world_n is None and "ground" in state.reason
+
+
+def test_with_mocap_a_pull_already_acting_at_switch_on_engages() -> None:
+    """Motion capture says where the drone is, so the catenary there is the tether's own
+    tension: a hand already pulling with 0.2 N when following is switched on is a pull."""
+    from groundstation.catenary import tether_force
+
+    spot = BASE_M + np.array([0.3, 0.0, -0.25])
+    own = np.asarray(tether_force(BASE_M, spot, 1.6, 0.05, FLOOR_M).force_world_n)
+    tension = own + np.array([0.0, 0.0, -0.2])
+    d = follow_step(
+        set_enabled(FollowState(), True),
+        FollowParams(threshold_n=0.1, land_below_m=0.6),
+        stamp_s=0.0,
+        tension_norm_n=float(np.linalg.norm(tension)),
+        position_world_m=spot,
+        base_world_m=BASE_M,
+        length_m=1.6,
+        floor_z_m=FLOOR_M,
+        tension_world_n=tension,
+        weight_n_per_m=0.05,
+    )
+    # The pull engages (and arms landing); z 0.504 m < 0.6 m: the one Stop of tug-to-land.
+    assert d.state.landing_armed and d.state.stopped and d.stop_reason is not None

@@ -12,9 +12,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from numpy.typing import ArrayLike
 
-from groundstation.catenary import tether_force
+from groundstation.catenary import solve, tether_force
 from groundstation.localization import (
     PLUMB_K,
+    AngleObservation,
     LocalizationFailure,
     PositionEstimate,
     localize,
@@ -118,7 +119,9 @@ def test_plumb_tether_leaves_azimuth_undetermined(height_m: float) -> None:
     assert T[2] == pytest.approx(-OMEGA_N_PER_M * height_m, rel=1e-6)  # T_v = omega z
     est = estimate(T, FILTER_COV_N2, OMEGA_N_PER_M, LENGTH_M, base, FLOOR_M)
     assert not est.azimuth_determined and est.azimuth_rad is None
-    assert est.case == "plumb" and est.radial_m == 0.0
+    assert est.case == "plumb" and est.azimuth_source == "none"
+    # Straight above the base (radial_m is the catenary's r: the straight run on the floor
+    # the floor model assumes, inside the interval below).
     np.testing.assert_allclose(est.position_world_m, drone, atol=1e-6)
     lo, hi = est.radial_interval_m
     assert lo == 0.0
@@ -129,7 +132,7 @@ def test_plumb_tether_leaves_azimuth_undetermined(height_m: float) -> None:
     assert est.std_world_m[2] < 0.05
 
 
-def test_plumb_threshold_uses_k_sigma() -> None:
+def test_plumb_threshold_uses_k_sigma_and_the_position_is_continuous() -> None:
     sigma_h = 1e-3
     cov = np.diag([sigma_h**2, sigma_h**2, 1e-6])
     below = estimate([PLUMB_K * sigma_h * 0.9, 0.0, -0.05], cov, OMEGA_N_PER_M, LENGTH_M, BASE_M)
@@ -137,10 +140,27 @@ def test_plumb_threshold_uses_k_sigma() -> None:
     assert not below.azimuth_determined
     assert above.azimuth_determined
     assert above.azimuth_rad == pytest.approx(math.pi)  # pull +x: drone on the -x side
-    # The plumb std covers the radius reachable at H = k sigma_H, which is where an
-    # estimate just above the threshold puts the drone.
-    assert below.std_world_m[0] == pytest.approx(above.radial_m, rel=2e-3)
-    assert below.radial_interval_m[1] == below.std_world_m[0]
+    # No jump at the threshold (the old rule put the drone at the base's xy just below it
+    # and ~0.2 m away just above): a sweep of H moves the position by at most what r
+    # itself moves, and it goes from the base's xy (H = 0) to r u (H >> sigma_H).
+    hs = np.linspace(0.0, 10.0 * PLUMB_K * sigma_h, 400)
+    xs, rs = [], []
+    for h in hs:
+        e = estimate([h, 0.0, -0.05], cov, OMEGA_N_PER_M, LENGTH_M, BASE_M)
+        assert e.position_world_m[1] == pytest.approx(0.0, abs=1e-12)
+        xs.append(float(e.position_world_m[0]))
+        rs.append(e.radial_m)
+    steps = np.abs(np.diff(xs))
+    assert steps.max() <= np.abs(np.diff(rs)).max() + 1e-9, steps.max()
+    assert xs[0] == pytest.approx(BASE_M[0], abs=1e-12)
+    assert xs[-1] == pytest.approx(BASE_M[0] - rs[-1], abs=1e-9)
+    # Undetermined, the horizontal std still covers the radius reachable at H = k sigma_H.
+    at_zero = estimate([0.0, 0.0, -0.05], cov, OMEGA_N_PER_M, LENGTH_M, BASE_M)
+    reach = estimate(
+        [PLUMB_K * sigma_h, 0.0, -0.05], np.zeros((3, 3)), OMEGA_N_PER_M, LENGTH_M, BASE_M
+    )
+    assert at_zero.std_world_m[0] >= reach.radial_m - 1e-9
+    assert at_zero.radial_interval_m == (0.0, pytest.approx(reach.radial_m, rel=1e-9))
 
 
 def test_floor_contact_interval_contains_truth() -> None:
@@ -199,9 +219,12 @@ def test_property_never_nan(
     floor: float,
 ) -> None:
     out = try_localize(np.array(T), np.diag(sig) ** 2, omega, length, [0.3, -0.2, base_z], floor)
-    if isinstance(out, LocalizationFailure):
-        assert out.reason
+    # Every input here is valid except a base below the floor: that, and only that, fails
+    # (a test that accepted any failure could not fail).
+    if base_z < floor:
+        assert isinstance(out, LocalizationFailure) and "below the floor" in out.reason
         return
+    assert isinstance(out, PositionEstimate), out
     assert np.all(np.isfinite(out.position_world_m))
     assert np.all(np.isfinite(out.std_world_m)) and np.all(out.std_world_m >= 0.0)
     assert np.all(np.isfinite(out.cov_world_m2))
@@ -209,3 +232,98 @@ def test_property_never_nan(
     lo, hi = out.radial_interval_m
     assert math.isfinite(lo) and math.isfinite(hi) and lo <= hi + 1e-9
     assert out.azimuth_determined == (out.azimuth_rad is not None)
+
+
+# ---------------------------------------------------------------- every azimuth source
+
+
+def exit_elevation(drone: np.ndarray, base: np.ndarray = BASE_M) -> float:
+    """The tether's slope where it leaves the base, from the catenary through both ends
+    (catenary.solve, not the localization's own formula)."""
+    r = math.hypot(drone[0] - base[0], drone[1] - base[1])
+    cat = solve(0.0, base[2], r, drone[2], LENGTH_M)
+    return math.atan(math.sinh((0.0 - cat.x0) / cat.a))
+
+
+@pytest.mark.parametrize("spot", PAPER_SPOTS)
+def test_exact_exit_elevation_is_consistent_with_the_tension(
+    spot: tuple[float, float, float],
+) -> None:
+    drone = np.array(spot)
+    T, contact = truth_tension(drone)
+    if contact:
+        pytest.skip("the elevation is fused only while the tether hangs free")
+    theta = AngleObservation(exit_elevation(drone), 0.01)
+    est = estimate(T, FILTER_COV_N2, OMEGA_N_PER_M, LENGTH_M, BASE_M, FLOOR_M, exit_elevation=theta)
+    assert est.elevation_used
+    np.testing.assert_allclose(est.position_world_m, drone, atol=1e-6)
+    # The elevation adds information: the radial/vertical std can only shrink.
+    alone = estimate(T, FILTER_COV_N2, OMEGA_N_PER_M, LENGTH_M, BASE_M, FLOOR_M)
+    assert est.std_world_m[2] <= alone.std_world_m[2] + 1e-12
+
+
+def test_exit_elevation_corrects_a_biased_tension() -> None:
+    """A 3 mN thrust error (1 % of the weight) moves the tension-only position by 10 cm; an
+    exit elevation accurate to 0.01 rad pulls the estimate back toward the truth (the
+    tension's covariance says what it knows: 3 mN vertically)."""
+    drone = np.array(PAPER_SPOTS[0])
+    T, _ = truth_tension(drone)
+    biased = T + np.array([0.0, 0.0, 0.003])
+    cov = np.diag([1e-3, 1e-3, 3e-3]) ** 2
+    alone = estimate(biased, cov, OMEGA_N_PER_M, LENGTH_M, BASE_M, FLOOR_M)
+    theta = AngleObservation(exit_elevation(drone), 0.01)
+    fused = estimate(biased, cov, OMEGA_N_PER_M, LENGTH_M, BASE_M, FLOOR_M, exit_elevation=theta)
+    err_alone = float(np.linalg.norm(alone.position_world_m - drone))
+    err_fused = float(np.linalg.norm(fused.position_world_m - drone))
+    assert err_alone > 0.03
+    assert err_fused < 0.5 * err_alone, (err_alone, err_fused)
+
+
+def test_azimuth_sources_modes_and_fusion() -> None:
+    drone = np.array([0.5, -0.6, 1.0])
+    beta_true = math.atan2(drone[1], drone[0])
+    T, _ = truth_tension(drone)
+    cov = np.eye(3) * (1e-3) ** 2
+    # The tension's own direction, rotated by a sideways error of 2 mN (H = 8.9 mN: 13 deg).
+    u = np.array([-T[1], T[0], 0.0]) / math.hypot(T[0], T[1])
+    bent = T + 0.002 * u
+    args = (bent, cov, OMEGA_N_PER_M, LENGTH_M, BASE_M, FLOOR_M)
+    reel = AngleObservation(beta_true, 0.01)
+    tension_only = estimate(*args, azimuth="tension", exit_azimuth=reel)
+    assert tension_only.azimuth_source == "tension"
+    assert abs(tension_only.azimuth_rad - beta_true) > math.radians(10)  # type: ignore[operator]
+    reel_only = estimate(*args, azimuth="reel", exit_azimuth=reel)
+    assert reel_only.azimuth_source == "reel"
+    assert reel_only.azimuth_rad == pytest.approx(beta_true, abs=1e-12)
+    auto = estimate(*args, exit_azimuth=reel)
+    assert auto.azimuth_source == "reel"  # the most certain one
+    # Inverse-variance weights: between the two, close to the reel's.
+    assert auto.azimuth_std_rad < min(reel.std_rad, tension_only.azimuth_std_rad)
+    assert abs(auto.azimuth_rad - beta_true) < 0.1 * abs(  # type: ignore[operator]
+        tension_only.azimuth_rad - beta_true  # type: ignore[operator]
+    )
+    assert np.linalg.norm(auto.position_world_m[:2] - drone[:2]) < 0.02
+    # mocap: the paper's method, beta from position_m.
+    mocap = estimate(*args, azimuth="mocap", mocap_world_m=drone + 0.001)
+    assert mocap.azimuth_source == "mocap"
+    assert mocap.azimuth_rad == pytest.approx(beta_true, abs=0.005)
+    # A source asked for but absent: the azimuth is undetermined, the position above the base.
+    none = estimate(*args, azimuth="reel")
+    assert none.azimuth_source == "none" and not none.azimuth_determined
+    np.testing.assert_allclose(none.position_world_m[:2], BASE_M[:2], atol=1e-12)
+    bad = try_localize(*args, azimuth="compass")  # type: ignore[arg-type]
+    assert isinstance(bad, LocalizationFailure) and "azimuth" in bad.reason
+
+
+def test_reel_azimuth_keeps_a_plumb_tether_determined_and_continuous() -> None:
+    """Near plumb the tension's direction is noise; the reel's exit azimuth still knows it."""
+    reel = AngleObservation(math.radians(40.0), 0.02)
+    xs = []
+    for h in np.linspace(0.0, 0.01, 200):
+        e = estimate([-h, 0.0, -0.05], FILTER_COV_N2, OMEGA_N_PER_M, LENGTH_M, BASE_M,
+                     azimuth="reel", exit_azimuth=reel)  # fmt: skip
+        assert e.azimuth_determined
+        assert e.azimuth_rad == pytest.approx(reel.value_rad)
+        xs.append(e.position_world_m[:2])
+    steps = np.linalg.norm(np.diff(np.array(xs), axis=0), axis=1)
+    assert steps.max() < 0.02

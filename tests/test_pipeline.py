@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from groundstation.bus import Sample
+from groundstation.config import load_settings
 from groundstation.evaluation import closed_loop, settings_for
 from groundstation.pipeline import Pipeline
 
@@ -180,7 +181,13 @@ def test_calibration_is_applied_and_reported_per_drone() -> None:
         use_env=False,
     )
     pipe = Pipeline(settings)
-    level = GOOD | {"accel_mps2": [0.0, 0.0, 9.81], "thrust_n": 0.30, "vbat_v": 3.7}
+    # position_m: motion capture at 1 m, so the contact rules see the drone in the air at once
+    level = GOOD | {
+        "accel_mps2": [0.0, 0.0, 9.81],
+        "thrust_n": 0.30,
+        "vbat_v": 3.7,
+        "position_m": [1.0, 0.0, 1.0],
+    }
     outs = {}
     for drone in ("cf1", "cf2"):
         body = json.dumps(level | {"seq": 0}).encode()
@@ -201,3 +208,150 @@ def test_calibration_is_applied_and_reported_per_drone() -> None:
     pipe = Pipeline(unlabelled)
     (out,) = pipe.handle(_telemetry(0), 0.0)
     assert json.loads(out.payload)["calibration"] == "config"
+
+
+@pytest.mark.parametrize("mocap", [True, False], ids=["mocap", "no-mocap"])
+@pytest.mark.parametrize(("length_m", "fraction"), [(1.6, 0.97), (3.0, 0.90)])
+def test_near_taut_hover_with_follow_enabled_never_engages_until_pulled(
+    monkeypatch: pytest.MonkeyPatch, length_m: float, fraction: float, mocap: bool
+) -> None:
+    """Issue 11 §2 through the pipeline and the simulator: near taut the tether alone pulls
+    with more than the 0.10 N threshold; with follow and tug-to-land enabled and nobody
+    pulling nothing engages, no setpoint, landing not armed; a 0.12 N pull at 6 s engages."""
+    from groundstation.sim.scenarios import SCENARIOS, Pull, Scenario, Waypoint
+
+    base = (0.0, 0.0, 0.754)
+    chord = fraction * length_m
+    spot = (float(np.sqrt(chord**2 - 0.3**2)), 0.0, base[2] + 0.3)
+    monkeypatch.setitem(
+        SCENARIOS,
+        "near_taut_test",
+        Scenario(
+            "near_taut_test",
+            "hover near taut; follow on at 1 s; a 0.12 N pull toward the base at 6 s",
+            start_m=spot,
+            waypoints=(Waypoint(0.0, spot),),
+            length_m=length_m,
+            pulls=(Pull(6.0, 8.0, (-0.12, 0.0, 0.0)),),
+            operator=((1.0, {"enabled": True, "land_below_m": 0.5}),),
+        ),
+    )
+    settings = load_settings(
+        None, {"sim": {"mocap": mocap, "seed": 5}, "tether": {"length_m": length_m}}, use_env=False
+    )
+    run, _, _ = closed_loop(settings, "near_taut_test", 8.0)
+    quiet = [e for e in run.estimates if 1.1 < e["stamp_s"] < 6.0]
+    assert quiet and all(e["follow"]["enabled"] for e in quiet)
+    assert min(np.linalg.norm(e["tension_n"]) for e in quiet) > 0.10, "the premise"
+    assert not any(e["follow"]["active"] or e["follow"]["landing_armed"] for e in quiet)
+    assert all(sp["stamp_s"] >= 6.0 for sp in run.setpoints), "no setpoint before the pull"
+    assert not run.stops
+    pulled = [e for e in run.estimates if 6.0 <= e["stamp_s"] < 6.5]
+    assert any(e["follow"]["active"] for e in pulled), "a real pull engages"
+
+
+@pytest.mark.parametrize("mocap", [True, False], ids=["mocap", "no-mocap"])
+def test_takeoff_ramp_publishes_no_floor_push_and_sends_no_stop(mocap: bool) -> None:
+    """Issue 11 §3 on the simulator: armed on the floor, the thrust ramps 0 → weight over
+    2 s; follow is on with tug-to-land at 0.3 m from the start. While the drone is on the
+    floor no tension above 20 mN is published and landing is never armed; no Stop at all;
+    the lift-off is seen (on_ground false) by the time the drone is 4 cm up."""
+    follow = Sample("tether/cf1/follow", b'{"enabled": true, "land_below_m": 0.3}')
+    run, _, sim = closed_loop(
+        settings_for(mocap=mocap, seed=11), "takeoff_ramp", 8.0, inject={0: [follow]}
+    )
+    assert not run.stops and sim.drones["cf1"].armed
+    floor = [e for e in run.estimates if run.truth_at(e["stamp_s"])["on_ground"]]
+    ramp = [e for e in floor if e["stamp_s"] >= 2.0]
+    assert ramp, "the ramp is on the floor"
+    assert max(float(np.linalg.norm(e["tension_n"])) for e in floor) <= 0.020
+    assert not any(e["follow"]["landing_armed"] or e["follow"]["active"] for e in floor)
+    up_4cm_s = min(
+        e["stamp_s"] for e in run.estimates if run.truth_at(e["stamp_s"])["position_m"][2] > 0.04
+    )
+    seen_s = min(e["stamp_s"] for e in run.estimates if e["stamp_s"] > 2.0 and not e["on_ground"])
+    assert seen_s <= up_4cm_s, (seen_s, up_4cm_s)
+    assert all(e["follow"]["enabled"] for e in run.estimates[1:]), "follow stayed on throughout"
+
+
+@pytest.mark.parametrize("bias_mps2", [0.0, 0.3])
+@pytest.mark.parametrize("mocap", [True, False], ids=["mocap", "no-mocap"])
+def test_half_weight_on_the_floor_is_not_tension(mocap: bool, bias_mps2: float) -> None:
+    """0.51 of the weight on the floor for 5 s (the floor pushes 144 mN), follow enabled with
+    tug-to-land, 0.3 m/s² accelerometer noise and a vertical bias: every Estimate says
+    on_ground with zero tension; no setpoint, no Stop."""
+    rng = np.random.default_rng(3)
+    pipe = Pipeline(settings_for())
+    weight_n = 0.030 * 9.81
+    pipe.handle(Sample("tether/cf1/follow", b'{"enabled": true, "land_below_m": 0.3}'), 0.0)
+    outputs: list[Sample] = []
+    for seq in range(1250):
+        accel = [*rng.normal(0.0, 0.3, 2), 9.81 + bias_mps2 + rng.normal(0.0, 0.3)]
+        patch: dict[str, object] = {"accel_mps2": accel, "thrust_n": 0.51 * weight_n}
+        if mocap:
+            patch["position_m"] = [0.5, 0.0, float(rng.normal(0.0, 1e-3))]
+        outputs += pipe.handle(_telemetry(seq, **patch), seq * 0.004)
+    estimates = [json.loads(o.payload) for o in outputs if o.key.endswith("/estimate")]
+    assert len(estimates) == len(outputs) == 1250, "no setpoint, no Stop"
+    assert all(e["on_ground"] and e["tension_n"] == [0.0, 0.0, 0.0] for e in estimates)
+    assert not any(e["follow"]["landing_armed"] for e in estimates)
+
+
+def test_ground_thrust_ratio_is_honoured() -> None:
+    weight_n = 0.030 * 9.81
+    for ratio, thrust_ratio, reason in [(0.6, 0.55, "low_thrust"), (0.4, 0.45, "resting")]:
+        settings = load_settings(None, {"filter": {"ground_thrust_ratio": ratio}}, use_env=False)
+        pipe = Pipeline(settings)
+        (out,) = pipe.handle(_telemetry(0, thrust_n=thrust_ratio * weight_n), 0.0)
+        assert json.loads(out.payload)["on_ground"] is True
+        status = pipe.status("cf1", 0.0)
+        assert status is not None and status["contact"]["reason"] == reason
+
+
+def test_reel_exit_angles_are_used_while_fresh_and_named_in_the_estimate() -> None:
+    """A plumb-ish hover (H ~ 2 mN: the tension's direction is noise): with the reel's exit
+    azimuth the Estimate says azimuth_source "reel" and the position lies along it; once the
+    reel falls silent for longer than [localization] reel_stale_after_s, the azimuth is
+    the tension's again."""
+    pipe = Pipeline(settings_for())
+    reel = json.dumps(
+        {"stamp_s": 0.0, "length_m": 1.6, "exit_azimuth_rad": 0.7, "exit_azimuth_std_rad": 0.02}
+    ).encode()
+    # The drone 0.3 m above the base, just off plumb: T_v = 0.3 * 0.05 N, H = 2 mN along -x.
+    accel = [0.0, 0.0, 9.81 + (0.33 - 0.03 * 9.81 - 0.015) / 0.030]
+    # The accelerometer's noise (0.3 m/s^2): the filter measures it, and a noise-free
+    # stream would tell it that the 2 mN direction is exact.
+    noise = np.random.default_rng(12).normal(0.0, 0.3, (500, 3))
+    sources = []
+    for seq in range(500):
+        now = seq * 0.004
+        if seq % 25 == 0 and now < 1.0:  # 10 Hz for 1 s, then silent
+            pipe.handle(Sample("tether/cf1/reel", reel), now)
+        a = noise[seq]
+        patch = {"accel_mps2": [0.002 / 0.030 + a[0], a[1], accel[2] + a[2]]}
+        (out,) = pipe.handle(_telemetry(seq, **patch), now)
+        est = json.loads(out.payload)
+        sources.append((now, est["azimuth_source"], est["position_m"]))
+    fresh = [s for t, s, p in sources if 0.5 < t < 1.0 and p is not None]
+    stale = [s for t, s, p in sources if t > 1.6 and p is not None]
+    assert fresh and set(fresh) == {"reel"}
+    assert stale and set(stale) == {"tension"}
+    _, _, p = next(x for x in sources if x[0] > 0.9)
+    assert p is not None
+    assert np.arctan2(p[1], p[0]) == pytest.approx(0.7, abs=0.02)  # fused, the reel dominant
+
+
+def test_service_started_mid_hover_finds_the_drone_in_the_air() -> None:
+    """No rest was seen (the service starts while the drone hovers, no motion capture): the
+    contact state starts on the ground, the floor's push is found absent within ~0.1 s and
+    the filter starts from its first observation, not from the lift-off prior."""
+    run, pipe, _ = closed_loop(settings_for(mocap=False, seed=2), "hover", 2.0)
+    first = next(e for e in run.estimates if e["position_m"] is not None)
+    assert first["stamp_s"] <= 0.25
+    late = [e for e in run.estimates if e["stamp_s"] > 1.0]
+    assert all(not e["on_ground"] for e in late)
+    err = [np.linalg.norm(np.subtract(e["position_m"], run.truth_at(e["stamp_s"])["position_m"]))
+           for e in late]  # fmt: skip
+    assert float(np.median(err)) < 0.05
+    status = pipe.status("cf1", 2.0)
+    assert status is not None and status["contact"]["reason"] == "air"

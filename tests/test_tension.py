@@ -190,6 +190,11 @@ def test_ground_contact_disarmed_and_low_thrust() -> None:
     at = observe_tension([0, 0, GRAVITY_MPS2], [1, 0, 0, 0], half_weight_n, MASS_KG)
     assert below.reason == "low_thrust"
     assert at.reason == "ok" and at.tension_world_n is not None
+    # [filter] ground_thrust_ratio moves the line.
+    strict = observe_tension(
+        [0, 0, GRAVITY_MPS2], [1, 0, 0, 0], half_weight_n, MASS_KG, ground_thrust_ratio=0.7
+    )
+    assert strict.reason == "low_thrust" and strict.tension_world_n is None
 
 
 @pytest.mark.parametrize(

@@ -1,67 +1,30 @@
-"""The operator's 3D web dashboard (viser): an edge that talks to the service over the bus only."""
+"""The operator's 3D web dashboard (viser): an edge that talks to the service over the bus only.
 
-from groundstation.dashboard.app import (
-    ARROW_M_PER_N,
-    CHART_RATE_HZ,
-    HISTORY_S,
-    PANEL_RATE_HZ,
-    PENDING_HOLD_S,
-    Dashboard,
-    DashboardStats,
-    EstimateView,
-    FollowView,
-    History,
-    ReelView,
-    TelemetryView,
-    Throttle,
-    TruthView,
-    camera_framing,
-    fill_gaps,
+Parts, in the order data flows through them:
+
+- :mod:`.model`: per-drone state, parsed from the bus with the contract's models;
+- :mod:`.scene`: the 3D scene shared by every tab (drones, tethers, arrows, labels, axes);
+- :mod:`.panel`: the operator's controls per tab (selection, stop, follow, parameters),
+  with :mod:`.readouts` (HTML) and :mod:`.charts` (uPlot);
+- :mod:`.commands`: what the panel publishes and the checks a follow setting passes;
+- :mod:`.app`: wiring, bus client, threads, lifecycle.
+"""
+
+from groundstation.dashboard.app import Dashboard, DashboardStats
+from groundstation.dashboard.commands import (
+    FollowLimits,
     follow_command,
-    health_html,
-    load_quadrotor_mesh,
     params_command,
-    parse_estimate,
-    parse_reel,
-    parse_telemetry,
-    parse_truth,
-    polyline_segments,
-    reconcile,
     stop_command,
-    tension_arrow,
-    tension_html,
-    tether_points,
 )
+from groundstation.dashboard.panel import Panel
 
 __all__ = [
-    "ARROW_M_PER_N",
-    "CHART_RATE_HZ",
-    "HISTORY_S",
-    "PANEL_RATE_HZ",
-    "PENDING_HOLD_S",
     "Dashboard",
     "DashboardStats",
-    "EstimateView",
-    "FollowView",
-    "History",
-    "ReelView",
-    "TelemetryView",
-    "Throttle",
-    "TruthView",
-    "camera_framing",
-    "fill_gaps",
+    "FollowLimits",
+    "Panel",
     "follow_command",
-    "health_html",
-    "load_quadrotor_mesh",
     "params_command",
-    "parse_estimate",
-    "parse_reel",
-    "parse_telemetry",
-    "parse_truth",
-    "polyline_segments",
-    "reconcile",
     "stop_command",
-    "tension_arrow",
-    "tension_html",
-    "tether_points",
 ]

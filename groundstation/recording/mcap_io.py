@@ -97,6 +97,9 @@ def _schema_models() -> dict[str, type[BaseModel]]:
     params = getattr(messages, "TetherParams", None)
     if isinstance(params, type) and issubclass(params, BaseModel):
         models["params"] = params
+    events = getattr(messages, "Event", None)  # the operator action log, likewise
+    if isinstance(events, type) and issubclass(events, BaseModel):
+        models["events"] = events
     return models
 
 
@@ -792,17 +795,26 @@ def run_record(
     Raises:
         RecordingError: the file cannot be created or written.
     """
+    from groundstation.bus import PeerWatch, describe_endpoints
     from groundstation.zenoh_bus import ZenohBus
 
     stop = stop_event if stop_event is not None else threading.Event()
-    with ZenohBus(settings.zenoh) as bus:
+    z = settings.zenoh
+    with ZenohBus(z) as bus:
+        watch = PeerWatch(
+            bus.peer_count,
+            describe_endpoints(z.mode, z.connect, z.listen),
+            "groundstation record",
+            _log,
+        )
         recorder = Recorder(bus, out_path, keyexprs or DEFAULT_KEYEXPRS)
         try:
             _log.info("recording %s to %s", ", ".join(recorder.keyexprs), out_path)
             # Short waits keep the main thread responsive to the CLI's signal handlers.
             while not stop.wait(0.2):
-                pass
+                watch.poll(time.monotonic())
             _linger(recorder, quiet_s=linger_quiet_s, max_s=linger_max_s)
+            watch.poll(time.monotonic())
         finally:
             stats = recorder.close()
     _log.info(
@@ -813,6 +825,8 @@ def run_record(
         stats.dropped,
         stats.max_queue_depth,
     )
+    if not watch.ever_connected:
+        _log.warning("nothing could reach the recorder: %s", watch.where)
     return 0
 
 

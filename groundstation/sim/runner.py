@@ -60,6 +60,8 @@ class Simulator:
         self.bus = bus
         self.scenario = SCENARIOS[name]
         self.rng = np.random.default_rng(settings.sim.seed)
+        # The base sensor draws from its own stream: switching it on changes no other noise.
+        self._base_rng = np.random.default_rng([settings.sim.seed, 0xBA5E])
         self.dt_s = 1.0 / settings.sim.rate_hz
         self.t_s = 0.0
         self.seq = 0
@@ -300,13 +302,29 @@ class Simulator:
         )
         out.append(Sample(f"tether/{drone_id}/truth", truth.to_json()))
         if publish_reel and self.scenario.coin_mass_kg is None:
-            reel = {
+            reel: dict[str, object] = {
                 "stamp_s": round(self.t_s, 9),
                 "length_m": drone.length_m,
                 "base_m": drone.base_world_m.tolist(),
             }
+            if cfg.exit_angles:
+                from groundstation.catenary import tether_points
+
+                pts = tether_points(
+                    drone.base_world_m, drone.position_world_m, drone.length_m, drone.floor_z_m, 257
+                )
+                reel |= self._exit_angles(pts)
             out.append(Sample(f"tether/{drone_id}/reel", json.dumps(reel).encode()))
         return out
+
+    def _exit_angles(self, points_world_m: np.ndarray) -> dict[str, float]:
+        """The base sensor's Reel fields ([sim] exit_angles; groundstation/sim/base_sensor.py)."""
+        from groundstation.sim.base_sensor import exit_angle_fields
+
+        cfg = self.settings.sim
+        return exit_angle_fields(
+            points_world_m, self._base_rng, cfg.exit_azimuth_noise_rad, cfg.exit_elevation_noise_rad
+        )
 
     def _realistic_messages(
         self,
@@ -342,11 +360,13 @@ class Simulator:
             )
             out.append(Sample(f"tether/{drone_id}/truth", truth.to_json()))
         if publish_reel and self.scenario.coin_mass_kg is None:
-            reel = {
+            reel: dict[str, object] = {
                 "stamp_s": round(self.t_s, 9),
                 "length_m": drone.length_m,
                 "base_m": drone.base_world_m.tolist(),
             }
+            if self.settings.sim.exit_angles:
+                reel |= self._exit_angles(drone.tether.x_world_m)
             out.append(Sample(f"tether/{drone_id}/reel", json.dumps(reel).encode()))
         return out
 

@@ -74,9 +74,15 @@ def browser() -> Iterator[Any]:
             chromium.close()
 
 
-def open_page(browser: Any, url: str, log: RequestLog) -> Any:
-    """A fresh page on ``url`` recording every request into ``log``."""
-    context = browser.new_context(viewport={"width": 1100, "height": 800})
+def open_page(
+    browser: Any, url: str, log: RequestLog, viewport: tuple[int, int] = (1100, 800)
+) -> Any:
+    """A fresh page (its own browser context) on ``url`` recording every request into ``log``.
+
+    Args:
+        viewport: (width, height) in CSS pixels.
+    """
+    context = browser.new_context(viewport={"width": viewport[0], "height": viewport[1]})
     context.on("request", lambda request: log.urls.append(request.url))
     page = context.new_page()
     page.on("websocket", lambda ws: log.urls.append(ws.url))

@@ -1,6 +1,8 @@
 """The dashboard in a real Chromium: it renders, shows |T|, and its buttons put commands on
-the bus (Follow mode at once; Stop only after the confirmation). Nothing it loads comes from
-outside the machine.
+the bus (Follow mode at once; Stop only after the confirmation, then acknowledged when the
+telemetry says so). Follow inputs are refused on the page, not clamped; the follow controls
+fit a 1280×800 screen; the position chart survives switching between drones with and without
+motion capture; each tab selects its own drone. Nothing it loads comes from outside.
 
 The feed is :class:`tests.dashboard_fake.FakeService` on an in-memory bus (it echoes a
 FollowCommand into the next Estimates, as the service does); one test drives the real
@@ -23,7 +25,7 @@ from PIL import Image
 
 from groundstation.bus import InMemoryBus, Sample
 from groundstation.config import Settings, load_settings
-from groundstation.dashboard import Dashboard
+from groundstation.dashboard import Dashboard, Panel
 from tests.browser.conftest import (
     FIRST_FRAME_TIMEOUT_MS,
     RequestLog,
@@ -35,6 +37,17 @@ from tests.dashboard_fake import FakeService
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
 COMMAND_TIMEOUT_S = 30.0
+VIEWPORT = (1280, 800)
+"""A common laptop screen: the follow controls must be visible on it without scrolling."""
+VISIBLE_CHARTS_JS = """() => Object.values(window.__viserTestpoints?.uplots ?? {})
+    .filter((c) => c.chart.root.isConnected && c.chart.root.offsetParent !== null)
+    .map((c) => ({
+        title: c.chart.root.querySelector('.u-title')?.textContent ?? '',
+        n: c.chart.data[0].length,
+        series: c.chart.series.length,
+        xmin: c.chart.scales.x.min,
+        xmax: c.chart.scales.x.max,
+    }))"""
 
 
 def wait_until(predicate: Callable[[], bool], timeout_s: float) -> bool:
@@ -76,14 +89,37 @@ def _settings() -> Settings:
     return load_settings(use_env=False, cli_overrides={"web": {"port": 0}})
 
 
+def only_panel(feed: Feed) -> Panel:
+    """The panel of the feed's page (one tab connected: one panel)."""
+    assert wait_until(lambda: len(feed.dashboard.panels) == 1, COMMAND_TIMEOUT_S)
+    (panel,) = feed.dashboard.panels
+    return panel
+
+
+def select_drone(page: Any, drone_id: str) -> None:
+    """Choose ``drone_id`` in this page's drone selector (a Mantine select)."""
+    page.get_by_label("Drone", exact=True).first.click()
+    page.get_by_role("option", name=drone_id, exact=True).click()
+
+
+def position_chart_ok(page: Any) -> dict[str, Any] | None:
+    """The visible position chart if it shows a 20 s window ending now, else None."""
+    for chart in page.evaluate(VISIBLE_CHARTS_JS):
+        window_ok = chart["xmin"] < -5.0 and -1.0 < chart["xmax"] <= 0.5
+        if chart["title"].startswith("Position") and chart["n"] > 10 and window_ok:
+            return dict(chart)
+    return None
+
+
 @pytest.fixture(scope="module")
 def feed(browser: Any) -> Iterator[Feed]:
     bus = InMemoryBus()
-    fake = FakeService(bus, ("cf1", "cf2"), rate_hz=50.0).start()
+    # cf1 with motion capture, cf2 without (the chart switch).
+    fake = FakeService(bus, ("cf1", "cf2"), rate_hz=50.0, mocap=("cf1",)).start()
     dashboard = Dashboard(_settings(), bus, port=0)
     dashboard.start()
     requests = RequestLog()
-    page = open_page(browser, dashboard.url, requests)
+    page = open_page(browser, dashboard.url, requests, viewport=VIEWPORT)
     try:
         yield Feed(bus, fake, dashboard, page, requests)
     finally:
@@ -125,7 +161,7 @@ def test_follow_mode_click_publishes_and_reflects_the_report(feed: Feed) -> None
     ), f"no FollowCommand enabled=true on the bus: {fake.follow_commands}"
     assert fake.follow_commands[-1] == ("cf1", {"enabled": True})
     # Held by the report (not only by the click): still checked once the hold expired.
-    assert wait_until(lambda: feed.dashboard._follow.pending is None, COMMAND_TIMEOUT_S)
+    assert wait_until(lambda: only_panel(feed).follow.pending is None, COMMAND_TIMEOUT_S)
     expect(checkbox).to_be_checked()
 
     # A change made elsewhere shows up in the browser.
@@ -133,31 +169,149 @@ def test_follow_mode_click_publishes_and_reflects_the_report(feed: Feed) -> None
     expect(checkbox).not_to_be_checked(timeout=COMMAND_TIMEOUT_S * 1000)
 
 
-def test_stop_needs_confirmation(feed: Feed) -> None:
+def test_follow_controls_are_visible_at_1280x800_without_scrolling(feed: Feed) -> None:
+    from playwright.sync_api import expect
+
+    page = feed.page
+    width, height = VIEWPORT
+    controls = [
+        page.get_by_label("Follow mode", exact=True),
+        page.get_by_label("Tug-to-land", exact=True),
+        page.get_by_role("button", name="Apply follow settings"),
+        page.get_by_role("button", name="Emergency stop"),
+    ]
+    for control in controls:
+        expect(control).to_be_visible()
+    assert page.evaluate("() => [window.scrollX, window.scrollY]") == [0, 0]
+    for control in controls:
+        box = control.bounding_box()
+        assert box is not None
+        assert box["x"] >= 0 and box["x"] + box["width"] <= width, box
+        assert box["y"] >= 0 and box["y"] + box["height"] <= height, box
+
+
+def test_a_threshold_below_the_floor_is_refused_on_the_page(feed: Feed) -> None:
+    from playwright.sync_api import expect
+
+    page, fake = feed.page, feed.fake
+    n_before = len(fake.follow_commands)
+    field = page.get_by_label("Threshold (N)", exact=True)
+    field.fill("-1")
+    page.get_by_role("button", name="Apply follow settings").click()
+    expect(page.get_by_text("Threshold -1 N refused", exact=False).first).to_be_visible()
+    expect(page.get_by_text("Nothing was sent", exact=False).first).to_be_visible()
+    assert feed.bus.flush()
+    assert fake.follow_commands[n_before:] == [], "a refused threshold went out"
+    expect(field).to_have_value("-1")  # not clamped to a minimum behind the operator's back
+    field.fill("0.12")
+    page.get_by_role("button", name="Apply follow settings").click()
+    assert fake.wait_for(
+        lambda f: any(c.get("threshold_n") == 0.12 for _, c in f.follow_commands[n_before:]),
+        COMMAND_TIMEOUT_S,
+    ), "a valid threshold was not sent"
+
+
+def test_position_chart_survives_switching_motion_capture_on_and_off(feed: Feed) -> None:
+    page = feed.page
+    assert wait_until(lambda: position_chart_ok(page) is not None, COMMAND_TIMEOUT_S)
+    chart = position_chart_ok(page)
+    assert chart is not None and chart["series"] == 7  # cf1 has motion capture
+    for drone_id, series in (("cf2", 4), ("cf1", 7), ("cf2", 4)):
+        select_drone(page, drone_id)
+        assert wait_until(lambda d=drone_id: only_panel(feed).selected == d, COMMAND_TIMEOUT_S)
+        assert wait_until(
+            lambda n=series: (c := position_chart_ok(page)) is not None and c["series"] == n,
+            COMMAND_TIMEOUT_S,
+        ), f"after selecting {drone_id}: {page.evaluate(VISIBLE_CHARTS_JS)}"
+    select_drone(page, "cf1")
+    assert wait_until(lambda: only_panel(feed).selected == "cf1", COMMAND_TIMEOUT_S)
+
+
+def test_stop_needs_confirmation_and_is_acknowledged_by_telemetry(feed: Feed) -> None:
     from playwright.sync_api import expect
 
     page, fake, bus = feed.page, feed.fake, feed.bus
     stop_button = page.get_by_role("button", name="Emergency stop")
     confirm = page.get_by_role("button", name="Confirm stop")
+    n_stops = len(fake.stops)
 
     stop_button.click()
     expect(confirm).to_be_visible()
     assert bus.flush()
-    assert fake.stops == [], "a Stop went out before the confirmation"
+    assert len(fake.stops) == n_stops, "a Stop went out before the confirmation"
     page.get_by_role("button", name="Cancel").click()
     expect(confirm).to_be_hidden()
     assert bus.flush()
-    assert fake.stops == [], "Cancel sent a Stop"
+    assert len(fake.stops) == n_stops, "Cancel sent a Stop"
 
     stop_button.click()
     t_click_s = time.time()
     confirm.click()
-    assert fake.wait_for(lambda f: len(f.stops) == 1, COMMAND_TIMEOUT_S), "no Stop on the bus"
-    drone, stop = fake.stops[0]
+    assert fake.wait_for(lambda f: len(f.stops) == n_stops + 1, COMMAND_TIMEOUT_S), "no Stop"
+    drone, stop = fake.stops[-1]
     assert drone == "cf1" and stop["reason"] == "operator"
     assert abs(stop["stamp_s"] - t_click_s) < 30.0
     expect(confirm).to_be_hidden()
-    expect(page.get_by_text("Stop sent", exact=False).first).to_be_visible()
+    # The fake drone obeys: its telemetry says disarmed, and only then "acknowledged".
+    expect(page.get_by_text("Stop acknowledged: disarmed", exact=False).first).to_be_visible()
+    fake.rearm("cf1")
+
+
+def test_keyboard_shortcut_asks_then_stops(feed: Feed) -> None:
+    from playwright.sync_api import expect
+
+    page, fake = feed.page, feed.fake
+    n_stops = len(fake.stops)
+    box = scene_canvas_box(page)  # focus out of any field: the browser keeps keys there
+    page.mouse.click(box["x"] + 20, box["y"] + box["height"] - 20)
+    page.keyboard.press("Shift+S")
+    expect(page.get_by_role("button", name="Confirm stop")).to_be_visible()
+    assert feed.bus.flush()
+    assert len(fake.stops) == n_stops, "the first Shift+S must only ask"
+    page.keyboard.press("Shift+S")
+    assert fake.wait_for(lambda f: len(f.stops) == n_stops + 1, COMMAND_TIMEOUT_S), (
+        "Shift+S twice sent no Stop"
+    )
+    assert fake.stops[-1][0] == "cf1"
+    expect(page.get_by_role("button", name="Confirm stop")).to_be_hidden()
+    fake.rearm("cf1")
+
+
+def test_stop_all_stops_every_drone(feed: Feed) -> None:
+    from playwright.sync_api import expect
+
+    page, fake = feed.page, feed.fake
+    n_stops = len(fake.stops)
+    page.get_by_role("button", name="Stop all drones").click()
+    confirm = page.get_by_role("button", name="Confirm stop all")
+    expect(confirm).to_be_visible()
+    confirm.click()
+    assert fake.wait_for(lambda f: len(f.stops) >= n_stops + 2, COMMAND_TIMEOUT_S)
+    assert sorted(d for d, _ in fake.stops[n_stops:]) == ["cf1", "cf2"]
+    for drone in ("cf1", "cf2"):
+        fake.rearm(drone)
+
+
+def test_each_tab_has_its_own_selected_drone(feed: Feed, browser: Any) -> None:
+    from playwright.sync_api import expect
+
+    other = open_page(browser, feed.dashboard.url, feed.requests, viewport=VIEWPORT)
+    try:
+        assert wait_until(lambda: len(feed.dashboard.panels) == 2, COMMAND_TIMEOUT_S)
+        expect(other.get_by_text("This tab has its own selected drone").first).to_be_attached()
+        select_drone(other, "cf2")
+        assert wait_until(
+            lambda: sorted(str(p.selected) for p in feed.dashboard.panels) == ["cf1", "cf2"],
+            COMMAND_TIMEOUT_S,
+        ), [p.selected for p in feed.dashboard.panels]
+        expect(other.get_by_label("Drone", exact=True).first).to_have_value("cf2")
+        expect(feed.page.get_by_label("Drone", exact=True).first).to_have_value("cf1")
+        # cf1's fixed |T| = 0.250 N shows in the first tab only.
+        expect(feed.page.get_by_text("0.250 N", exact=True).first).to_be_visible()
+        expect(other.get_by_text("0.250 N", exact=True)).to_have_count(0)
+    finally:
+        other.context.close()
+    assert wait_until(lambda: len(feed.dashboard.panels) == 1, COMMAND_TIMEOUT_S)
 
 
 def test_nothing_is_fetched_from_outside(feed: Feed) -> None:

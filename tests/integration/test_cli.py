@@ -30,7 +30,7 @@ def _gs(*args: str, timeout_s: float = 60.0) -> subprocess.CompletedProcess[str]
 def test_help_version_and_scenarios() -> None:
     out = _gs("--help")
     assert out.returncode == 0
-    for cmd in ("serve", "sim", "demo", "record", "replay"):
+    for cmd in ("serve", "sim", "demo", "record", "replay", "crazyflie"):
         assert cmd in out.stdout
     serve_help = _gs("serve", "--help").stdout
     for flag in ("--config", "--connect", "--listen", "--headless", "--web-host", "--web-port"):
@@ -50,6 +50,39 @@ def test_bad_config_fails_at_start_naming_key_and_value(tmp_path: Path) -> None:
     assert "tether.weight_n_per_m = -0.05" in out.stderr
     out = _gs("sim", "--scenario", "no_such_scenario", "--duration", "1")
     assert out.returncode != 0 and "no_such_scenario" in out.stderr
+
+
+@pytest.mark.parametrize(
+    ("args", "needle"),
+    [
+        (("serve", "--headless", "--connect", "tcp/127.0.0.1:{port}"), "no router reachable at"),
+        (("record", "--out", "x.mcap", "--connect", "tcp/127.0.0.1:{port}"), "no router reachable"),
+        (("sim", "--connect", "tcp/127.0.0.1:{port}"), "no router reachable at tcp/127.0.0.1:"),
+        (("serve", "--headless", "--connect", "bogus"), "zenoh.connect = ['bogus']"),
+        (("sim", "--scenario", "nope"), "unknown scenario 'nope'"),
+        (("demo", "--scenario", "nope", "--headless"), "unknown scenario 'nope'"),
+        (("replay", "--offline", "x.mcap"), "replay --offline needs --out"),
+        (("serve", "--headless", "--config", "{strings}"), "tether.length_m = '1.6'"),
+    ],
+)
+def test_errors_are_one_line_and_exit_2(tmp_path: Path, args: tuple[str, ...], needle: str) -> None:
+    # A port nothing listens on: a router that is down.
+    strings = tmp_path / "strings.toml"
+    strings.write_text('[tether]\nlength_m = "1.6"\n')
+    port = free_port()
+    argv = [a.format(port=port, strings=strings) for a in args]
+    out = subprocess.run(
+        [sys.executable, "-m", "groundstation", *argv],
+        capture_output=True,
+        text=True,
+        timeout=60.0,
+        cwd=tmp_path,
+    )
+    assert out.returncode == 2, out.stderr
+    lines = out.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("groundstation: "), out.stderr
+    assert needle in lines[0], lines[0]
+    assert "Traceback" not in out.stderr
 
 
 @pytest.mark.slow

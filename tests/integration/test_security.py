@@ -116,7 +116,7 @@ class Pki:
         self.router = make_leaf(directory, self.ca, "router", server=True)
         self.clients = {
             cn: make_leaf(directory, self.ca, cn)
-            for cn in ("groundstation", "operator", "observer")
+            for cn in ("groundstation", "operator", "observer", "cf1")
         }
         rogue_dir = directory / "rogue"
         rogue_dir.mkdir()
@@ -268,7 +268,7 @@ def test_mutual_tls(pki: Pki, procs: list[Proc]) -> None:
     assert_cannot_connect(rogue)
 
 
-def test_access_control_only_the_ground_station_commands(pki: Pki, procs: list[Proc]) -> None:
+def test_acl_operators_stop_the_ground_station_steers(pki: Pki, procs: list[Proc]) -> None:
     router, endpoint = start_router(pki, "router-mtls.json5", acl=True)
     procs.append(router)
 
@@ -293,21 +293,43 @@ def test_access_control_only_the_ground_station_commands(pki: Pki, procs: list[P
     sub = mtls("groundstation", role="sub", keys=("tether/**", "acl-test/**"))
     sub.wait_line("ready", 30.0)
 
-    # A denied put followed by an allowed one from the same session: the router handles one
-    # link's messages in order, so once the allowed one has arrived the denied one would
-    # have arrived before it.
+    # Denied puts followed by allowed ones from the same session: the router handles one
+    # link's messages in order, so once the allowed ones have arrived the denied ones would
+    # have arrived before them.
     operator = mtls(
         "operator",
         role="pub",
         puts=(
-            ("tether/cf1/cmd/stop", '{"stamp_s":1.0,"reason":"operator"}'),
+            ("tether/cf1/cmd/setpoint", '{"stamp_s":1.0,"position_m":[0,0,1]}'),
             ("tether/cf1/estimate", '{"forged":true}'),
+            ("tether/cf1/events", '{"forged":true}'),
+            ("tether/cf1/cmd/stop", '{"stamp_s":1.0,"reason":"operator"}'),
+            ("tether/cf2/cmd/stop", '{"stamp_s":1.0,"reason":"operator"}'),
             ("tether/cf1/follow", '{"enabled":false}'),
         ),
     )
     operator.wait_line("sent", 30.0)
+    # The operator role stops every drone (the dashboard's emergency Stop) ...
+    lines = [sub.wait_line("got", 15.0) for _ in range(3)]
+    assert lines == [
+        'got tether/cf1/cmd/stop {"stamp_s":1.0,"reason":"operator"}',
+        'got tether/cf2/cmd/stop {"stamp_s":1.0,"reason":"operator"}',
+        'got tether/cf1/follow {"enabled":false}',
+    ], lines
+    # ... but setpoints, estimates and events stay the ground station's.
+
+    # A drone's certificate may not command anything, not even a Stop.
+    drone = mtls(
+        "cf1",
+        role="pub",
+        puts=(
+            ("tether/cf2/cmd/stop", '{"stamp_s":1.5,"reason":"forged"}'),
+            ("acl-test/marker", "cf1"),
+        ),
+    )
+    drone.wait_line("sent", 30.0)
     line = sub.wait_line("got", 15.0)
-    assert line == 'got tether/cf1/follow {"enabled":false}', line
+    assert line == "got acl-test/marker cf1", line
 
     ground_station = mtls(
         "groundstation",

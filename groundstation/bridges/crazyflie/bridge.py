@@ -1,0 +1,593 @@
+"""The bridge's logic, without threads or I/O: which variables, which blocks, units, alignment,
+thrust, and the command gate (watchdog and stop latch).
+
+The runner (:mod:`groundstation.bridges.crazyflie.runner`) feeds these with what the link
+and the bus deliver and with the host's monotonic clock as a parameter (``now_s``).
+
+Units at the Crazyflie side (firmware log variables):
+
+=========================  ===========  =========================================
+variable                   unit         Telemetry field
+=========================  ===========  =========================================
+``acc.x/y/z``              g            ``accel_mps2`` (× 9.81), body frame
+``gyro.x/y/z``             deg/s        ``gyro_rps`` (× π/180), body frame
+``stateEstimate.qw..qz``   –            ``quat_wxyz`` (body → world, normalised)
+``motor.m1..m4``           0..65535     ``thrust_n`` via ``thrust_map``, summed
+``pwm.m1_pwm..m4_pwm``     0..65535     (the same; the duty after battery compensation)
+``pm.vbat``                V            ``vbat_v``
+``supervisor.info``        bit field    ``armed`` (bit 1, "is armed")
+=========================  ===========  =========================================
+
+The Crazyflie's body frame is the contract's (x forward, y left, z up) and its accelerometer
+reads about +1 g on z level at rest, so no axis changes sign.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Literal
+
+from groundstation.bridges.crazyflie.link import TYPE_SIZES, LogBlock
+from groundstation.config import CrazyflieSection
+from groundstation.messages import Telemetry
+
+__all__ = [
+    "ACC",
+    "ATTITUDE",
+    "GYRO",
+    "G_MPS2",
+    "MAX_BLOCK_BYTES",
+    "Aligned",
+    "Aligner",
+    "CommandGate",
+    "MissingVariables",
+    "MocapPose",
+    "SetpointCommand",
+    "Skip",
+    "VariablePlan",
+    "build_telemetry",
+    "plan_blocks",
+    "plan_variables",
+    "thrust_n",
+    "yaw_deg_from_quat",
+]
+
+G_MPS2 = 9.81
+"""m/s² per g for ``acc.*`` (the value the contract's at-rest reading uses)."""
+MAX_BLOCK_BYTES = 26
+"""Log data per CRTP packet (cflib ``LogConfig.MAX_LEN``: 30 bytes less id and timestamp)."""
+TIMESTAMP_WRAP_MS = 1 << 24
+"""Log timestamps are 24-bit milliseconds (they wrap after 4.66 h)."""
+
+ACC = ("acc.x", "acc.y", "acc.z")
+GYRO = ("gyro.x", "gyro.y", "gyro.z")
+ATTITUDE = ("stateEstimate.qw", "stateEstimate.qx", "stateEstimate.qy", "stateEstimate.qz")
+MOTORS = {
+    "motor": ("motor.m1", "motor.m2", "motor.m3", "motor.m4"),
+    "pwm": ("pwm.m1_pwm", "pwm.m2_pwm", "pwm.m3_pwm", "pwm.m4_pwm"),
+}
+VBAT = "pm.vbat"
+SUPERVISOR_INFO = "supervisor.info"
+SUPERVISOR_IS_ARMED_BIT = 1
+"""cflib ``supervisor.BIT_IS_ARMED``; the firmware's ``supervisor.info`` documents the same."""
+
+
+class MissingVariables(ValueError):
+    """The firmware's log TOC lacks variables the configuration needs (all named)."""
+
+    def __init__(self, missing: Sequence[str], uri: str) -> None:
+        self.missing = tuple(missing)
+        super().__init__(
+            f"{uri}: the firmware does not log {', '.join(self.missing)} "
+            "(check [crazyflie] motor_variables / attitude_source / armed_source, or the "
+            "firmware version)"
+        )
+
+
+@dataclass(frozen=True, slots=True)
+class VariablePlan:
+    """Which variables to log, split into blocks."""
+
+    fast: tuple[LogBlock, ...]
+    """Sampled every telemetry period and aligned by timestamp."""
+    slow: tuple[LogBlock, ...]
+    """Battery and armed state: the latest value joins each Telemetry."""
+    motors: tuple[str, ...]
+    attitude: tuple[str, ...]
+    """``stateEstimate.q*`` or empty when the attitude comes from motion capture."""
+    armed: bool
+    """``supervisor.info`` is logged."""
+    vbat: bool
+
+
+def plan_blocks(
+    name: str,
+    groups: Sequence[Sequence[str]],
+    toc: Mapping[str, str],
+    period_ms: int,
+    fetch_as: Mapping[str, str] | None = None,
+    max_bytes: int = MAX_BLOCK_BYTES,
+) -> list[LogBlock]:
+    """Pack groups of variables, in order, into blocks of at most ``max_bytes`` of data.
+
+    A group (the components of one vector) stays in one block; a group larger than a packet
+    is split. Each group goes into the first block with room (first fit), so a small group
+    may fill a gap left earlier.
+
+    Args:
+        name: prefix of the block names (``name0``, ``name1``, ...).
+        groups: ``group.name`` variables, e.g. ``[ACC, GYRO, ATTITUDE]``.
+        toc: the firmware's log TOC, ``{"group.name": C type}``.
+        period_ms: period of every block, a multiple of 10 ms in 10..2540.
+        fetch_as: a narrower type to fetch some variables as (default: the stored type).
+
+    Raises:
+        ValueError: a period not in 10 ms steps.
+    """
+    if period_ms % 10 or not 10 <= period_ms <= 2540:
+        raise ValueError(f"log period {period_ms} ms is not a multiple of 10 ms in 10..2540")
+    fetch_as = fetch_as or {}
+    blocks: list[list[tuple[str, str]]] = []
+    used: list[int] = []
+
+    def place(items: list[tuple[str, str]], size: int) -> None:
+        for i, u in enumerate(used):
+            if u + size <= max_bytes:
+                blocks[i].extend(items)
+                used[i] += size
+                return
+        blocks.append(list(items))
+        used.append(size)
+
+    for group in groups:
+        items = [(v, fetch_as.get(v, toc[v])) for v in group]
+        size = sum(TYPE_SIZES[t] for _, t in items)
+        if size <= max_bytes:
+            place(items, size)
+        else:
+            for item in items:
+                place([item], TYPE_SIZES[item[1]])
+    return [
+        LogBlock(f"{name}{i}", period_ms, tuple(v for v, _ in b), tuple(t for _, t in b))
+        for i, b in enumerate(blocks)
+    ]
+
+
+def plan_variables(section: CrazyflieSection, toc: Mapping[str, str], uri: str) -> VariablePlan:
+    """Check the configuration's variables against the TOC and lay out the log blocks.
+
+    Raises:
+        MissingVariables: naming every variable the configuration needs and the TOC lacks.
+    """
+    motors = MOTORS[section.motor_variables]
+    attitude = ATTITUDE if section.attitude_source == "estimator" else ()
+    needed = [*ACC, *GYRO, *attitude, *motors]
+    if section.armed_source == "supervisor":
+        needed.append(SUPERVISOR_INFO)
+    missing = [v for v in needed if v not in toc]
+    if missing:
+        raise MissingVariables(missing, uri)
+    armed = section.armed_source != "none" and SUPERVISOR_INFO in toc
+    vbat = VBAT in toc
+    slow_vars = [v for v, on in ((VBAT, vbat), (SUPERVISOR_INFO, armed)) if on]
+    # Motor commands are 0..65535 (firmware doc) but stored as uint32: fetch them as uint16
+    # so that attitude and motors share one packet.
+    narrow = {m: "uint16_t" for m in motors if toc[m] in ("uint32_t", "int32_t")}
+    groups = [g for g in (ACC, GYRO, attitude, motors) if g]
+    fast = plan_blocks("tel", groups, toc, section.log_period_ms, narrow)
+    slow = plan_blocks("slow", [slow_vars], toc, section.slow_period_ms) if slow_vars else []
+    return VariablePlan(tuple(fast), tuple(slow), motors, attitude, armed, vbat)
+
+
+def thrust_n(pwms: Sequence[float], thrust_map: Sequence[float]) -> float:
+    """Collective thrust: the sum over motors of ``a·pwm² + b·pwm + c``, newtons.
+
+    A motor at pwm 0 is off and contributes 0 (the fit's offset ``c`` would say 0.5 mN); a
+    negative per-motor value is clipped to 0.
+    """
+    a, b, c = thrust_map
+    total = 0.0
+    for pwm in pwms:
+        if pwm > 0:
+            total += max(0.0, a * pwm * pwm + b * pwm + c)
+    return total
+
+
+def yaw_deg_from_quat(quat_wxyz: Sequence[float]) -> float:
+    """Yaw (rotation about world z, ZYX convention) of a body → world quaternion, degrees."""
+    w, x, y, z = quat_wxyz
+    return math.degrees(math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z)))
+
+
+def normalise_quat(values: Sequence[float]) -> tuple[float, float, float, float] | None:
+    """Unit quaternion, or None when not finite or of norm far from 1 (a broken reading)."""
+    if len(values) != 4 or not all(math.isfinite(v) for v in values):
+        return None
+    n = math.sqrt(sum(v * v for v in values))
+    if not 0.5 < n < 1.5:
+        return None
+    w, x, y, z = (v / n for v in values)
+    return (w, x, y, z)
+
+
+@dataclass(frozen=True, slots=True)
+class Aligned:
+    """The fast blocks of one log period, put together."""
+
+    stamp_ms: int
+    """Firmware clock of the first fast block, unwrapped, ms."""
+    values: Mapping[str, float]
+
+
+@dataclass
+class _Unwrap:
+    last_raw: int | None = None
+    offset: int = 0
+
+    def __call__(self, raw: int) -> int | None:
+        """Unwrapped ms, or None when ``raw`` is not after the previous one (out of order)."""
+        if self.last_raw is None:
+            self.last_raw = raw
+            return raw
+        step = (raw - self.last_raw) % TIMESTAMP_WRAP_MS
+        if step == 0 or step >= TIMESTAMP_WRAP_MS // 2:
+            return None
+        if raw < self.last_raw:
+            self.offset += TIMESTAMP_WRAP_MS
+        self.last_raw = raw
+        return raw + self.offset
+
+
+@dataclass
+class Aligner:
+    """Joins the fast blocks of one period by their firmware timestamps.
+
+    The firmware runs a timer per block, started when the block is, so blocks of the same
+    period carry timestamps offset by a fixed phase; the samples nearest the first block's
+    (within half a period) are one period. A block
+    sample whose timestamp is not after its block's previous one is dropped
+    (``out_of_order``); a first-block sample whose partners were lost is dropped
+    (``unmatched``). Counters say how many.
+
+    Args:
+        blocks: names of the fast blocks; the first one's timestamp stamps the result.
+        period_ms: their common period.
+    """
+
+    blocks: Sequence[str]
+    period_ms: int
+    max_pending: int = 16
+    out_of_order: int = 0
+    unmatched: int = 0
+    _pending: dict[str, deque[tuple[int, Mapping[str, float]]]] = field(default_factory=dict)
+    _unwrap: dict[str, _Unwrap] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget everything (a new connection: the firmware clock may have restarted)."""
+        self._pending = {b: deque() for b in self.blocks}
+        self._unwrap = {b: _Unwrap() for b in self.blocks}
+
+    def push(self, block: str, raw_ms: int, values: Mapping[str, float]) -> list[Aligned]:
+        """Add one block sample; return the periods it completes, oldest first."""
+        if block not in self._pending:
+            return []
+        stamp = self._unwrap[block](raw_ms)
+        if stamp is None:
+            self.out_of_order += 1
+            return []
+        queue = self._pending[block]
+        queue.append((stamp, values))
+        if len(queue) > self.max_pending:
+            queue.popleft()
+            if block == self.blocks[0]:
+                self.unmatched += 1
+        return self._drain()
+
+    def _drain(self) -> list[Aligned]:
+        out: list[Aligned] = []
+        tol = self.period_ms / 2.0
+        first = self._pending[self.blocks[0]]
+        others = [self._pending[name] for name in self.blocks[1:]]
+        while first:
+            t0, values0 = first[0]
+            for queue in others:
+                while queue and queue[0][0] < t0 - tol:
+                    queue.popleft()  # a period whose first-block sample was lost
+                    self.unmatched += 1
+            if any(q and q[0][0] > t0 + tol for q in others):
+                first.popleft()  # a partner of this period was lost
+                self.unmatched += 1
+                continue
+            if not all(others):
+                break  # a partner has not arrived yet
+            merged = dict(values0)
+            for queue in others:
+                merged.update(queue.popleft()[1])
+            first.popleft()
+            out.append(Aligned(t0, merged))
+        return out
+
+
+@dataclass(frozen=True, slots=True)
+class MocapPose:
+    """A motion-capture pose of the drone, world frame."""
+
+    position_m: tuple[float, float, float]
+    quat_wxyz: tuple[float, float, float, float] | None
+    received_s: float
+    """Host monotonic clock when it arrived, s."""
+
+
+class Skip(ValueError):
+    """This period yields no Telemetry; ``kind`` says why (counted, logged once per kind)."""
+
+    def __init__(self, kind: str, detail: str) -> None:
+        super().__init__(f"{kind}: {detail}")
+        self.kind = kind
+
+
+def build_telemetry(
+    aligned: Aligned,
+    plan: VariablePlan,
+    section: CrazyflieSection,
+    seq: int,
+    slow: Mapping[str, float],
+    mocap: MocapPose | None,
+    now_s: float,
+) -> Telemetry:
+    """One period of log data → the contract's Telemetry, SI units.
+
+    Args:
+        aligned: the fast blocks of one period.
+        plan: what is logged.
+        section: ``[crazyflie]``.
+        seq: the Telemetry's ``seq``.
+        slow: latest values of the slow block (``pm.vbat``, ``supervisor.info``).
+        mocap: latest motion-capture pose, or None.
+        now_s: host monotonic clock, s (for the pose's age).
+
+    Raises:
+        Skip: non-finite readings (``bad_reading``), no attitude (``no_attitude``).
+    """
+    v = aligned.values
+    try:
+        acc_g = [float(v[k]) for k in ACC]
+        gyro_dps = [float(v[k]) for k in GYRO]
+        pwms = [float(v[k]) for k in plan.motors]
+    except KeyError as exc:
+        raise Skip("bad_reading", f"{exc.args[0]} missing from the period") from None
+    if not all(math.isfinite(x) for x in (*acc_g, *gyro_dps, *pwms)):
+        raise Skip("bad_reading", "non-finite accelerometer, gyro or motor value")
+    stale_s = section.mocap_stale_s
+    fresh = mocap if mocap is not None and now_s - mocap.received_s <= stale_s else None
+    if section.attitude_source == "mocap":
+        raw = fresh.quat_wxyz if fresh is not None else None
+        if raw is None:
+            raise Skip("no_attitude", f"no motion-capture attitude within {stale_s} s")
+        quat = normalise_quat(raw)
+        if quat is None:
+            raise Skip("bad_reading", "motion-capture quaternion not of unit norm")
+    else:
+        quat = normalise_quat([float(v[k]) for k in plan.attitude])
+        if quat is None:
+            raise Skip("bad_reading", "attitude quaternion not finite or not of unit norm")
+    vbat = slow.get(VBAT)
+    armed: bool | None = None
+    if plan.armed and SUPERVISOR_INFO in slow:
+        armed = bool((int(slow[SUPERVISOR_INFO]) >> SUPERVISOR_IS_ARMED_BIT) & 1)
+    fields: dict[str, object] = {
+        "seq": seq,
+        "stamp_s": aligned.stamp_ms / 1000.0,
+        # specific force, g -> m/s^2
+        "accel_mps2": tuple(a * G_MPS2 for a in acc_g),
+        "quat_wxyz": quat,
+        "thrust_n": thrust_n(pwms, section.thrust_map),
+        "gyro_rps": tuple(math.radians(g) for g in gyro_dps),
+        "position_m": fresh.position_m if fresh is not None else None,
+        "vbat_v": vbat if vbat is not None and math.isfinite(vbat) and vbat > 0 else None,
+    }
+    if armed is not None:
+        fields["armed"] = armed
+    return Telemetry.model_validate(fields, strict=False)
+
+
+@dataclass(frozen=True, slots=True)
+class SetpointCommand:
+    """What the runner sends this tick."""
+
+    position_m: tuple[float, float, float]
+    yaw_deg: float
+    motors_off: bool = False
+    """The landing ramp has ended: send a stop setpoint instead, then nothing."""
+
+
+@dataclass(frozen=True, slots=True)
+class _Ramp:
+    start_m: tuple[float, float, float]
+    target_m: tuple[float, float, float]
+    t0_s: float
+    duration_s: float
+    land: bool
+
+    def at(self, now_s: float) -> tuple[float, float, float]:
+        f = (
+            1.0
+            if self.duration_s <= 0
+            else min(1.0, max(0.0, (now_s - self.t0_s) / self.duration_s))
+        )
+        a, b = self.start_m, self.target_m
+        return (a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1]), a[2] + f * (b[2] - a[2]))
+
+
+LAND_SETTLE_S = 0.5
+"""After the landing ramp reaches the floor, hold this long before the motors go off."""
+
+
+Verdict = Literal["accepted", "latched", "stale", "clock", "bad"]
+
+
+@dataclass
+class CommandGate:
+    """Watchdog and stop latch between the bus's commands and the drone.
+
+    * Nothing is sent until a Setpoint arrives: the bridge never flies on its own.
+    * Each tick re-sends the latest setpoint (the firmware levels and then cuts the motors
+      when its stream of setpoints stops, so holding means repeating). No fresh setpoint for
+      ``watchdog_s``: hold the last one, never extrapolate (``holding`` says so).
+    * Setpoints are stamped on the drone's clock. One stamped more than ``watchdog_s``
+      before the latest Telemetry, or before the setpoint in force, or arriving before any
+      Telemetry, is stale; one more than ``watchdog_s`` after it is on another clock: both
+      are dropped and counted.
+    * Stop latches: no setpoint is sent or accepted until :meth:`rearm`; a link loss also
+      forgets the setpoint in force (after a reconnection the drone may be on the floor, and a
+      held setpoint would lift it).
+
+    Args:
+        watchdog_s: freshness of setpoints, host seconds and drone seconds.
+        yaw_deg: yaw of the setpoints; None: the drone's yaw when the first setpoint arrives.
+    """
+
+    watchdog_s: float
+    yaw_deg: float | None = None
+    latched: bool = False
+    stop_reason: str = ""
+    dropped: dict[str, int] = field(default_factory=dict)
+    _position: tuple[float, float, float] | None = None
+    _stamp_s: float = -math.inf
+    _received_s: float = -math.inf
+    _yaw: float | None = None
+    _ramp: _Ramp | None = None
+
+    def on_setpoint(
+        self,
+        position_m: Sequence[float],
+        stamp_s: float,
+        now_s: float,
+        telemetry_stamp_s: float | None,
+        current_yaw_deg: float | None,
+    ) -> Verdict:
+        """Take a Setpoint from the bus.
+
+        Args:
+            position_m: world frame, metres.
+            stamp_s: the Setpoint's stamp, on the drone's clock (the service stamps it with
+                the Telemetry it was computed from).
+            now_s: host monotonic clock, s.
+            telemetry_stamp_s: ``stamp_s`` of the latest Telemetry published, or None.
+            current_yaw_deg: the drone's yaw now (held when ``yaw_deg`` is None).
+        """
+        verdict: Verdict = "accepted"
+        if self.latched:
+            verdict = "latched"
+        elif len(position_m) != 3 or not all(math.isfinite(v) for v in position_m):
+            verdict = "bad"
+        elif telemetry_stamp_s is None:
+            verdict = "stale"  # no telemetry yet: nothing to judge its age against
+        elif stamp_s < self._stamp_s or stamp_s < telemetry_stamp_s - self.watchdog_s:
+            verdict = "stale"
+        elif stamp_s > telemetry_stamp_s + self.watchdog_s:
+            verdict = "clock"  # not on the drone's clock (a wall-clock stamp?)
+        elif self._yaw is None:
+            yaw = self.yaw_deg if self.yaw_deg is not None else current_yaw_deg
+            if yaw is None:
+                verdict = "bad"  # no attitude yet: cannot hold the drone's yaw
+            else:
+                self._yaw = yaw
+        if verdict != "accepted":
+            self.dropped[verdict] = self.dropped.get(verdict, 0) + 1
+            return verdict
+        x, y, z = (float(v) for v in position_m)
+        self._ramp = None
+        self._position = (x, y, z)
+        self._stamp_s = stamp_s
+        self._received_s = now_s
+        return verdict
+
+    def on_stop(self, reason: str) -> None:
+        """Latch: nothing more is sent until :meth:`rearm`."""
+        self.latched = True
+        self.stop_reason = reason
+        self._forget()
+
+    def rearm(self) -> None:
+        """The operator lifts the latch; a new setpoint is needed before anything is sent."""
+        self.latched = False
+        self.stop_reason = ""
+        self._forget()
+
+    def on_link_lost(self) -> None:
+        self._forget()
+
+    def holding(self, now_s: float) -> bool:
+        """A setpoint is in force but none arrived for ``watchdog_s``."""
+        return self._position is not None and now_s - self._received_s > self.watchdog_s
+
+    def ramp(
+        self,
+        start_m: Sequence[float],
+        target_m: Sequence[float],
+        speed_mps: float,
+        now_s: float,
+        current_yaw_deg: float | None,
+        land: bool = False,
+    ) -> Literal["accepted", "latched", "bad"]:
+        """Fly a straight line at ``speed_mps`` (take-off, landing), then hold its end.
+
+        A landing ramp ends with the motors off (after :data:`LAND_SETTLE_S`). A Setpoint
+        accepted meanwhile replaces the ramp; Stop and link loss end it.
+        """
+        if self.latched:
+            self.dropped["latched"] = self.dropped.get("latched", 0) + 1
+            return "latched"
+        pts = (*start_m, *target_m)
+        yaw = (
+            self._yaw
+            if self._yaw is not None
+            else (self.yaw_deg if self.yaw_deg is not None else current_yaw_deg)
+        )
+        if len(pts) != 6 or not all(math.isfinite(v) for v in pts) or yaw is None:
+            self.dropped["bad"] = self.dropped.get("bad", 0) + 1
+            return "bad"
+        if not 0.0 < speed_mps <= 1.0:
+            self.dropped["bad"] = self.dropped.get("bad", 0) + 1
+            return "bad"
+        a = (float(start_m[0]), float(start_m[1]), float(start_m[2]))
+        b = (float(target_m[0]), float(target_m[1]), float(target_m[2]))
+        dist = math.dist(a, b)
+        self._yaw = yaw
+        self._ramp = _Ramp(a, b, now_s, dist / speed_mps, land)
+        self._position = a
+        self._received_s = now_s
+        return "accepted"
+
+    def position_in_force(self, now_s: float) -> tuple[float, float, float] | None:
+        """Where the drone is being told to be now, or None."""
+        if self._ramp is not None:
+            return self._ramp.at(now_s)
+        return self._position
+
+    def tick(self, now_s: float) -> SetpointCommand | None:
+        """The setpoint to send now, or None."""
+        if self.latched or self._position is None or self._yaw is None:
+            return None
+        ramp = self._ramp
+        if ramp is not None:
+            if ramp.land and now_s > ramp.t0_s + ramp.duration_s + LAND_SETTLE_S:
+                self._forget()
+                return SetpointCommand(ramp.target_m, 0.0, motors_off=True)
+            self._received_s = now_s  # a ramp is fresh by construction
+            return SetpointCommand(ramp.at(now_s), self._yaw)
+        return SetpointCommand(self._position, self._yaw)
+
+    def _forget(self) -> None:
+        self._ramp = None
+        self._position = None
+        self._stamp_s = -math.inf
+        self._received_s = -math.inf
+        self._yaw = None

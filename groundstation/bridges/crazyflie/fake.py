@@ -1,0 +1,274 @@
+"""TEST SUPPORT, NOT A DRONE: a fake :class:`~groundstation.bridges.crazyflie.link.Link`.
+
+It plays Crazyflie log packets (firmware units, 24-bit millisecond timestamps, one callback per
+log block as cflib delivers them) and records every command it receives. Unit tests drive it
+by hand (:meth:`FakeLink.emit`, :meth:`FakeLink.lose`); ``groundstation crazyflie --uri
+fake://SCENARIO`` plays a scenario in real time so that integration tests can run the real
+bridge process without a drone. Options ride on the URI's query::
+
+    fake://hover?record=/tmp/cmds.jsonl&drop_after_s=2&down_s=1&missing=pm.vbat&ooo=1
+
+``hover``: level, still, the tether pulling 0.05 N down; ``tug``: the same pulled 0.2 N down.
+After ``stop_motors`` the motors read 0 and the armed bit clears (the drone sits on the floor).
+``record`` appends one JSON line per call; ``drop_after_s`` loses the link once after that many
+seconds of playback and refuses to reconnect for ``down_s``; ``missing`` drops variables from
+the TOC; ``ooo`` repeats an old timestamp every 25th period (out-of-order packets).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import threading
+import time
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+from urllib.parse import parse_qs, urlparse
+
+import numpy as np
+
+from groundstation.bridges.crazyflie.link import (
+    DataHandler,
+    LinkError,
+    LogBlock,
+    LostHandler,
+)
+
+__all__ = ["FAKE_SCENARIOS", "FAKE_TOC", "FakeLink", "pwm_for_thrust"]
+
+FAKE_TOC: Mapping[str, str] = {
+    **{f"acc.{a}": "float" for a in "xyz"},
+    **{f"gyro.{a}": "float" for a in "xyz"},
+    **{f"stateEstimate.q{a}": "float" for a in "wxyz"},
+    **{f"motor.m{i}": "uint32_t" for i in range(1, 5)},
+    **{f"pwm.m{i}_pwm": "uint32_t" for i in range(1, 5)},
+    "pm.vbat": "float",
+    "supervisor.info": "uint16_t",
+}
+"""A Crazyflie 2.x firmware's log TOC, reduced to what the bridge may ask for (C types as in
+the firmware: ``motor.m*`` are ``uint32_t``, ``supervisor.info`` ``uint16_t``)."""
+
+FAKE_SCENARIOS: Mapping[str, float] = {"hover": 0.05, "tug": 0.20}
+"""Scenario → downward pull of the tether on the drone, N."""
+
+_ARMED_INFO = 0b1011  # can be armed, is armed, can fly
+_DISARMED_INFO = 0b0001
+
+
+def pwm_for_thrust(thrust_per_motor_n: float, thrust_map: Sequence[float]) -> float:
+    """Inverse of ``a·pwm² + b·pwm + c``: the pwm giving this thrust per motor."""
+    a, b, c = thrust_map
+    if a == 0:
+        return (thrust_per_motor_n - c) / b
+    return (-b + math.sqrt(b * b - 4 * a * (c - thrust_per_motor_n))) / (2 * a)
+
+
+class FakeLink:
+    """A scripted Crazyflie for tests (see the module docstring).
+
+    Args:
+        uri: ``fake://SCENARIO[?options]`` (only used by :meth:`start_player`).
+        mass_kg: the fake drone's mass.
+        thrust_map: the map the bridge uses, inverted to produce motor values.
+        toc: the TOC to report (default :data:`FAKE_TOC` less ``missing``).
+        seed: noise seed.
+        realtime: play the scenario on a thread once logging starts (the CLI's fake).
+    """
+
+    def __init__(
+        self,
+        uri: str = "fake://hover",
+        *,
+        mass_kg: float = 0.030,
+        thrust_map: Sequence[float] = (2.130295e-11, 1.032633e-6, 5.484560e-4),
+        toc: Mapping[str, str] | None = None,
+        seed: int = 0,
+        realtime: bool = False,
+    ) -> None:
+        self.uri = uri
+        parsed = urlparse(uri)
+        query = {k: v[-1] for k, v in parse_qs(parsed.query).items()}
+        self.scenario = parsed.netloc or "hover"
+        if self.scenario not in FAKE_SCENARIOS:
+            raise LinkError(f"fake scenario {self.scenario!r}: one of {sorted(FAKE_SCENARIOS)}")
+        missing = [m for m in query.get("missing", "").split(",") if m]
+        self.toc = dict(toc if toc is not None else FAKE_TOC)
+        for name in missing:
+            self.toc.pop(name, None)
+        self.record_path = Path(query["record"]) if "record" in query else None
+        self.drop_after_s = float(query["drop_after_s"]) if "drop_after_s" in query else None
+        self.down_s = float(query.get("down_s", "1.0"))
+        self.out_of_order = query.get("ooo", "0") == "1"
+        self.realtime = realtime
+        self.mass_kg = mass_kg
+        self.thrust_map = tuple(thrust_map)
+        self.commands: list[tuple[str, tuple[Any, ...]]] = []
+        self.opens = 0
+        self.motors_stopped = False
+        self._rng = np.random.default_rng(seed)
+        self._lock = threading.Lock()
+        self._on_lost: LostHandler | None = None
+        self._on_data: DataHandler | None = None
+        self._blocks: tuple[LogBlock, ...] = ()
+        self._open = False
+        self._down_until = -math.inf
+        self._dropped = False
+        self._player: threading.Thread | None = None
+        self._stop_player = threading.Event()
+        self._clock_ms = 5000
+
+    # ------------------------------------------------------------------ Link interface
+
+    def open(self, on_lost: LostHandler, timeout_s: float) -> Mapping[str, str]:
+        self._record("open")
+        if time.monotonic() < self._down_until:
+            raise LinkError(f"no answer from {self.uri} (fake: link down)")
+        with self._lock:
+            self._on_lost = on_lost
+            self._open = True
+            self.opens += 1
+        return dict(self.toc)
+
+    def start_logging(self, blocks: Sequence[LogBlock], on_data: DataHandler) -> None:
+        for block in blocks:
+            for var in block.variables:
+                if var not in self.toc:
+                    raise LinkError(f"log block {block.name}: Variable {var} not in TOC")
+            if block.size_bytes > 26 or block.period_ms % 10:
+                raise LinkError(f"log block {block.name} too large or bad period")
+        self._record("start_logging", *[b.name for b in blocks])
+        with self._lock:
+            self._blocks = tuple(blocks)
+            self._on_data = on_data
+        if self.realtime:
+            self.start_player()
+
+    def send_position_setpoint(self, x_m: float, y_m: float, z_m: float, yaw_deg: float) -> None:
+        self._record("send_position_setpoint", x_m, y_m, z_m, yaw_deg)
+
+    def stop_motors(self) -> None:
+        self.motors_stopped = True
+        self._record("stop_motors")
+
+    def send_stop_setpoint(self) -> None:
+        self._record("send_stop_setpoint")
+
+    def arm(self) -> None:
+        self.motors_stopped = False
+        self._record("arm")
+
+    def send_extpos(self, position_m: Sequence[float], quat_wxyz: Sequence[float] | None) -> None:
+        self._record("send_extpos", *position_m)
+
+    def close(self) -> None:
+        self._stop_player.set()
+        player = self._player
+        if player is not None and player is not threading.current_thread():
+            player.join(2.0)
+        self._player = None
+        with self._lock:
+            was_open, self._open = self._open, False
+        if was_open:
+            self._record("close")
+
+    # ------------------------------------------------------------------ test driving
+
+    def emit(self, block: str, timestamp_ms: int, values: Mapping[str, float]) -> None:
+        """Deliver one log packet of ``block`` (timestamp wraps at 24 bits, as on the wire)."""
+        with self._lock:
+            handler = self._on_data if self._open else None
+        if handler is not None:
+            handler(block, int(timestamp_ms) % (1 << 24), dict(values))
+
+    def lose(self, reason: str = "fake: too many packets lost") -> None:
+        """Drop the link, as cflib's ``connection_lost`` does."""
+        with self._lock:
+            handler, self._on_lost = self._on_lost, None
+            self._open = False
+        self._record("lost", reason)
+        if handler is not None:
+            handler(reason)
+
+    def values(self) -> dict[str, float]:
+        """One sample of every TOC variable for the scenario (firmware units)."""
+        pull_n = FAKE_SCENARIOS[self.scenario]
+        noise = self._rng.normal(0.0, 1.0, 6)
+        if self.motors_stopped:
+            pwm, info = 0.0, _DISARMED_INFO
+        else:
+            # At rest the specific force is (thrust + tether) / m = g up, so the thrust
+            # carries the weight and the pull.
+            pwm = pwm_for_thrust((self.mass_kg * 9.81 + pull_n) / 4.0, self.thrust_map)
+            info = _ARMED_INFO
+        out: dict[str, float] = {
+            "acc.x": 0.002 * noise[0],
+            "acc.y": 0.002 * noise[1],
+            "acc.z": 1.0 + 0.002 * noise[2],
+            "gyro.x": 0.05 * noise[3],
+            "gyro.y": 0.05 * noise[4],
+            "gyro.z": 0.05 * noise[5],
+            "stateEstimate.qw": 1.0,
+            "stateEstimate.qx": 0.0,
+            "stateEstimate.qy": 0.0,
+            "stateEstimate.qz": 0.0,
+            "pm.vbat": 3.95,
+            "supervisor.info": float(info),
+        }
+        for i in range(1, 5):
+            out[f"motor.m{i}"] = float(round(pwm))
+            out[f"pwm.m{i}_pwm"] = float(round(pwm))
+        return {k: v for k, v in out.items() if k in self.toc}
+
+    # ------------------------------------------------------------------ real-time player
+
+    def start_player(self) -> None:
+        """Play the scenario in real time on a thread until :meth:`close` (CLI use)."""
+        self._stop_player.clear()
+        self._player = threading.Thread(target=self._play, name="fake-crazyflie", daemon=True)
+        self._player.start()
+
+    def _play(self) -> None:
+        with self._lock:
+            blocks = self._blocks
+        if not blocks:
+            return
+        period_ms = min(b.period_ms for b in blocks)
+        start = time.monotonic()
+        next_t = start
+        periods = 0
+        while not self._stop_player.is_set():
+            if (
+                self.drop_after_s is not None
+                and not self._dropped
+                and time.monotonic() - start > self.drop_after_s
+            ):
+                self._dropped = True
+                self._down_until = time.monotonic() + self.down_s
+                self.lose()
+                return
+            self._clock_ms += period_ms
+            periods += 1
+            sample = self.values()
+            for i, block in enumerate(blocks):
+                if (self._clock_ms // period_ms) % (block.period_ms // period_ms):
+                    continue
+                stamp = self._clock_ms + 2 * i  # each block runs on its own firmware timer
+                if self.out_of_order and i == 0 and periods % 25 == 0:
+                    self.emit(block.name, stamp - 3 * period_ms, _pick(sample, block))
+                self.emit(block.name, stamp, _pick(sample, block))
+            next_t += period_ms / 1000.0
+            self._stop_player.wait(max(0.0, next_t - time.monotonic()))
+
+    # ------------------------------------------------------------------ recording
+
+    def _record(self, name: str, *args: Any) -> None:
+        self.commands.append((name, args))
+        if self.record_path is not None:
+            line = json.dumps({"t": time.monotonic(), "cmd": name, "args": list(args)})
+            with self.record_path.open("a") as fh:
+                fh.write(line + "\n")
+
+
+def _pick(sample: Mapping[str, float], block: LogBlock) -> dict[str, float]:
+    return {v: sample[v] for v in block.variables}

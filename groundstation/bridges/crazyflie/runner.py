@@ -1,0 +1,505 @@
+"""The bridge at run time: one loop between a :class:`Link` and the bus.
+
+Link and bus callbacks only validate and queue; one thread (the caller's, in :meth:`run`)
+aligns log blocks, publishes Telemetry, streams setpoints and handles Stop, so the order of
+events is the order they are acted on. Bus keys (``{drone}`` is the drone id):
+
+* publishes ``tether/{drone}/telemetry`` (contract) and ``tether/{drone}/bridge`` (added:
+  status, once per ``status_period_s`` and on every change of connection or latch);
+* reads ``tether/{drone}/cmd/setpoint`` and ``tether/{drone}/cmd/stop`` (contract),
+  ``tether/{drone}/cmd/rearm`` (added: lifts the stop latch and asks the supervisor to arm,
+  any JSON object),
+  ``tether/{drone}/cmd/takeoff`` ``{"height_m": h, "speed_mps": v}`` and
+  ``tether/{drone}/cmd/land`` ``{"speed_mps": v}`` (added: straight vertical ramps of position
+  setpoints from the motion-capture position; landing ends with the motors off) and the
+  configured motion-capture key.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import queue
+import threading
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from groundstation.bridges.crazyflie.bridge import (
+    Aligner,
+    CommandGate,
+    MissingVariables,
+    MocapPose,
+    Skip,
+    VariablePlan,
+    build_telemetry,
+    plan_variables,
+    yaw_deg_from_quat,
+)
+from groundstation.bridges.crazyflie.link import Link, LinkError
+from groundstation.bus import Bus, Sample, Subscription
+from groundstation.config import CrazyflieSection
+from groundstation.messages import (
+    InvalidMessage,
+    LandIn,
+    MocapPoseIn,
+    SetpointIn,
+    StopIn,
+    TakeoffIn,
+)
+
+__all__ = ["CrazyflieBridge", "bridge_keys"]
+
+_log = logging.getLogger("groundstation.crazyflie")
+
+_BACKOFF_START_S = 0.25
+REACH_MARGIN_M = 0.05
+"""A take-off target stays this much inside the tether's length from the base."""
+
+
+def bridge_keys(drone: str) -> dict[str, str]:
+    """The bus keys of one drone's bridge."""
+    base = f"tether/{drone}"
+    return {
+        "telemetry": f"{base}/telemetry",
+        "status": f"{base}/bridge",
+        "setpoint": f"{base}/cmd/setpoint",
+        "stop": f"{base}/cmd/stop",
+        "rearm": f"{base}/cmd/rearm",
+        "takeoff": f"{base}/cmd/takeoff",
+        "land": f"{base}/cmd/land",
+    }
+
+
+@dataclass(frozen=True, slots=True)
+class _Event:
+    kind: str
+    """``data``, ``lost``, ``setpoint``, ``stop``, ``rearm``, ``mocap``, ``wake``."""
+    payload: Any = None
+    epoch: int = 0
+    """Connection number a link event belongs to (late events of an old link are ignored)."""
+
+
+class CrazyflieBridge:
+    """Runs the bridge for one drone until ``stop`` is set.
+
+    Args:
+        section: ``[crazyflie]``.
+        bus: the bus (a :class:`~groundstation.zenoh_bus.ZenohBus` in the CLI).
+        drone: the drone id used in the keys.
+        link: the drone (:class:`~groundstation.bridges.crazyflie.link.CflibLink`, or the
+            test fake).
+        clock: monotonic host clock, s.
+        floor_z_m: where a landing ramp ends, world z (``[base] floor_z_m``).
+        reach: ``(base exit point, tether length)``, world frame, m: a take-off whose target
+            lies beyond ``length - 0.05`` m of the base is refused. None: not checked.
+    """
+
+    def __init__(
+        self,
+        section: CrazyflieSection,
+        bus: Bus,
+        drone: str,
+        link: Link,
+        clock: Callable[[], float] = time.monotonic,
+        floor_z_m: float = 0.0,
+        reach: tuple[tuple[float, float, float], float] | None = None,
+    ) -> None:
+        self.section = section
+        self.bus = bus
+        self.drone = drone
+        self.link = link
+        self.keys = bridge_keys(drone)
+        self.mocap_key = section.mocap_key.replace("{drone}", drone) if section.mocap_key else None
+        self._clock = clock
+        self.floor_z_m = floor_z_m
+        self.reach = reach
+        self._events: queue.Queue[_Event] = queue.Queue()
+        self.gate = CommandGate(section.watchdog_s, section.yaw_deg)
+        self.seq = 0
+        self.connected = False
+        self.counts: dict[str, int] = {}
+        self._logged: set[str] = set()
+        self._epoch = 0
+        self._plan: VariablePlan | None = None
+        self._aligner: Aligner | None = None
+        self._slow: dict[str, float] = {}
+        self._mocap: MocapPose | None = None
+        self._last_stamp_s: float | None = None
+        self._last_data_s = 0.0
+        self._connected_s = 0.0
+        self._last_yaw_deg: float | None = None
+        self._pending_stop = False
+        self._commanding = False
+        self._holding_logged = False
+        self._subs: list[Subscription] = []
+
+    # ------------------------------------------------------------------ callbacks
+
+    def _put(self, kind: str, payload: Any = None, epoch: int = 0) -> None:
+        self._events.put(_Event(kind, payload, epoch))
+
+    def _on_bus(self, sample: Sample) -> None:
+        key = sample.key
+        try:
+            if key == self.keys["setpoint"]:
+                self._put("setpoint", SetpointIn.parse(sample.payload))
+            elif key == self.keys["stop"]:
+                self._put("stop", StopIn.parse(sample.payload))
+            elif key == self.keys["rearm"]:
+                if not isinstance(json.loads(sample.payload), dict):
+                    raise InvalidMessage("invalid", "rearm payload is not a JSON object")
+                self._put("rearm")
+            elif key == self.keys["takeoff"]:
+                self._put("takeoff", TakeoffIn.parse(sample.payload))
+            elif key == self.keys["land"]:
+                self._put("land", LandIn.parse(sample.payload))
+            elif key == self.mocap_key:
+                self._put("mocap", MocapPoseIn.parse(sample.payload))
+        except (InvalidMessage, ValueError) as exc:
+            self._put("bad_input", f"{key}: {exc}")
+
+    # ------------------------------------------------------------------ lifecycle
+
+    def run(self, stop: threading.Event) -> int:
+        """Connect, bridge, reconnect after a loss, until ``stop``; then stop and disconnect.
+
+        Returns:
+            0, or 2 when the firmware lacks a needed log variable (the message names them).
+        """
+        for name in ("setpoint", "stop", "rearm", "takeoff", "land"):
+            self._subs.append(self.bus.subscribe(self.keys[name], self._on_bus))
+        if self.mocap_key:
+            self._subs.append(self.bus.subscribe(self.mocap_key, self._on_bus))
+        backoff_s = _BACKOFF_START_S
+        next_status = self._clock()
+        try:
+            while not stop.is_set():
+                if not self.connected:
+                    try:
+                        self._connect()
+                        backoff_s = _BACKOFF_START_S
+                    except MissingVariables as exc:
+                        _log.error("%s", exc)
+                        return 2
+                    except LinkError as exc:
+                        self._once(
+                            "connect_failed",
+                            "%s; retrying (back-off up to %.1f s)",
+                            exc,
+                            self.section.reconnect_max_s,
+                        )
+                        self._drain_commands()
+                        if stop.wait(backoff_s):
+                            break
+                        backoff_s = min(2.0 * backoff_s, self.section.reconnect_max_s)
+                        continue
+                next_status = self._serve_period(stop, next_status)
+        finally:
+            self._shutdown()
+        return 0
+
+    def _connect(self) -> None:
+        self._epoch += 1
+        epoch = self._epoch
+        toc = self.link.open(
+            lambda reason: self._put("lost", reason, epoch), self.section.connect_timeout_s
+        )
+        try:
+            plan = plan_variables(self.section, toc, self.link.uri)
+        except MissingVariables:
+            self.link.close()
+            raise
+        self._plan = plan
+        self._aligner = Aligner([b.name for b in plan.fast], self.section.log_period_ms)
+        self._slow = {}
+        self._last_stamp_s = None
+        try:
+            self.link.start_logging(
+                [*plan.fast, *plan.slow],
+                lambda block, ts, values: self._put("data", (block, ts, values), epoch),
+            )
+        except LinkError:
+            self.link.close()
+            raise
+        self.connected = True
+        self._last_data_s = self._connected_s = self._clock()
+        self._logged.discard("connect_failed")
+        self._logged.discard("lost")
+        if self._pending_stop:
+            self._send("stop_motors")  # a Stop that arrived while the link was down
+            self._pending_stop = False
+        _log.info(
+            "connected to %s: blocks %s every %d ms, %s; armed %s, vbat %s",
+            self.link.uri,
+            " | ".join(",".join(b.variables) for b in plan.fast),
+            self.section.log_period_ms,
+            " | ".join(",".join(b.variables) for b in plan.slow) or "no slow block",
+            "supervisor.info" if plan.armed else "not reported",
+            "pm.vbat" if plan.vbat else "not reported",
+        )
+        self._publish_status()
+
+    def _serve_period(self, stop: threading.Event, next_status: float) -> float:
+        """Handle events until the next setpoint tick, then send it."""
+        period_s = self.section.log_period_ms / 1000.0
+        deadline = self._clock() + period_s
+        while not stop.is_set():
+            remaining = deadline - self._clock()
+            if remaining <= 0:
+                break
+            try:
+                event = self._events.get(timeout=remaining)
+            except queue.Empty:
+                break
+            self._handle(event)
+            if not self.connected:
+                return next_status
+        now = self._clock()
+        if self.connected and now - self._last_data_s > self.section.data_timeout_s:
+            self._on_lost(f"no log data for {self.section.data_timeout_s:g} s")
+        if self.connected:
+            self._send_setpoint(now)
+        if now >= next_status:
+            self._publish_status()
+            next_status = now + self.section.status_period_s
+        return next_status
+
+    def _drain_commands(self) -> None:
+        """While disconnected, still act on commands (a Stop latches; setpoints are dropped)."""
+        while True:
+            try:
+                event = self._events.get_nowait()
+            except queue.Empty:
+                return
+            if event.kind not in ("data", "lost"):
+                self._handle(event)
+
+    # ------------------------------------------------------------------ events
+
+    def _handle(self, event: _Event) -> None:
+        kind = event.kind
+        if kind in ("data", "lost") and event.epoch != self._epoch:
+            return  # from a link we already gave up
+        if kind == "data":
+            self._on_data(*event.payload)
+        elif kind == "lost":
+            self._on_lost(str(event.payload))
+        elif kind == "setpoint":
+            sp: SetpointIn = event.payload
+            if not self.connected:
+                self._count("setpoint_disconnected")
+                return
+            verdict = self.gate.on_setpoint(
+                sp.position_m, sp.stamp_s, self._clock(), self._last_stamp_s, self._last_yaw_deg
+            )
+            if verdict != "accepted":
+                self._count(f"setpoint_{verdict}")
+                self._once(f"setpoint_{verdict}", "setpoint dropped (%s)", verdict)
+            else:
+                self._holding_logged = False
+        elif kind == "stop":
+            stop_msg: StopIn = event.payload
+            was_latched = self.gate.latched
+            self.gate.on_stop(stop_msg.reason)
+            self._commanding = False  # the stop is the last command
+            self._count("stops")
+            if self.connected:
+                self._send("stop_motors")
+            else:
+                self._pending_stop = True
+            _log.warning(
+                "Stop (%s): motors stopped, latched until tether/%s/cmd/rearm",
+                stop_msg.reason,
+                self.drone,
+            )
+            if not was_latched:
+                self._publish_status()
+        elif kind == "rearm":
+            if self.gate.latched:
+                _log.warning("re-armed by the operator: setpoints are accepted again")
+            self.gate.rearm()
+            if self.connected:
+                self._send("arm")
+            self._publish_status()
+        elif kind in ("takeoff", "land"):
+            self._ramp(kind, event.payload)
+        elif kind == "mocap":
+            pose: MocapPoseIn = event.payload
+            self._mocap = MocapPose(pose.position_m, pose.quat_wxyz, self._clock())
+            if self.section.send_extpos and self.connected:
+                self._send("send_extpos", pose.position_m, pose.quat_wxyz)
+        elif kind == "bad_input":
+            self._count("bad_input")
+            self._once(f"bad_input:{str(event.payload).split(':')[0]}", "dropped %s", event.payload)
+
+    def _ramp(self, kind: str, cmd: TakeoffIn | LandIn) -> None:
+        now = self._clock()
+        pose = self._mocap
+        fresh = pose is not None and now - pose.received_s <= self.section.mocap_stale_s
+        start = self.gate.position_in_force(now) if kind == "land" else None
+        if start is None and fresh and pose is not None:
+            start = pose.position_m
+        if not self.connected or start is None:
+            self._count(f"{kind}_refused")
+            _log.warning(
+                "%s refused: %s",
+                kind,
+                "link down" if not self.connected else "no fresh motion-capture pose",
+            )
+            return
+        x, y, _ = start
+        z = cmd.height_m if isinstance(cmd, TakeoffIn) else self.floor_z_m
+        if kind == "takeoff" and self.reach is not None:
+            base_m, length_m = self.reach
+            if math.dist(base_m, (x, y, z)) > length_m - REACH_MARGIN_M:
+                self._count("takeoff_refused")
+                _log.warning(
+                    "takeoff refused: (%.2f, %.2f, %.2f) m is beyond the tether's reach "
+                    "(%.2f m from the base)",
+                    x,
+                    y,
+                    z,
+                    length_m,
+                )
+                return
+        verdict = self.gate.ramp(
+            start, (x, y, z), cmd.speed_mps, now, self._last_yaw_deg, land=kind == "land"
+        )
+        if verdict != "accepted":
+            self._count(f"{kind}_refused")
+            _log.warning("%s refused (%s)", kind, verdict)
+        else:
+            _log.info(
+                "%s: from %s to z %.2f m at %.2f m/s",
+                kind,
+                [round(v, 3) for v in start],
+                z,
+                cmd.speed_mps,
+            )
+
+    def _on_data(self, block: str, raw_ms: int, values: Mapping[str, float]) -> None:
+        plan, aligner = self._plan, self._aligner
+        if plan is None or aligner is None:
+            return
+        self._last_data_s = self._clock()
+        if any(block == b.name for b in plan.slow):
+            self._slow.update(values)
+            return
+        before = aligner.out_of_order
+        # Until the slow block's first sample (armed, battery), a Telemetry would say "armed"
+        # by the contract's default: wait for it, a few of its periods at most.
+        waiting = (
+            plan.slow
+            and not self._slow
+            and self._clock() - self._connected_s < 3 * self.section.slow_period_ms / 1000.0
+        )
+        for aligned in aligner.push(block, raw_ms, values):
+            if waiting:
+                self._count("before_slow_block")
+                continue
+            try:
+                tel = build_telemetry(
+                    aligned, plan, self.section, self.seq, self._slow, self._mocap, self._clock()
+                )
+            except Skip as exc:
+                self._count(exc.kind)
+                self._once(exc.kind, "no telemetry for this period: %s", exc)
+                continue
+            self.bus.publish(
+                self.keys["telemetry"], tel.model_dump_json(exclude_none=True).encode()
+            )
+            self.seq += 1
+            self._last_stamp_s = tel.stamp_s
+            self._last_yaw_deg = yaw_deg_from_quat(tel.quat_wxyz)
+        if aligner.out_of_order > before:
+            self._once("out_of_order", "log packet with an old timestamp dropped (%s)", block)
+
+    def _on_lost(self, reason: str) -> None:
+        self.connected = False
+        self.gate.on_link_lost()
+        self._commanding = False
+        self._once(
+            "lost", "link to %s lost (%s): telemetry stops; reconnecting", self.link.uri, reason
+        )
+        self._count("link_lost")
+        self.link.close()
+        self._publish_status()
+
+    def _send_setpoint(self, now_s: float) -> None:
+        cmd = self.gate.tick(now_s)
+        if cmd is None:
+            return
+        if self.gate.holding(now_s) and not self._holding_logged:
+            self._holding_logged = True
+            _log.warning(
+                "no fresh setpoint for %.2f s: holding %s",
+                self.section.watchdog_s,
+                [round(v, 3) for v in cmd.position_m],
+            )
+        if cmd.motors_off:
+            self._send("send_stop_setpoint")
+            self._commanding = False
+            _log.info("landed: motors off")
+            return
+        x, y, z = cmd.position_m
+        if not self._send("send_position_setpoint", x, y, z, cmd.yaw_deg):
+            return
+        self._commanding = True
+        self._count("setpoints_sent")
+
+    def _shutdown(self) -> None:
+        for sub in self._subs:
+            sub.close()
+        self._subs.clear()
+        if self.connected:
+            try:
+                if self._commanding:
+                    self.link.send_stop_setpoint()
+            finally:
+                self.link.close()
+                self.connected = False
+        _log.info("bridge stopped: %d telemetry published, counts %s", self.seq, self.counts)
+
+    def _send(self, method: str, *args: Any) -> bool:
+        """Call a command of the link; a link that fails under it is a lost link."""
+        try:
+            getattr(self.link, method)(*args)
+        except LinkError as exc:
+            if self.connected:
+                if method == "stop_motors":
+                    self._pending_stop = True  # send it again once reconnected
+                self._on_lost(f"{method} failed: {exc}")
+            return False
+        return True
+
+    # ------------------------------------------------------------------ reporting
+
+    def status(self) -> dict[str, Any]:
+        """What ``tether/{drone}/bridge`` carries."""
+        aligner = self._aligner
+        return {
+            "uri": self.link.uri,
+            "connected": self.connected,
+            "latched": self.gate.latched,
+            "stop_reason": self.gate.stop_reason,
+            "holding": self.gate.holding(self._clock()),
+            "telemetry": self.seq,
+            "counts": dict(self.counts),
+            "dropped_setpoints": dict(self.gate.dropped),
+            "out_of_order": aligner.out_of_order if aligner else 0,
+            "unmatched": aligner.unmatched if aligner else 0,
+        }
+
+    def _publish_status(self) -> None:
+        self.bus.publish(self.keys["status"], json.dumps(self.status()).encode())
+
+    def _count(self, kind: str) -> None:
+        self.counts[kind] = self.counts.get(kind, 0) + 1
+
+    def _once(self, kind: str, msg: str, *args: Any) -> None:
+        if kind not in self._logged:
+            self._logged.add(kind)
+            _log.warning(msg, *args)

@@ -1,0 +1,270 @@
+"""Ground or air: whether the floor carries the drone, with hysteresis (pure state machine).
+
+Pure: the standard library's maths only; time enters as ``dt_s``.
+
+Why it matters (NOTES "Tension observation"): on the floor, the balance of ``eq:NE_tether``
+reads the floor's push as tether tension, ``T_z = m g - F`` upward, up to the whole weight
+(~0.3 N). Below ``[filter] ground_thrust_ratio`` of the weight (0.5) the drone is surely on
+the floor; between that and the weight it may still rest there while the propellers spin
+up: at 0.51 of the weight the floor pushes with 144 mN, above the follow threshold. So
+while the thrust is at or above the ratio, lift-off must be *seen* before the tension is
+trusted, and a touch-down is noticed where it can be:
+
+* **Certainly on the ground** (any state): disarmed, or thrust below
+  ``ground_thrust_ratio`` of the weight. Meanwhile the vertical accelerometer bias is
+  learnt (the drone does not move) and the resting motion-capture height is remembered
+  (a marker sits above the floor).
+* **Lift-off with motion capture:** the height rises ``liftoff_height_m`` (3 cm) above
+  the resting height (or the floor when no rest was seen); touch-down below
+  ``touchdown_height_m`` (1.5 cm) above it. The band between is the hysteresis.
+* **Lift-off without motion capture**, either of:
+
+  - *climbing*: the vertical acceleration (IMU specific force rotated to the world, minus
+    gravity, minus the bias learnt at rest) integrated with a leak of
+    ``speed_time_constant_s`` exceeds ``liftoff_speed_mps``, while the smoothed upward
+    force is below ``climb_push_max_n`` (50 mN: the floor carries less than a sixth of a
+    30 g drone). The leak bounds what a bias left over can build up to (0.1 m/s² gives
+    0.05 m/s) and the noise (0.3 m/s² per sample at 250 Hz gives 0.01 m/s standard
+    deviation); the push bound keeps a larger bias (vibration at spool-up) from lifting
+    a drone that the floor still visibly carries;
+  - *the floor carries nothing*: the observed upward force, smoothed over
+    ``push_time_constant_s``, stays below ``push_free_n`` (10 mN) for ``push_hold_s``.
+    Whatever rests on the floor then, what is published as tension is below that, which
+    is the point; in the air the tether pulls down (or a hand pulls), so a hovering drone
+    whose service restarts is found in the air in 0.1 s. A thrust reading low by more
+    than the tether's downward pull (e.g. 15 % at 10 mN of pull) defeats this rule; a
+    take-off is then found by the climb.
+
+  In the air, without motion capture, only the two certain signs above bring the drone
+  back to the ground (a hand lifting the drone pushes up like the floor would).
+
+The state starts on the ground: nothing is known yet, and no tension is published until
+one of the rules above says otherwise.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from typing import Literal
+
+__all__ = [
+    "ContactParams",
+    "ContactState",
+    "contact_step",
+    "vertical_accel_mps2",
+]
+
+GRAVITY_MPS2 = 9.81
+"""Standard gravity, m/s^2 (the value of :data:`groundstation.tension.GRAVITY_MPS2`)."""
+
+Reason = Literal[
+    "start", "disarmed", "low_thrust", "resting", "mocap_height", "climbing", "push_free", "air"
+]
+
+
+@dataclass(frozen=True)
+class ContactParams:
+    """Thresholds of :func:`contact_step` (see the module docstring).
+
+    Attributes:
+        ground_thrust_ratio: Below this fraction of the weight the drone is on the ground,
+            in (0, 1) (``[filter] ground_thrust_ratio``).
+        liftoff_height_m: Motion capture: lift-off above the resting height plus this, m.
+        touchdown_height_m: Motion capture: touch-down below the resting height plus this,
+            m (< ``liftoff_height_m``: the hysteresis).
+        liftoff_speed_mps: No motion capture: lift-off when the leaky vertical speed from
+            the IMU exceeds this, m/s.
+        speed_time_constant_s: Leak of that speed, s.
+        climb_push_max_n: No motion capture: a climb counts only while the smoothed upward
+            force is below this, N.
+        push_free_n: No motion capture: lift-off when the smoothed upward force stays below
+            this, N ...
+        push_hold_s: ... for this long, s.
+        push_time_constant_s: Smoothing of the upward force, s.
+        bias_time_constant_s: Averaging time of the vertical accelerometer bias at rest, s.
+    """
+
+    ground_thrust_ratio: float = 0.5
+    liftoff_height_m: float = 0.03
+    touchdown_height_m: float = 0.015
+    liftoff_speed_mps: float = 0.1
+    speed_time_constant_s: float = 0.5
+    climb_push_max_n: float = 0.050
+    push_free_n: float = 0.010
+    push_hold_s: float = 0.1
+    push_time_constant_s: float = 0.1
+    bias_time_constant_s: float = 1.0
+
+    def __post_init__(self) -> None:
+        if not (0.0 < self.ground_thrust_ratio < 1.0):
+            raise ValueError(
+                f"ContactParams.ground_thrust_ratio must be in (0, 1), "
+                f"got {self.ground_thrust_ratio!r}"
+            )
+        if not (0.0 <= self.touchdown_height_m < self.liftoff_height_m < math.inf):
+            raise ValueError(
+                f"ContactParams: need 0 <= touchdown_height_m < liftoff_height_m, got "
+                f"{self.touchdown_height_m!r}, {self.liftoff_height_m!r}"
+            )
+        for name in (
+            "liftoff_speed_mps",
+            "speed_time_constant_s",
+            "climb_push_max_n",
+            "push_free_n",
+            "push_hold_s",
+            "push_time_constant_s",
+            "bias_time_constant_s",
+        ):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0.0):
+                raise ValueError(f"ContactParams.{name} must be finite and > 0, got {value!r}")
+
+
+@dataclass(frozen=True)
+class ContactState:
+    """Ground/air state between samples (immutable; each step returns a new one).
+
+    Attributes:
+        on_ground: The floor carries (part of) the drone: its push is no tension.
+        reason: What decided the last step (see :data:`Reason`).
+        accel_bias_z_mps2: Vertical accelerometer bias learnt at rest, m/s^2, or None
+            before the first rest.
+        climb_speed_mps: Leaky vertical speed from the IMU while on the ground, m/s.
+        push_n: Smoothed upward observed force while on the ground, N, or None.
+        push_free_s: How long ``push_n`` has been below ``push_free_n``, s.
+        rest_height_m: Motion-capture height while resting, m, or None.
+    """
+
+    on_ground: bool = True
+    reason: Reason = "start"
+    accel_bias_z_mps2: float | None = None
+    climb_speed_mps: float = 0.0
+    push_n: float | None = None
+    push_free_s: float = 0.0
+    rest_height_m: float | None = None
+
+
+def vertical_accel_mps2(
+    accel_body_mps2: tuple[float, float, float] | list[float],
+    quat_wxyz: tuple[float, float, float, float] | list[float],
+    gravity_mps2: float = GRAVITY_MPS2,
+) -> float:
+    """World vertical acceleration from the IMU: ``p''_z = (R_world_body f)_z - g``.
+
+    Args:
+        accel_body_mps2: Specific force in the body frame, m/s^2, 3 floats.
+        quat_wxyz: Attitude body->world ``[w, x, y, z]`` (normalised here), 4 floats.
+        gravity_mps2: Magnitude of gravity, m/s^2.
+
+    Returns:
+        The vertical acceleration, m/s^2 (0 at rest); NaN for a degenerate quaternion.
+    """
+    w, x, y, z = quat_wxyz
+    n2 = w * w + x * x + y * y + z * z
+    if not (math.isfinite(n2) and n2 > 1e-12):
+        return math.nan
+    fx, fy, fz = accel_body_mps2
+    # Third row of R_world_body for a unit quaternion, over |q|^2 for an unnormalised one.
+    r20, r21, r22 = 2.0 * (x * z - w * y), 2.0 * (y * z + w * x), n2 - 2.0 * (x * x + y * y)
+    return (r20 * fx + r21 * fy + r22 * fz) / n2 - gravity_mps2
+
+
+def contact_step(
+    state: ContactState,
+    params: ContactParams,
+    *,
+    dt_s: float,
+    armed: bool,
+    thrust_n: float,
+    mass_kg: float,
+    vertical_accel_mps2: float,
+    upward_force_n: float | None,
+    height_m: float | None,
+    floor_z_m: float = -math.inf,
+    gravity_mps2: float = GRAVITY_MPS2,
+) -> ContactState:
+    """One sample of the ground/air state machine (module docstring).
+
+    Args:
+        state: State after the previous sample.
+        params: Thresholds.
+        dt_s: Time since the previous sample, s (0 for the first or after a gap).
+        armed: Motors armed.
+        thrust_n: Collective thrust, N.
+        mass_kg: Drone mass, kg.
+        vertical_accel_mps2: World vertical acceleration from the IMU, m/s^2
+            (:func:`vertical_accel_mps2`); NaN when unknown.
+        upward_force_n: Vertical (world +z) component of this sample's raw tension
+            observation, N, or None when there is none.
+        height_m: Motion-capture height (world z) of the drone, m, or None.
+        floor_z_m: Floor height, m (``-inf``: no floor, the resting height alone counts).
+        gravity_mps2: Magnitude of gravity, m/s^2.
+
+    Returns:
+        The next state; ``on_ground`` says whether the floor carries the drone.
+    """
+    dt = dt_s if math.isfinite(dt_s) and dt_s > 0.0 else 0.0
+    height = height_m if height_m is not None and math.isfinite(height_m) else None
+    accel = vertical_accel_mps2
+    weight_n = mass_kg * gravity_mps2
+
+    # Certainly on the ground: learn the resting accelerometer bias and height.
+    if not armed or not (thrust_n >= params.ground_thrust_ratio * weight_n):
+        bias = state.accel_bias_z_mps2
+        if math.isfinite(accel):
+            w = min(1.0, dt / params.bias_time_constant_s) if bias is not None else 1.0
+            bias = accel if bias is None else bias + w * (accel - bias)
+        rest = state.rest_height_m
+        if height is not None:
+            w = min(1.0, dt / params.bias_time_constant_s) if rest is not None else 1.0
+            rest = height if rest is None else rest + w * (height - rest)
+        return ContactState(
+            on_ground=True,
+            reason="disarmed" if not armed else "low_thrust",
+            accel_bias_z_mps2=bias,
+            rest_height_m=rest,
+        )
+
+    if height is not None:
+        ground_m = state.rest_height_m if state.rest_height_m is not None else floor_z_m
+        if math.isfinite(ground_m):
+            above_m = height - ground_m
+            if state.on_ground:
+                on_ground = not above_m > params.liftoff_height_m
+            else:
+                on_ground = above_m < params.touchdown_height_m
+            return replace(
+                state,
+                on_ground=on_ground,
+                reason="resting" if on_ground else "mocap_height",
+                climb_speed_mps=0.0,
+                push_n=None,
+                push_free_s=0.0,
+            )
+
+    if not state.on_ground:
+        return replace(state, reason="air")
+
+    # On the ground with the propellers carrying part of the weight: look for lift-off.
+    speed = state.climb_speed_mps
+    if math.isfinite(accel) and dt > 0.0:
+        a = accel - (state.accel_bias_z_mps2 or 0.0)
+        speed += a * dt - speed * min(1.0, dt / params.speed_time_constant_s)  # leaky
+    push = state.push_n
+    if upward_force_n is not None and math.isfinite(upward_force_n):
+        w = min(1.0, dt / params.push_time_constant_s) if push is not None else 1.0
+        push = upward_force_n if push is None else push + w * (upward_force_n - push)
+    free_s = state.push_free_s + dt if push is not None and push < params.push_free_n else 0.0
+    if speed > params.liftoff_speed_mps and (push is None or push < params.climb_push_max_n):
+        return replace(state, on_ground=False, reason="climbing", climb_speed_mps=0.0)
+    if push is not None and push < params.push_free_n and free_s >= params.push_hold_s:
+        return replace(state, on_ground=False, reason="push_free", climb_speed_mps=0.0)
+    return replace(
+        state,
+        on_ground=True,
+        reason="resting",
+        climb_speed_mps=speed,
+        push_n=push,
+        push_free_s=free_s,
+    )

@@ -1,0 +1,262 @@
+"""``groundstation crazyflie`` against the fake link, with a real service, over a real router.
+
+Router, service and bridge are separate processes on TCP 127.0.0.1; the fake link
+(``--uri fake://...``, test support shipped in the package, not a drone) records every command
+it receives to a JSON-lines file that the test reads.
+"""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import threading
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from tests.integration.harness import Probe, Procs, free_port
+
+pytestmark = [pytest.mark.integration, pytest.mark.slow]
+
+
+def _commands(path: Path) -> list[dict[str, Any]]:
+    if not path.exists():
+        return []
+    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+
+
+def _names(path: Path) -> list[str]:
+    return [c["cmd"] for c in _commands(path)]
+
+
+def _start(
+    procs: Procs, make_probe: Any, uri: str, *bridge_args: str
+) -> tuple[Probe, Any, Any, str]:
+    port = free_port()
+    procs.router(port)
+    probe: Probe = make_probe(port)
+    for key in ("tether/cf1/estimate", "tether/cf1/bridge", "tether/cf1/cmd/**"):
+        probe.collect(key)
+    ep = f"tcp/127.0.0.1:{port}"
+    service = procs.groundstation("serve", "serve", "--connect", ep, "--headless")
+    bridge = procs.groundstation(
+        "bridge", "crazyflie", "--uri", uri, "--drone", "cf1", "--connect", ep, *bridge_args
+    )
+    return probe, service, bridge, ep
+
+
+def test_fake_hover_gives_estimates_and_a_stop_reaches_the_link_once(
+    procs: Procs, make_probe: Any, tmp_path: Path
+) -> None:
+    record = tmp_path / "commands.jsonl"
+    probe, service, bridge, _ = _start(procs, make_probe, f"fake://hover?record={record}")
+    probe.wait_for(
+        lambda: sum(1 for e in probe.json("tether/cf1/estimate") if e["converged"]) > 300,
+        timeout_s=40,
+        what="3 s of converged estimates from the bridged fake drone",
+    )
+    estimates = probe.json("tether/cf1/estimate")
+    seqs = [e["seq"] for e in estimates]
+    assert seqs == sorted(seqs) and len(set(seqs)) == len(seqs)
+    late = [e for e in estimates if e["converged"]][-200:]
+    # The fake hovers level with the tether pulling 0.05 N straight down: the service sees
+    # exactly that through the bridge's unit conversion (g, deg/s, PWM -> SI).
+    vertical = np.median([e["vertical_n"] for e in late])
+    horizontal = np.median([e["horizontal_n"] for e in late])
+    assert vertical == pytest.approx(0.05, abs=0.01), f"vertical tension {vertical:.4f} N"
+    assert horizontal < 0.01
+    assert not any(e["on_ground"] for e in late)
+    assert "stop_motors" not in _names(record)
+
+    # A Stop on cmd/stop, as the service publishes it.
+    stamp = late[-1]["stamp_s"]
+    probe.publish_json("tether/cf1/cmd/stop", {"stamp_s": stamp, "reason": "test"})
+    probe.wait_for(lambda: "stop_motors" in _names(record), 10, "stop_motors on the link")
+    # Latched: a setpoint after it is dropped (the bridge's status counts it).
+    probe.publish_json(
+        "tether/cf1/cmd/setpoint", {"stamp_s": stamp + 0.1, "position_m": [0.0, 0.0, 0.5]}
+    )
+    probe.wait_for(
+        lambda: any(
+            s["latched"] and s["dropped_setpoints"].get("latched", 0) >= 1
+            for s in probe.json("tether/cf1/bridge")
+        ),
+        timeout_s=10,
+        what="the bridge reports the latch and the dropped setpoint",
+    )
+    # The fake drone's motors are off: the service sees a drone on the floor.
+    probe.wait_for(
+        lambda: any(e["on_ground"] for e in probe.json("tether/cf1/estimate")[-50:]),
+        timeout_s=10,
+        what="estimates on the ground after the stop",
+    )
+    names = _names(record)
+    assert names.count("stop_motors") == 1
+    assert "send_position_setpoint" not in names
+    assert bridge.stop(signal.SIGTERM) == 0
+    assert _names(record)[-1] == "close"
+    assert service.stop(signal.SIGTERM) == 0
+
+
+def test_tug_to_land_from_the_service_stops_the_fake_drone_once(
+    procs: Procs, make_probe: Any, tmp_path: Path
+) -> None:
+    record = tmp_path / "commands.jsonl"
+    cfg = tmp_path / "bridge.toml"
+    cfg.write_text('[crazyflie]\nmocap_key = "mocap/{drone}"\nmocap_stale_s = 0.5\n')
+    probe, service, bridge, _ = _start(
+        procs, make_probe, f"fake://tug?record={record}", "--config", str(cfg)
+    )
+    # Motion capture of a drone hovering 0.5 m up, 0.3 m from the base.
+    done = threading.Event()
+
+    def mocap() -> None:
+        while not done.wait(0.02):  # a 50 Hz stream
+            probe.publish_json("mocap/cf1", {"position_m": [0.3, 0.0, 0.5]})
+
+    thread = threading.Thread(target=mocap, daemon=True)
+    thread.start()
+    try:
+        probe.wait_for(
+            lambda: (
+                sum(
+                    1
+                    for e in probe.json("tether/cf1/estimate")
+                    if e["converged"] and e["position_m"] is not None
+                )
+                > 200
+            ),
+            timeout_s=40,
+            what="converged estimates",
+        )
+        late = probe.json("tether/cf1/estimate")[-100:]
+        assert np.median([e["vertical_n"] for e in late]) == pytest.approx(0.2, abs=0.02)
+        # Follow with tug-to-land above the drone: the pull engages it, the height stops it.
+        probe.publish_json(
+            "tether/cf1/follow", {"enabled": True, "threshold_n": 0.1, "land_below_m": 0.6}
+        )
+        probe.wait_for(lambda: "stop_motors" in _names(record), 15, "the service's Stop")
+        stops = [json.loads(s.payload) for s in probe.got("tether/cf1/cmd/**")]
+        assert any("tug-to-land" in s.get("reason", "") for s in stops)
+        probe.wait_for(
+            lambda: any(e["on_ground"] for e in probe.json("tether/cf1/estimate")[-50:]),
+            timeout_s=10,
+            what="the drone on the ground after the stop",
+        )
+    finally:
+        done.set()
+        thread.join(2)
+    names = _names(record)
+    assert names.count("stop_motors") == 1
+    i_stop = names.index("stop_motors")
+    assert "send_position_setpoint" not in names[i_stop:]
+    assert bridge.stop(signal.SIGTERM) == 0
+    assert service.stop(signal.SIGTERM) == 0
+
+
+def test_a_dropped_link_stops_telemetry_and_reconnects(
+    procs: Procs, make_probe: Any, tmp_path: Path
+) -> None:
+    record = tmp_path / "commands.jsonl"
+    port = free_port()
+    procs.router(port)
+    probe: Probe = make_probe(port)
+    probe.collect("tether/cf1/telemetry")
+    bridge = procs.groundstation(
+        "bridge",
+        "crazyflie",
+        "--uri",
+        f"fake://hover?record={record}&drop_after_s=1.5&down_s=1.0",
+        "--drone",
+        "cf1",
+        "--connect",
+        f"tcp/127.0.0.1:{port}",
+        "--rate-hz",
+        "50",
+    )
+    probe.wait_for(
+        lambda: (
+            _names(record).count("open") >= 3
+            and len(probe.json("tether/cf1/telemetry")) > 20
+            and probe.json("tether/cf1/telemetry")[-1]["stamp_s"] > 7.0
+        ),
+        timeout_s=30,
+        what="telemetry again after the link came back",
+    )
+    tel = probe.json("tether/cf1/telemetry")
+    seqs = [t["seq"] for t in tel]
+    assert seqs == list(range(seqs[0], seqs[0] + len(seqs))), "seq without gaps or repeats"
+    stamps = np.array([t["stamp_s"] for t in tel])
+    assert np.all(np.diff(stamps) > 0)
+    assert np.median(np.diff(stamps)) == pytest.approx(0.02), "--rate-hz 50: a 20 ms period"
+    assert bridge.stop(signal.SIGINT) == 0
+    out = bridge.output()
+    assert out.count(" lost (") == 1, out
+    assert "no answer" in out  # the refused reconnection attempt, logged once
+
+
+def test_missing_log_variables_fail_at_start_naming_them() -> None:
+    out = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "groundstation",
+            "crazyflie",
+            "--uri",
+            "fake://hover?missing=stateEstimate.qz,motor.m2",
+            "--drone",
+            "cf1",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert out.returncode == 2, out.stderr
+    assert "stateEstimate.qz" in out.stderr and "motor.m2" in out.stderr
+
+
+def test_a_uri_that_is_not_cflib_fails_at_start() -> None:
+    out = subprocess.run(
+        [sys.executable, "-m", "groundstation", "crazyflie", "--uri", "bogus://", "--drone", "c"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert out.returncode == 2 and "not a cflib URI" in out.stderr
+
+
+def test_the_bridge_over_cflib_udp_to_a_crtp_responder(procs: Procs, make_probe: Any) -> None:
+    """The real cflib path (``--uri udp://``) against tests/crtp_firmware.py, which stands in
+    for a software-in-the-loop firmware: estimates come, and a Stop reaches it once."""
+    from groundstation.bridges.crazyflie.fake import FAKE_TOC, pwm_for_thrust
+    from tests.crtp_firmware import CrtpFirmware
+
+    hover_pwm = pwm_for_thrust((0.030 * 9.81 + 0.05) / 4, (2.130295e-11, 1.032633e-6, 5.484560e-4))
+    firmware = CrtpFirmware(FAKE_TOC, motor_pwm=round(hover_pwm))
+    try:
+        probe, service, bridge, _ = _start(procs, make_probe, firmware.uri)
+        probe.wait_for(
+            lambda: sum(1 for e in probe.json("tether/cf1/estimate") if e["converged"]) > 100,
+            timeout_s=40,
+            what="converged estimates through cflib",
+        )
+        late = [e for e in probe.json("tether/cf1/estimate") if e["converged"]][-50:]
+        assert np.median([e["vertical_n"] for e in late]) == pytest.approx(0.05, abs=0.01)
+        probe.publish_json("tether/cf1/cmd/stop", {"stamp_s": 0.0, "reason": "test"})
+
+        def stops() -> int:
+            return sum(1 for ch, d in firmware.packets(0x09) if ch == 1 and d == b"\x03")
+
+        probe.wait_for(lambda: stops() >= 1, 10, "the supervisor's emergency stop")
+        probe.wait_for(
+            lambda: any(s["latched"] for s in probe.json("tether/cf1/bridge")), 10, "latched"
+        )
+        assert stops() == 1
+        assert bridge.stop(signal.SIGTERM) == 0
+        assert service.stop(signal.SIGTERM) == 0
+    finally:
+        firmware.close()

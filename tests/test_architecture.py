@@ -1,0 +1,110 @@
+"""The rooms of the package and what each may import (docs/architecture.md, kept in step).
+
+A static check over every module's ``import`` statements, lazy ones inside functions
+included: a physics module that reaches for zenoh, an edge that imports the service, or a
+simulator that runs the estimator's code fails here with the offending line. A new module
+must be given a room below (and in docs/architecture.md) before it can land.
+"""
+
+from __future__ import annotations
+
+import ast
+import sys
+from pathlib import Path
+
+import pytest
+
+PACKAGE = Path(__file__).resolve().parent.parent / "groundstation"
+STDLIB = set(sys.stdlib_module_names)
+
+PHYSICS = ("catenary", "tension", "localization", "follow", "calibration", "contact")
+CONTRACT = ("messages", "config", "bus")
+
+# room -> (module prefixes in it, groundstation modules it may import, third-party it may import)
+ROOMS: dict[str, tuple[tuple[str, ...], tuple[str, ...], tuple[str, ...]]] = {
+    "physics": (PHYSICS, PHYSICS, ("numpy", "scipy", "filterpy")),
+    "contract": (CONTRACT, CONTRACT, ("pydantic", "pydantic_settings")),
+    "seam": (("pipeline",), (*PHYSICS, *CONTRACT), ("numpy",)),
+    "adapter": (("zenoh_bus",), CONTRACT, ("zenoh",)),
+    "service": (("service",), ("pipeline", *CONTRACT, "recording"), ()),
+    "sim": (("sim",), ("sim", "catenary", *CONTRACT), ("numpy",)),
+    "dashboard": (
+        ("dashboard",),
+        ("dashboard", "catenary", *CONTRACT),
+        ("numpy", "viser", "trimesh"),
+    ),
+    "recording": (
+        ("recording",),
+        ("recording", "pipeline", "calibration", "catenary", "zenoh_bus", *CONTRACT),
+        ("mcap", "zstandard", "pydantic", "numpy", "matplotlib"),
+    ),
+    "bridges": (("bridges",), ("bridges", "zenoh_bus", *CONTRACT), ("numpy", "cflib")),
+    # Entry points and the lock-step harness may wire anything together.
+    "entry": (("cli", "__main__", "__init__", "evaluation"), ("*",), ("*",)),
+}
+NEVER = {
+    # A simulator that runs the estimator's code proves nothing about it.
+    "sim": ("tension", "localization", "pipeline", "follow", "calibration", "contact"),
+}
+
+
+def _room(module: str) -> str:
+    top = module.split(".")[0]
+    for room, (prefixes, _, _) in ROOMS.items():
+        if top in prefixes:
+            return room
+    raise AssertionError(
+        f"groundstation.{module} is in no room: add it to ROOMS in {Path(__file__).name} "
+        "and to docs/architecture.md"
+    )
+
+
+def _modules() -> list[tuple[str, Path]]:
+    out = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        rel = path.relative_to(PACKAGE).with_suffix("")
+        parts = [p for p in rel.parts if p != "__init__"] or ["__init__"]
+        out.append((".".join(parts), path))
+    return out
+
+
+def _imports(path: Path) -> list[tuple[int, str]]:
+    tree = ast.parse(path.read_text(), filename=str(path))
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            found += [(node.lineno, alias.name) for alias in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            if node.module == "groundstation":
+                found += [(node.lineno, f"groundstation.{a.name}") for a in node.names]
+            else:
+                found.append((node.lineno, node.module))
+    return found
+
+
+@pytest.mark.parametrize(("module", "path"), _modules(), ids=lambda v: str(v))
+def test_module_imports_only_what_its_room_allows(module: str, path: Path) -> None:
+    room = _room(module)
+    _, own_allowed, third_allowed = ROOMS[room]
+    never = NEVER.get(room, ())
+    bad = []
+    for lineno, name in _imports(path):
+        top = name.split(".")[0]
+        if top == "groundstation":
+            parts = name.split(".")
+            target = parts[1] if len(parts) > 1 else "__init__"
+            if target == "__init__" and name == "groundstation":
+                continue  # `from groundstation import __version__`
+            if target in never or ("*" not in own_allowed and target not in own_allowed):
+                bad.append(f"line {lineno}: {name}")
+        elif top in STDLIB or top == "__future__":
+            continue
+        elif "*" not in third_allowed and top not in third_allowed:
+            bad.append(f"line {lineno}: {name} (third-party)")
+    assert not bad, f"groundstation.{module} ({room}) imports what its room may not: {bad}"
+
+
+def test_every_room_is_described_in_the_architecture_page() -> None:
+    text = (PACKAGE.parent / "docs" / "architecture.md").read_text()
+    for room in ROOMS:
+        assert f"**{room}**" in text, f"docs/architecture.md does not describe the {room} room"

@@ -1,0 +1,773 @@
+"""The Crazyflie bridge without a drone: its logic, and the runner against the fake link."""
+
+from __future__ import annotations
+
+import itertools
+import json
+import logging
+import math
+import threading
+import time
+from collections.abc import Callable, Iterator
+from typing import Any
+
+import pytest
+
+from groundstation.bridges.crazyflie.bridge import (
+    ACC,
+    ATTITUDE,
+    G_MPS2,
+    GYRO,
+    MAX_BLOCK_BYTES,
+    Aligned,
+    Aligner,
+    CommandGate,
+    MissingVariables,
+    MocapPose,
+    Skip,
+    build_telemetry,
+    plan_blocks,
+    plan_variables,
+    thrust_n,
+    yaw_deg_from_quat,
+)
+from groundstation.bridges.crazyflie.fake import FAKE_TOC, FakeLink, pwm_for_thrust
+from groundstation.bridges.crazyflie.link import TYPE_SIZES
+from groundstation.bridges.crazyflie.runner import CrazyflieBridge
+from groundstation.bus import InMemoryBus, Sample
+from groundstation.config import ConfigError, CrazyflieSection, load_settings
+from groundstation.messages import Telemetry
+
+DEFAULT_MAP = (2.130295e-11, 1.032633e-6, 5.484560e-4)
+
+
+# --------------------------------------------------------------------------- thrust, config
+
+
+def test_thrust_map_sums_motors_and_zero_pwm_is_zero_thrust() -> None:
+    a, b, c = DEFAULT_MAP
+    pwm = 40000.0
+    one = a * pwm**2 + b * pwm + c
+    assert thrust_n([pwm] * 4, DEFAULT_MAP) == pytest.approx(4 * one, rel=1e-12)
+    assert thrust_n([pwm, pwm, 0.0, 0.0], DEFAULT_MAP) == pytest.approx(2 * one, rel=1e-12)
+    assert thrust_n([0.0] * 4, DEFAULT_MAP) == 0.0
+    # The default map: a 30 g drone hovers near pwm 39 000 (widely reported for a CF2.x).
+    hover = pwm_for_thrust(0.030 * 9.81 / 4, DEFAULT_MAP)
+    assert 35000 < hover < 43000
+    assert thrust_n([hover] * 4, DEFAULT_MAP) == pytest.approx(0.030 * 9.81, rel=1e-9)
+
+
+def test_crazyflie_config_defaults_and_errors() -> None:
+    section = load_settings(None, use_env=False).crazyflie
+    assert section.thrust_map == DEFAULT_MAP
+    assert section.log_period_ms == 10
+    assert CrazyflieSection(rate_hz=33).log_period_ms == 30
+    with pytest.raises(ConfigError, match=r"crazyflie.slow_period_ms = 15"):
+        load_settings(None, {"crazyflie": {"slow_period_ms": 15}}, use_env=False)
+    with pytest.raises(ConfigError, match=r"crazyflie.thrust_map"):
+        load_settings(None, {"crazyflie": {"thrust_map": [0.0, 0.0, -1.0]}}, use_env=False)
+    with pytest.raises(ConfigError, match=r"crazyflie.motor_variables = 'm'"):
+        load_settings(None, {"crazyflie": {"motor_variables": "m"}}, use_env=False)
+
+
+# --------------------------------------------------------------------------- log blocks
+
+
+def _block_bytes(block: Any) -> int:
+    return sum(TYPE_SIZES[t] for t in block.fetch_as)
+
+
+@pytest.mark.parametrize("motor_variables", ["motor", "pwm"])
+def test_blocks_fit_one_packet_and_carry_every_variable_once(motor_variables: str) -> None:
+    section = CrazyflieSection(motor_variables=motor_variables)  # type: ignore[arg-type]
+    plan = plan_variables(section, FAKE_TOC, "fake://")
+    fast_vars = [v for b in plan.fast for v in b.variables]
+    assert sorted(fast_vars) == sorted([*ACC, *GYRO, *ATTITUDE, *plan.motors])
+    assert len(plan.fast) == 2, "acc+gyro, then attitude+motors (motors as uint16)"
+    for block in (*plan.fast, *plan.slow):
+        assert _block_bytes(block) <= MAX_BLOCK_BYTES
+        assert block.period_ms % 10 == 0
+    assert all(b.period_ms == 10 for b in plan.fast)
+    assert [v for b in plan.slow for v in b.variables] == ["pm.vbat", "supervisor.info"]
+    assert plan.slow[0].period_ms == 100
+    motor_types = {
+        t
+        for b in plan.fast
+        for v, t in zip(b.variables, b.fetch_as, strict=True)
+        if v in plan.motors
+    }
+    assert motor_types == {"uint16_t"}
+    # Vector components stay together.
+    for group in (ACC, GYRO, ATTITUDE, plan.motors):
+        assert len({b.name for b in plan.fast for v in b.variables if v in group}) == 1
+
+
+def test_blocks_split_when_nothing_is_narrowed() -> None:
+    toc = {f"v{i}": "float" for i in range(20)}
+    blocks = plan_blocks("b", [[f"v{i}" for i in range(20)]], toc, 20)
+    assert [len(b.variables) for b in blocks] == [6, 6, 6, 2]
+    assert all(_block_bytes(b) <= 26 for b in blocks)
+    with pytest.raises(ValueError, match="multiple of 10 ms"):
+        plan_blocks("b", [["v0"]], toc, 15)
+
+
+def test_missing_variables_are_all_named() -> None:
+    toc = {k: v for k, v in FAKE_TOC.items() if k not in ("stateEstimate.qw", "motor.m3")}
+    with pytest.raises(MissingVariables) as info:
+        plan_variables(CrazyflieSection(), toc, "radio://0/80/2M")
+    msg = str(info.value)
+    assert "stateEstimate.qw" in msg and "motor.m3" in msg and "radio://0/80/2M" in msg
+    assert info.value.missing == ("stateEstimate.qw", "motor.m3")
+    # The attitude from motion capture needs no stateEstimate; pwm.* replace motor.*.
+    plan = plan_variables(
+        CrazyflieSection(attitude_source="mocap", motor_variables="pwm"), toc, "x"
+    )
+    assert plan.attitude == ()
+    # armed: 'auto' goes without supervisor.info, 'supervisor' insists on it.
+    no_sup = {k: v for k, v in FAKE_TOC.items() if k != "supervisor.info"}
+    assert not plan_variables(CrazyflieSection(), no_sup, "x").armed
+    with pytest.raises(MissingVariables, match=r"supervisor\.info"):
+        plan_variables(CrazyflieSection(armed_source="supervisor"), no_sup, "x")
+
+
+# --------------------------------------------------------------------------- alignment
+
+
+def test_aligner_joins_blocks_by_timestamp_with_a_phase_offset() -> None:
+    al = Aligner(["a", "b"], period_ms=10)
+    assert al.push("a", 1000, {"x": 1.0}) == []  # b not yet here
+    out = al.push("b", 1003, {"y": 2.0})
+    assert out == [Aligned(1000, {"x": 1.0, "y": 2.0})]
+    # b arrives first in the next period: fine too.
+    assert al.push("b", 1013, {"y": 3.0}) == []
+    assert al.push("a", 1010, {"x": 4.0}) == [Aligned(1010, {"x": 4.0, "y": 3.0})]
+
+
+def test_aligner_drops_out_of_order_and_unmatched_samples() -> None:
+    al = Aligner(["a", "b"], period_ms=10)
+    al.push("a", 1000, {"x": 1.0})
+    al.push("b", 1002, {"y": 1.0})
+    # an old timestamp replayed: dropped, counted
+    assert al.push("a", 990, {"x": 9.0}) == []
+    assert al.push("a", 1000, {"x": 9.0}) == []
+    assert al.out_of_order == 2
+    # a's sample of 1010 is lost: b's 1012 is orphaned, then 1020 pairs
+    assert al.push("b", 1012, {"y": 2.0}) == []
+    assert al.push("a", 1020, {"x": 3.0}) == []
+    assert al.push("b", 1022, {"y": 3.0}) == [Aligned(1020, {"x": 3.0, "y": 3.0})]
+    assert al.unmatched == 1
+    # b's sample of 1030 is lost: a's 1030 is dropped once b shows 1040
+    al.push("a", 1030, {"x": 4.0})
+    assert al.push("b", 1042, {"y": 5.0}) == []
+    assert al.push("a", 1040, {"x": 5.0}) == [Aligned(1040, {"x": 5.0, "y": 5.0})]
+    assert al.unmatched == 2
+
+
+def test_aligner_unwraps_the_24_bit_clock() -> None:
+    al = Aligner(["a"], period_ms=10)
+    wrap = 1 << 24
+    assert al.push("a", wrap - 10, {})[0].stamp_ms == wrap - 10
+    assert al.push("a", 0, {})[0].stamp_ms == wrap
+    assert al.push("a", 10, {})[0].stamp_ms == wrap + 10
+
+
+# --------------------------------------------------------------------------- units
+
+
+def _values(**over: float) -> dict[str, float]:
+    v = {k: 0.0 for k in (*ACC, *GYRO, *ATTITUDE, "motor.m1", "motor.m2", "motor.m3", "motor.m4")}
+    v.update({"acc.z": 1.0, "stateEstimate.qw": 1.0})
+    v.update({f"motor.m{i}": 40000.0 for i in range(1, 5)})
+    for k, x in over.items():
+        v[k.replace("__", ".")] = x
+    return v
+
+
+def test_telemetry_is_si() -> None:
+    section = CrazyflieSection()
+    plan = plan_variables(section, FAKE_TOC, "x")
+    values = _values(acc__x=0.1, gyro__z=180.0, stateEstimate__qw=1.2)  # quat not unit
+    slow = {"pm.vbat": 3.7, "supervisor.info": 0b0011}
+    tel = build_telemetry(Aligned(12345, values), plan, section, 7, slow, None, 0.0)
+    assert isinstance(tel, Telemetry)
+    assert tel.seq == 7 and tel.stamp_s == pytest.approx(12.345)
+    assert tel.accel_mps2 == pytest.approx((0.1 * G_MPS2, 0.0, G_MPS2))
+    assert tel.gyro_rps == pytest.approx((0.0, 0.0, math.pi))
+    assert tel.quat_wxyz == pytest.approx((1.0, 0.0, 0.0, 0.0))
+    assert tel.thrust_n == pytest.approx(thrust_n([40000.0] * 4, DEFAULT_MAP))
+    assert tel.vbat_v == 3.7 and tel.armed is True and tel.position_m is None
+    disarmed = build_telemetry(
+        Aligned(0, values), plan, section, 0, {"supervisor.info": 0b0001}, None, 0.0
+    )
+    assert disarmed.armed is False
+    with pytest.raises(Skip) as info:
+        build_telemetry(Aligned(0, _values(acc__y=math.nan)), plan, section, 0, {}, None, 0.0)
+    assert info.value.kind == "bad_reading"
+
+
+def test_mocap_position_and_attitude() -> None:
+    section = CrazyflieSection(attitude_source="mocap", mocap_stale_s=0.1)
+    plan = plan_variables(section, FAKE_TOC, "x")
+    quat = (math.cos(0.5), 0.0, 0.0, math.sin(0.5))  # yaw 1 rad
+    pose = MocapPose((0.3, -0.2, 0.5), quat, received_s=10.0)
+    tel = build_telemetry(Aligned(0, _values()), plan, section, 0, {}, pose, 10.05)
+    assert tel.position_m == (0.3, -0.2, 0.5)
+    assert tel.quat_wxyz == pytest.approx(quat)
+    assert yaw_deg_from_quat(tel.quat_wxyz) == pytest.approx(math.degrees(1.0))
+    zero = MocapPose((0.3, -0.2, 0.5), (0.0, 0.0, 0.0, 0.0), received_s=10.0)
+    with pytest.raises(Skip, match="bad_reading"):
+        build_telemetry(Aligned(0, _values()), plan, section, 0, {}, zero, 10.05)
+    with pytest.raises(Skip, match="no_attitude"):  # stale pose: no attitude at all
+        build_telemetry(Aligned(0, _values()), plan, section, 0, {}, pose, 10.2)
+    est = CrazyflieSection(attitude_source="estimator")
+    tel = build_telemetry(
+        Aligned(0, _values()), plan_variables(est, FAKE_TOC, "x"), est, 0, {}, pose, 10.2
+    )
+    assert tel.position_m is None, "a stale motion-capture position is left out"
+
+
+# --------------------------------------------------------------------------- command gate
+
+
+def test_gate_sends_nothing_until_asked_then_holds_the_last_setpoint() -> None:
+    gate = CommandGate(watchdog_s=0.5)
+    assert gate.tick(0.0) is None
+    assert gate.on_setpoint((0.1, 0.2, 0.5), 10.0, 0.0, 10.0, 30.0) == "accepted"
+    cmd = gate.tick(0.01)
+    assert cmd is not None and cmd.position_m == (0.1, 0.2, 0.5) and cmd.yaw_deg == 30.0
+    assert not gate.holding(0.4)
+    assert gate.holding(0.6)
+    held = gate.tick(5.0)
+    assert held is not None and held.position_m == (0.1, 0.2, 0.5), "hold, do not extrapolate"
+    # fresh again
+    assert gate.on_setpoint((0.2, 0.2, 0.5), 10.5, 5.1, 10.5, 90.0) == "accepted"
+    again = gate.tick(5.1)
+    assert again is not None and again.position_m == (0.2, 0.2, 0.5)
+    assert again.yaw_deg == 30.0, "the yaw of the first setpoint is held"
+
+
+def test_gate_drops_stale_setpoints() -> None:
+    gate = CommandGate(watchdog_s=0.5)
+    # computed from telemetry 0.8 s older than the latest: stale
+    assert gate.on_setpoint((0.0, 0.0, 0.5), 9.2, 0.0, 10.0, 0.0) == "stale"
+    assert gate.tick(0.0) is None
+    assert gate.on_setpoint((0.0, 0.0, 0.5), 10.0, 0.0, 10.0, 0.0) == "accepted"
+    assert gate.on_setpoint((9.0, 0.0, 0.5), 9.9, 0.0, 10.0, 0.0) == "stale", "stamp backwards"
+    assert gate.on_setpoint((math.nan, 0.0, 0.5), 10.1, 0.0, 10.1, 0.0) == "bad"
+    assert gate.on_setpoint((9.0, 0.0, 0.5), 1.7e9, 0.0, 10.1, 0.0) == "clock", "wall clock"
+    assert gate.on_setpoint((9.0, 0.0, 0.5), 10.2, 0.0, None, 0.0) == "stale", "no telemetry"
+    cmd = gate.tick(0.0)
+    assert cmd is not None and cmd.position_m == (0.0, 0.0, 0.5)
+    assert gate.dropped == {"stale": 3, "bad": 1, "clock": 1}
+
+
+def test_gate_latches_on_stop_until_rearm_and_forgets_on_link_loss() -> None:
+    gate = CommandGate(watchdog_s=0.5, yaw_deg=0.0)
+    gate.on_setpoint((0.0, 0.0, 0.5), 1.0, 0.0, 1.0, None)
+    gate.on_stop("tug-to-land")
+    assert gate.latched and gate.tick(0.1) is None
+    assert gate.on_setpoint((0.0, 0.0, 0.5), 1.1, 0.1, 1.1, None) == "latched"
+    assert gate.tick(0.2) is None
+    gate.rearm()
+    assert gate.tick(0.3) is None, "re-arming sends nothing by itself"
+    assert gate.on_setpoint((0.0, 0.0, 0.6), 1.2, 0.3, 1.2, None) == "accepted"
+    assert gate.tick(0.3) is not None
+    gate.on_link_lost()
+    assert gate.tick(0.4) is None, "after a reconnection a fresh setpoint is needed"
+
+
+def test_gate_ramps_take_off_and_land_then_motors_off() -> None:
+    from groundstation.bridges.crazyflie.bridge import LAND_SETTLE_S
+
+    gate = CommandGate(watchdog_s=0.5)
+    assert gate.ramp((0.3, 0.0, 0.0), (0.3, 0.0, 0.5), 0.25, 10.0, 45.0) == "accepted"
+    mid = gate.tick(11.0)
+    assert mid is not None and mid.position_m == pytest.approx((0.3, 0.0, 0.25))
+    assert mid.yaw_deg == 45.0
+    top = gate.tick(20.0)
+    assert top is not None and top.position_m == pytest.approx((0.3, 0.0, 0.5))
+    assert not gate.holding(20.0), "a ramp is its own fresh setpoint"
+    start = gate.position_in_force(20.0)
+    assert start is not None
+    assert gate.ramp(start, (0.3, 0.0, 0.0), 0.5, 20.0, 0.0, land=True) == "accepted"
+    down = gate.tick(21.0 + LAND_SETTLE_S / 2)
+    assert down is not None and not down.motors_off and down.position_m[2] == pytest.approx(0.0)
+    off = gate.tick(21.0 + 2 * LAND_SETTLE_S)
+    assert off is not None and off.motors_off
+    assert gate.tick(22.0) is None, "after landing nothing is sent"
+    gate.on_stop("x")
+    assert gate.ramp((0, 0, 0), (0, 0, 0.5), 0.25, 30.0, 0.0) == "latched"
+    gate.rearm()
+    assert gate.ramp((0, 0, 0), (0, 0, 0.5), 5.0, 30.0, 0.0) == "bad", "too fast"
+
+
+# --------------------------------------------------------------------------- runner
+
+
+class Harness:
+    """The runner on a thread, with an in-memory bus and the fake link driven by hand."""
+
+    def __init__(self, link: FakeLink, section: CrazyflieSection | None = None) -> None:
+        self.bus = InMemoryBus()
+        self.link = link
+        reach = ((0.0, 0.0, 0.754), 1.6)  # the default base and tether
+        self.bridge = CrazyflieBridge(
+            section or CrazyflieSection(), self.bus, "cf1", link, reach=reach
+        )
+        self.telemetry: list[dict[str, Any]] = []
+        self.status: list[dict[str, Any]] = []
+        self.bus.subscribe("tether/cf1/telemetry", lambda s: self.telemetry.append(_j(s)))
+        self.bus.subscribe("tether/cf1/bridge", lambda s: self.status.append(_j(s)))
+        self.stop = threading.Event()
+        self.rc: list[int] = []
+        self.thread = threading.Thread(target=lambda: self.rc.append(self.bridge.run(self.stop)))
+        self.clock_ms = 1000
+
+    def start(self) -> Harness:
+        self.thread.start()
+        wait_for(lambda: self.link.opens >= 1 and self.bridge.connected, "connected")
+        return self
+
+    def period(self, n: int = 1) -> None:
+        """Play ``n`` periods of every block."""
+        plan = self.bridge._plan
+        assert plan is not None
+        for _ in range(n):
+            sample = self.link.values()
+            # the slow block first: the bridge waits for its first sample (armed state)
+            for i, block in enumerate((*plan.slow, *plan.fast)):
+                values = {v: sample[v] for v in block.variables}
+                self.link.emit(block.name, self.clock_ms + i, values)
+            self.clock_ms += 10
+
+    def publish(self, key: str, payload: dict[str, Any]) -> None:
+        self.bus.publish(key, json.dumps(payload).encode())
+
+    def close(self) -> int:
+        self.stop.set()
+        self.thread.join(5.0)
+        assert not self.thread.is_alive()
+        self.bus.close()
+        return self.rc[0]
+
+
+def _j(sample: Sample) -> dict[str, Any]:
+    return dict(json.loads(sample.payload))
+
+
+def wait_for(predicate: Callable[[], bool], what: str, timeout_s: float = 5.0) -> None:
+    deadline = time.monotonic() + timeout_s
+    done = threading.Event()
+    while not predicate():
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
+        done.wait(0.005)
+
+
+@pytest.fixture
+def harness() -> Iterator[Callable[..., Harness]]:
+    made: list[Harness] = []
+
+    def make(link: FakeLink | None = None, **section: Any) -> Harness:
+        section.setdefault("data_timeout_s", 60.0)  # tests pause between packets
+        h = Harness(link or FakeLink(), CrazyflieSection(**section))
+        made.append(h)
+        return h.start()
+
+    yield make
+    for h in made:
+        if h.thread.is_alive():
+            h.close()
+
+
+def _names(link: FakeLink) -> list[str]:
+    return [name for name, _ in link.commands]
+
+
+def test_runner_publishes_si_telemetry_with_increasing_seq(harness: Any) -> None:
+    h = harness()
+    h.period(50)
+    wait_for(lambda: len(h.telemetry) >= 50, "50 telemetry")
+    assert [t["seq"] for t in h.telemetry] == list(range(len(h.telemetry)))
+    stamps = [t["stamp_s"] for t in h.telemetry]
+    assert all(b - a == pytest.approx(0.010) for a, b in itertools.pairwise(stamps))
+    last = h.telemetry[-1]
+    assert last["accel_mps2"][2] == pytest.approx(G_MPS2, abs=0.05)
+    pull_n = 0.05  # the fake's hover: thrust carries the weight and the tether's pull
+    assert last["thrust_n"] == pytest.approx(0.030 * 9.81 + pull_n, rel=1e-3)
+    assert last["vbat_v"] == pytest.approx(3.95) and last["armed"] is True
+    assert h.close() == 0
+    assert _names(h.link)[-1] == "close"
+    assert "send_stop_setpoint" not in _names(h.link), "never commanded: nothing to stop"
+
+
+def test_runner_waits_for_the_armed_state_before_publishing(harness: Any) -> None:
+    h = harness()
+    plan = h.bridge._plan
+    sample = h.link.values()
+    for block in plan.fast:  # fast blocks only: no armed state yet
+        h.link.emit(block.name, 900, {v: sample[v] for v in block.variables})
+    h.period(3)
+    wait_for(lambda: len(h.telemetry) >= 3, "telemetry")
+    assert h.bridge.counts["before_slow_block"] == 1
+    assert all(t["armed"] is True and t["stamp_s"] > 0.95 for t in h.telemetry)
+
+
+def test_runner_drops_out_of_order_packets(harness: Any) -> None:
+    h = harness()
+    h.period(5)
+    plan = h.bridge._plan
+    sample = h.link.values()
+    first = plan.fast[0]
+    h.link.emit(first.name, h.clock_ms - 30, {v: sample[v] for v in first.variables})
+    h.period(5)
+    wait_for(lambda: len(h.telemetry) >= 10, "10 telemetry")
+    stamps = [t["stamp_s"] for t in h.telemetry]
+    assert stamps == sorted(stamps) and len(set(stamps)) == len(stamps)
+    assert h.bridge._aligner is not None and h.bridge._aligner.out_of_order == 1
+
+
+def test_runner_streams_setpoints_and_a_stop_latches(harness: Any) -> None:
+    h = harness()
+    h.period(5)
+    wait_for(lambda: len(h.telemetry) >= 5, "telemetry")
+    stamp = h.telemetry[-1]["stamp_s"]
+    h.publish("tether/cf1/cmd/setpoint", {"stamp_s": stamp, "position_m": [0.1, 0.0, 0.5]})
+    wait_for(lambda: _names(h.link).count("send_position_setpoint") >= 5, "streamed setpoints")
+    sent = [a for n, a in h.link.commands if n == "send_position_setpoint"]
+    assert all(a[:3] == (0.1, 0.0, 0.5) for a in sent)
+    h.publish("tether/cf1/cmd/stop", {"stamp_s": stamp, "reason": "tug-to-land"})
+    wait_for(lambda: "stop_motors" in _names(h.link), "stop_motors")
+    h.publish("tether/cf1/cmd/setpoint", {"stamp_s": stamp + 0.01, "position_m": [0.2, 0, 0.5]})
+    wait_for(lambda: h.bridge.counts.get("setpoint_latched", 0) == 1, "latched setpoint dropped")
+    names = _names(h.link)
+    i_stop = names.index("stop_motors")
+    assert names.count("stop_motors") == 1
+    assert "send_position_setpoint" not in names[i_stop:], "no setpoint after a Stop"
+    wait_for(lambda: any(s["latched"] for s in h.status), "status says latched")
+    # the operator re-arms; the next setpoint flies again
+    h.publish("tether/cf1/cmd/rearm", {})
+    wait_for(lambda: "arm" in _names(h.link), "the arming request")
+    h.publish("tether/cf1/cmd/setpoint", {"stamp_s": stamp + 0.02, "position_m": [0.3, 0, 0.5]})
+    wait_for(
+        lambda: any(n == "send_position_setpoint" and a[0] == 0.3 for n, a in h.link.commands),
+        "setpoint after rearm",
+    )
+    assert h.close() == 0
+    assert _names(h.link)[-2:] == ["send_stop_setpoint", "close"], "shutdown stops setpoints"
+
+
+def test_runner_reconnects_after_a_dropped_link_and_logs_once(
+    harness: Any, caplog: pytest.LogCaptureFixture
+) -> None:
+    caplog.set_level(logging.WARNING, logger="groundstation.crazyflie")
+    h = harness()
+    h.period(5)
+    wait_for(lambda: len(h.telemetry) >= 5, "telemetry")
+    stamp = h.telemetry[-1]["stamp_s"]
+    h.publish("tether/cf1/cmd/setpoint", {"stamp_s": stamp, "position_m": [0.1, 0.0, 0.5]})
+    wait_for(lambda: "send_position_setpoint" in _names(h.link), "a setpoint")
+    h.link.lose()
+    wait_for(lambda: h.link.opens >= 2 and h.bridge.connected, "reconnected")
+    n_before = len(h.telemetry)
+    h.period(5)
+    wait_for(lambda: len(h.telemetry) >= n_before + 5, "telemetry after reconnecting")
+    seqs = [t["seq"] for t in h.telemetry]
+    assert seqs == list(range(len(seqs))), "seq continues across the reconnection"
+    lost_logs = [r for r in caplog.records if "lost" in r.getMessage()]
+    assert len(lost_logs) == 1
+    names = _names(h.link)
+    i_lost = names.index("lost")
+    assert "send_position_setpoint" not in names[i_lost:], "no held setpoint after a loss"
+
+
+def test_runner_takes_silence_as_a_lost_link(harness: Any) -> None:
+    h = harness(data_timeout_s=0.2)
+    h.period(3)
+    wait_for(lambda: len(h.telemetry) >= 3, "telemetry")
+    # no more packets: after 0.2 s the bridge gives the link up and opens it again
+    wait_for(lambda: h.link.opens >= 2, "reopened after silence")
+    assert h.bridge.counts.get("link_lost", 0) >= 1
+
+
+def test_runner_stop_while_disconnected_is_sent_at_reconnection(harness: Any) -> None:
+    link = FakeLink("fake://hover?down_s=0.3")
+    h = harness(link)
+    h.period(3)
+    link._down_until = time.monotonic() + 0.3  # refuse reconnecting for a while
+    link.lose()
+    wait_for(lambda: not h.bridge.connected, "disconnected")
+    h.publish("tether/cf1/cmd/stop", {"stamp_s": 0.0, "reason": "operator"})
+    wait_for(lambda: h.bridge.connected and "stop_motors" in _names(link), "stop on reconnect")
+    names = _names(link)
+    assert names.index("stop_motors") > names.index("start_logging", names.index("lost"))
+    assert h.bridge.gate.latched
+
+
+def test_runner_fails_clearly_on_missing_variables(caplog: pytest.LogCaptureFixture) -> None:
+    caplog.set_level(logging.ERROR, logger="groundstation.crazyflie")
+    link = FakeLink("fake://hover?missing=stateEstimate.qx,acc.z")
+    bus = InMemoryBus()
+    try:
+        rc = CrazyflieBridge(CrazyflieSection(), bus, "cf1", link).run(threading.Event())
+    finally:
+        bus.close()
+    assert rc == 2
+    msg = " ".join(r.getMessage() for r in caplog.records)
+    assert "acc.z" in msg and "stateEstimate.qx" in msg
+    assert _names(link) == ["open", "close"]
+
+
+def test_runner_attaches_mocap_position_and_forwards_extpos(harness: Any) -> None:
+    h = harness(mocap_key="mocap/{drone}", send_extpos=True, mocap_stale_s=5.0)
+    h.publish("mocap/cf1", {"position_m": [0.3, 0.1, 0.5]})
+    wait_for(lambda: "send_extpos" in _names(h.link), "extpos forwarded")
+    h.period(3)
+    wait_for(lambda: len(h.telemetry) >= 3, "telemetry")
+    assert h.telemetry[-1]["position_m"] == [0.3, 0.1, 0.5]
+    h.publish("mocap/cf1", {"position_m": [0.3, "x", 0.5]})
+    wait_for(lambda: h.bridge.counts.get("bad_input", 0) == 1, "bad pose counted")
+
+
+# --------------------------------------------------------------------------- CflibLink
+
+
+class _RecordingDriver:
+    """Stands in for cflib's radio driver below a real ``Crazyflie``: records packets."""
+
+    needs_resending = False
+
+    def __init__(self) -> None:
+        self.sent: list[tuple[int, int, bytes]] = []
+
+    def send_packet(self, pk: Any) -> None:
+        self.sent.append((pk.port, pk.channel, bytes(pk.data)))
+
+    def close(self) -> None:
+        pass
+
+
+def _cflib_link(toc: dict[str, str]) -> tuple[Any, Any, _RecordingDriver]:
+    """A :class:`CflibLink` on a real cflib ``Crazyflie`` whose TOC is ``toc``."""
+    from cflib.crazyflie import Crazyflie
+    from cflib.crazyflie.log import LogTocElement
+    from cflib.crazyflie.toc import Toc
+
+    from groundstation.bridges.crazyflie.link import CflibLink
+
+    cf = Crazyflie()
+    driver = _RecordingDriver()
+    cf.link = driver
+    cf.platform._protocolVersion = 12  # a firmware with the supervisor port
+    type_ids = {v[0]: k for k, v in LogTocElement.types.items()}
+    table = Toc()
+    for ident, (name, ctype) in enumerate(toc.items()):
+        group, var = name.split(".")
+        data = bytearray([type_ids[ctype]]) + group.encode() + b"\0" + var.encode() + b"\0"
+        table.add_element(LogTocElement(ident, data))
+    cf.log.toc = table
+    link = CflibLink("radio://0/80/2M/E7E7E7E7E7")
+    link._cf = cf
+    return link, cf, driver
+
+
+def test_cflib_accepts_the_planned_blocks_and_decodes_their_packets() -> None:
+    import struct
+
+    from cflib.crtp.crtpstack import CRTPPacket, CRTPPort
+
+    link, cf, driver = _cflib_link(dict(FAKE_TOC))
+    plan = plan_variables(CrazyflieSection(), FAKE_TOC, link.uri)
+    got: list[tuple[str, int, dict[str, float]]] = []
+    link.start_logging([*plan.fast, *plan.slow], lambda b, t, v: got.append((b, t, dict(v))))
+    creates = [p for p in driver.sent if p[0] == CRTPPort.LOGGING and p[2][0] in (0, 6)]
+    assert len(creates) == len(plan.fast) + len(plan.slow), "one create-block per block"
+    # A log packet of the attitude+motors block as the firmware sends it.
+    conf = next(c for c in cf.log.log_blocks if "motor.m1" in [v.name for v in c.variables])
+    fmt = {"float": "f", "uint16_t": "H"}
+    block = next(b for b in plan.fast if b.name == conf.name)
+    values: dict[str, float] = {v: (1.0 if v.endswith("qw") else 0.0) for v in block.variables}
+    values.update({m: 41000 + i for i, m in enumerate(plan.motors)})
+    body = b"".join(
+        struct.pack("<" + fmt[t], values[v])
+        for v, t in zip(block.variables, block.fetch_as, strict=True)
+    )
+    ts = 0x123456
+    pk = CRTPPacket()
+    pk.set_header(CRTPPort.LOGGING, 2)
+    pk.data = bytes([conf.id, ts & 0xFF, (ts >> 8) & 0xFF, ts >> 16]) + body
+    cf.log._new_packet_cb(pk)
+    assert got == [(block.name, ts, values)]
+
+
+def test_cflib_refuses_a_block_larger_than_a_packet() -> None:
+    from groundstation.bridges.crazyflie.link import LinkError, LogBlock
+
+    toc = {f"g.v{i}": "float" for i in range(7)}
+    link, _, _ = _cflib_link(toc)
+    big = LogBlock("big", 10, tuple(toc), ("float",) * 7)  # 28 bytes
+    with pytest.raises(LinkError, match="big"):
+        link.start_logging([big], lambda b, t, v: None)
+
+
+def test_cflib_commands_go_out_on_the_right_ports() -> None:
+    import struct
+
+    from cflib.crtp.crtpstack import CRTPPort
+
+    link, _, driver = _cflib_link(dict(FAKE_TOC))
+    link.send_position_setpoint(0.1, 0.2, 0.5, 30.0)
+    port, _, data = driver.sent[-1]
+    assert port == CRTPPort.COMMANDER_GENERIC
+    assert struct.unpack("<Bffff", data) == pytest.approx((7, 0.1, 0.2, 0.5, 30.0))
+    driver.sent.clear()
+    link.stop_motors()
+    assert (CRTPPort.SUPERVISOR, 1, bytes([0x03])) in driver.sent, "supervisor emergency stop"
+    assert (CRTPPort.COMMANDER_GENERIC, 0, bytes([0])) in driver.sent, "and a stop setpoint"
+    driver.sent.clear()
+    link.arm()
+    assert driver.sent == [(CRTPPort.SUPERVISOR, 1, bytes([0x01, 1]))], "arming request"
+
+
+def test_runner_takeoff_and_land_from_the_mocap_position(harness: Any) -> None:
+    h = harness(mocap_key="mocap/{drone}", mocap_stale_s=5.0)
+    h.period(3)
+    wait_for(lambda: len(h.telemetry) >= 3, "telemetry")
+    h.publish("tether/cf1/cmd/takeoff", {"height_m": 0.4})
+    wait_for(lambda: h.bridge.counts.get("takeoff_refused", 0) == 1, "refused without mocap")
+    assert "send_position_setpoint" not in _names(h.link)
+    h.publish("mocap/cf1", {"position_m": [0.3, 0.1, 0.02]})
+    h.publish("tether/cf1/cmd/takeoff", {"height_m": 2.5})  # 1.75 m above a 1.6 m tether
+    wait_for(lambda: h.bridge.counts.get("takeoff_refused", 0) == 2, "refused beyond reach")
+    h.publish("tether/cf1/cmd/takeoff", {"height_m": 0.4, "speed_mps": 1.0})
+    wait_for(
+        lambda: any(
+            n == "send_position_setpoint" and a[2] == pytest.approx(0.4) for n, a in h.link.commands
+        ),
+        "at the take-off height",
+    )
+    ups = [a for n, a in h.link.commands if n == "send_position_setpoint"]
+    assert all(a[:2] == pytest.approx((0.3, 0.1)) for a in ups), "straight up"
+    zs = [a[2] for a in ups]
+    assert zs == sorted(zs) and zs[0] < 0.1
+    h.publish("tether/cf1/cmd/land", {"speed_mps": 1.0})
+    wait_for(lambda: "send_stop_setpoint" in _names(h.link), "motors off after landing", 10)
+    names = _names(h.link)
+    i_off = names.index("send_stop_setpoint")
+    downs = [a[2] for n, a in h.link.commands[:i_off] if n == "send_position_setpoint"]
+    assert downs[-1] == pytest.approx(0.0)
+    assert h.close() == 0
+    assert "send_position_setpoint" not in _names(h.link)[i_off:]
+
+
+def test_example_lab_config_loads() -> None:
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "config" / "crazyflie.toml"
+    settings = load_settings(path, use_env=False)
+    assert settings.crazyflie.mocap_key == "mocap/{drone}"
+    assert settings.crazyflie.thrust_map == DEFAULT_MAP
+
+
+def test_a_command_failing_on_the_link_counts_as_a_loss(harness: Any) -> None:
+    from groundstation.bridges.crazyflie.link import LinkError
+
+    class Flaky(FakeLink):
+        failed = False
+
+        def send_position_setpoint(self, x_m: float, y_m: float, z_m: float, yaw: float) -> None:
+            if not self.failed:
+                self.failed = True
+                raise LinkError("radio gone")
+            super().send_position_setpoint(x_m, y_m, z_m, yaw)
+
+    h = harness(Flaky())
+    h.period(3)
+    wait_for(lambda: len(h.telemetry) >= 3, "telemetry")
+    stamp = h.telemetry[-1]["stamp_s"]
+    h.publish("tether/cf1/cmd/setpoint", {"stamp_s": stamp, "position_m": [0.1, 0.0, 0.5]})
+    wait_for(lambda: h.link.opens >= 2 and h.bridge.connected, "reconnected after the failure")
+    assert h.bridge.counts["link_lost"] == 1
+    assert "send_position_setpoint" not in _names(h.link), "the setpoint is forgotten"
+
+
+def test_cflib_link_refuses_a_uri_it_cannot_open() -> None:
+    from groundstation.bridges.crazyflie.link import CflibLink, LinkError
+
+    with pytest.raises(LinkError, match="not a cflib URI"):
+        CflibLink("radio:/0/80")
+    assert CflibLink("udp://127.0.0.1:19850").uri == "udp://127.0.0.1:19850"
+
+
+# ------------------------------------------------------------------ over cflib's UDP driver
+
+
+@pytest.fixture
+def firmware() -> Iterator[Any]:
+    from tests.crtp_firmware import CrtpFirmware
+
+    fw = CrtpFirmware(FAKE_TOC)
+    yield fw
+    fw.close()
+
+
+def test_cflib_link_connects_over_udp_and_streams_the_planned_blocks(firmware: Any) -> None:
+    """CflibLink end to end through cflib 0.1.34 (connect, TOC, blocks, data, commands) against
+    a minimal CRTP responder standing in for firmware (tests/crtp_firmware.py)."""
+    from groundstation.bridges.crazyflie.link import CflibLink
+
+    link = CflibLink(firmware.uri)
+    lost: list[str] = []
+    toc = link.open(lost.append, timeout_s=10.0)
+    try:
+        assert toc == dict(FAKE_TOC)
+        plan = plan_variables(CrazyflieSection(), toc, link.uri)
+        got: list[tuple[str, int, dict[str, float]]] = []
+        lock = threading.Lock()
+
+        def on_data(block: str, ts: int, values: Any) -> None:
+            with lock:
+                got.append((block, ts, dict(values)))
+
+        link.start_logging([*plan.fast, *plan.slow], on_data)
+        names = {b.name for b in (*plan.fast, *plan.slow)}
+        wait_for(lambda: {b for b, _, _ in list(got)} == names, "data of every block", 10.0)
+        with lock:
+            by_block = {b: v for b, _, v in got}
+        assert by_block["tel0"]["acc.z"] == pytest.approx(1.0)
+        assert by_block["tel1"]["motor.m3"] == 40000, "fetched as uint16"
+        assert by_block["slow0"]["supervisor.info"] == 0b1011
+        link.send_position_setpoint(0.1, 0.2, 0.5, 0.0)
+        link.stop_motors()
+        wait_for(lambda: any(d == b"\x03" for _, d in firmware.packets(0x09)), "emergency stop")
+        assert lost == []
+    finally:
+        link.close()
+
+
+def test_the_bridge_runs_on_cflib_over_udp(firmware: Any) -> None:
+    from groundstation.bridges.crazyflie.link import CflibLink
+
+    bus = InMemoryBus()
+    telemetry: list[dict[str, Any]] = []
+    bus.subscribe("tether/cf1/telemetry", lambda s: telemetry.append(_j(s)))
+    bridge = CrazyflieBridge(CrazyflieSection(), bus, "cf1", CflibLink(firmware.uri))
+    stop = threading.Event()
+    rc: list[int] = []
+    thread = threading.Thread(target=lambda: rc.append(bridge.run(stop)))
+    thread.start()
+    try:
+        wait_for(lambda: len(telemetry) >= 20, "20 telemetry over cflib", 15.0)
+    finally:
+        stop.set()
+        thread.join(10.0)
+        bus.close()
+    assert rc == [0]
+    seqs = [t["seq"] for t in telemetry]
+    assert seqs == list(range(len(seqs)))
+    last = telemetry[-1]
+    assert last["accel_mps2"] == pytest.approx([0.0, 0.0, G_MPS2])
+    assert last["thrust_n"] == pytest.approx(thrust_n([40000.0] * 4, DEFAULT_MAP))
+    assert last["armed"] is True and last["vbat_v"] == pytest.approx(3.9)
+    stamps = [t["stamp_s"] for t in telemetry]
+    assert all(b > a for a, b in itertools.pairwise(stamps))
