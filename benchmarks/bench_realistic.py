@@ -518,8 +518,8 @@ def render(res: dict[str, Any], cmd: str, wall_s: float) -> str:
         "- Near plumb (the spot (0.5, -0.6, 1.0), H ~ 9 mN) the azimuth is poorly determined "
         "at 2 m/s^2 for ours and the oracle alike; the pooled p95 follows that spot.",
         "- With calibration = truth both filters still see a few mN of vertical bias at some "
-        "spots (the simulator's equivalent calibration is first-order in the battery voltage "
-        "and ignores motor lag and rotor drag), so the hover figures are not pure noise.",
+        "spots (e.g. -5 mN of T_z at (0.5, -0.6, 1.0), seed 104, 2 m/s^2; cause not isolated), "
+        "so the hover figures are not pure noise.",
         "",
     ]
     return "\n".join(L)
