@@ -4,7 +4,8 @@ service at scale.
 Nothing here re-implements a benchmark: the case set, the peers (the paper's recipe, scipy
 ``fsolve`` on the five equations, a plain vectorised Newton), the 50-digit reference and the
 error measures are :mod:`benchmarks.bench_catenary`'s; the service load run is
-:func:`benchmarks.bench_service.run_case`; the dashboard's cost is measured with
+:func:`benchmarks.bench_service.run_case` (with the echo floor, bursts and the drain rate of
+:mod:`benchmarks.service_rig`); the dashboard's cost is measured with
 :mod:`benchmarks.bench_dashboard`'s ``callback_cost_us`` and ``run_once``. This module only
 chooses the sizes (quick or full) and keeps the numbers as data for tables and figures.
 """
@@ -16,7 +17,7 @@ import math
 import os
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 from benchmarks import bench_catenary as bc
@@ -32,6 +33,8 @@ CATENARY_NAMES = {
 """bench_catenary's method keys → names on the results page (the page's order)."""
 SERVICE_TARGET_DELIVERY = 0.999  # bench_service's targets
 SERVICE_TARGET_P99_MS = 10.0
+SERVICE_TARGET_BURST_RATIO = 3.0  # issue 13: p99 under bursts ≤ 3× the echo floor's
+SERVICE_TARGET_CAPACITY_HZ = 20_000.0  # issue 13: msgs/s on one core with a backlog
 
 
 # ---------------------------------------------------------------------------- (b) catenary
@@ -147,6 +150,11 @@ class ServiceResult:
     rows: tuple[dict[str, Any], ...]  # bench_service.run_case outputs
     dashboard_rows: tuple[dict[str, Any], ...]  # run_case(..., dashboard=True)
     load_before: float  # 1-minute load average when the section started
+    floor_rows: tuple[dict[str, Any], ...] = ()  # run_case(..., sut="echo"): the echo floor
+    bursts: dict[str, dict[str, Any]] = field(default_factory=dict)  # sut -> service_rig.drive
+    capacity: dict[str, dict[str, Any]] = field(default_factory=dict)  # sut -> rig.capacity
+    offline_us_per_msg: float = float("nan")  # Pipeline.handle in-process, same run (CPU)
+    load_after: float = float("nan")
 
     def meets(self, row: dict[str, Any]) -> bool:
         return bool(
@@ -156,6 +164,9 @@ class ServiceResult:
     def delivered_ok(self, row: dict[str, Any]) -> bool:
         return bool(row["delivered"] >= SERVICE_TARGET_DELIVERY and row["queue_overflow"] == 0)
 
+    def floor(self, drones: int) -> dict[str, Any] | None:
+        return next((r for r in self.floor_rows if r["drones"] == drones), None)
+
 
 def service(
     drone_counts: tuple[int, ...],
@@ -163,12 +174,20 @@ def service(
     dashboard_drones: tuple[int, ...],
     extend_to: int = 0,
     progress: Callable[[str], None] | None = None,
+    floor_drones: tuple[int, ...] = (8,),
+    burst_drones: int = 8,
+    backlog: int = 6000,
+    capacity_suts: tuple[str, ...] = ("echo", "service"),
 ) -> ServiceResult:
     """``run_case`` per drone count; then, if every count delivered, larger counts (doubling
-    up to ``extend_to``) to find where it saturates; then the dashboard cases."""
-    from benchmarks.bench_service import run_case  # imports zenoh: only when needed
+    up to ``extend_to``) to find where it saturates; then the dashboard cases; the echo
+    floor at ``floor_drones``; bursts (100 ms pauses once a second) against the service and
+    the floor; the drain rate with a ``backlog`` (all :mod:`benchmarks.service_rig`)."""
+    from benchmarks import service_rig as sr  # imports zenoh: only when needed
+    from benchmarks.bench_service import run_case
 
     load = os.getloadavg()[0]
+    offline = sr.offline_us_per_msg(8)["cpu_us_per_msg"]
     rows: list[dict[str, Any]] = []
     for n in drone_counts:
         rows.append(run_case(n, seconds))
@@ -182,12 +201,41 @@ def service(
         rows.append(run_case(n, seconds))
         if progress:
             progress(f"service {n} drones: {_row_brief(rows[-1])}")
+    floors = []
+    for n in floor_drones:
+        floors.append(run_case(n, seconds, sut="echo"))
+        if progress:
+            progress(f"echo floor {n} drones: {_row_brief(floors[-1])}")
     dash = []
     for n in dashboard_drones:
         dash.append(run_case(n, seconds, dashboard=True))
         if progress:
             progress(f"service {n} drones + dashboard: {_row_brief(dash[-1])}")
-    return ServiceResult(seconds, tuple(rows), tuple(dash), load)
+    schedule = sr.Schedule.bursts(seconds)
+    payloads = sr.telemetry_payloads(burst_drones, len(schedule.release_s), seed=burst_drones)
+    bursts, capacity = {}, {}
+    for sut in ("echo", "service"):
+        with sr.rig(sut) as rig:
+            bursts[sut] = sr.drive(rig.endpoint, burst_drones, schedule, payloads, rig.pid)
+        if progress:
+            progress(f"bursts, {sut}: {_row_brief(bursts[sut])}")
+    for sut in capacity_suts:
+        with sr.rig(sut) as rig:
+            capacity[sut] = sr.capacity(rig.endpoint, rig.pid, burst_drones, backlog)
+        if progress:
+            progress(f"capacity, {sut}: {capacity[sut]['msgs_per_s']:.0f} msg/s")
+    offline = min(offline, sr.offline_us_per_msg(8)["cpu_us_per_msg"])
+    return ServiceResult(
+        seconds,
+        tuple(rows),
+        tuple(dash),
+        load,
+        tuple(floors),
+        bursts,
+        capacity,
+        offline,
+        os.getloadavg()[0],
+    )
 
 
 def _row_brief(r: dict[str, Any]) -> str:

@@ -1,4 +1,4 @@
-"""Command line: ``groundstation serve | sim | demo | record | replay | crazyflie``.
+"""Command line: ``groundstation serve | sim | demo | record | replay | crazyflie | calibrate``.
 
 Flags of the public contract are kept exactly (``docs/contract.md``); the ones added beside
 them are listed there too. Every long-running command stops on SIGINT or SIGTERM, closes its
@@ -466,6 +466,20 @@ def cmd_crazyflie(args: argparse.Namespace) -> int:
         return bridge.run(stop)
 
 
+def cmd_calibrate(args: argparse.Namespace) -> int:
+    from groundstation.recording.calibrate import run_calibrate
+
+    settings = _load(args)
+    return run_calibrate(
+        settings,
+        args.config,
+        args.files,
+        args.out,
+        drone=args.drone,
+        fit_tether=args.fit_tether,
+    )
+
+
 # --------------------------------------------------------------------------- parser
 
 
@@ -525,6 +539,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--web-port", metavar="N", type=int, help="dashboard port (8080, or a free one)")
     p.add_argument("--duration", type=float, metavar="S", help="stop after S wall seconds")
     p.add_argument("--once", action="store_true", help="stop when the scenario ends")
+    p.add_argument(
+        "--profile", choices=("ideal", "realistic"), help="simulator profile (docs/simulator.md)"
+    )
     p.set_defaults(func=cmd_demo)
 
     p = sub.add_parser("record", help="record the bus into MCAP")
@@ -573,6 +590,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--drone", required=True, metavar="ID", help="drone id on the bus")
     p.add_argument("--rate-hz", type=float, metavar="HZ", help="telemetry rate (100)")
     p.set_defaults(func=cmd_crazyflie)
+
+    p = sub.add_parser(
+        "calibrate", help="fit thrust scale, thrust axis, accelerometer bias from recordings"
+    )
+    p.add_argument("files", metavar="FILE.mcap", nargs="+", help="recordings with motion capture")
+    p.add_argument("--config", metavar="PATH", help="TOML configuration (the output's base)")
+    p.add_argument("--drone", metavar="ID", help="calibrate this drone only")
+    p.add_argument("--out", required=True, metavar="PATH.toml", help="configuration to write")
+    p.add_argument(
+        "--fit-tether", action="store_true", help="also fit the tether's ω and the base position"
+    )
+    p.add_argument(
+        "--log-level", choices=["DEBUG", "INFO", "WARNING", "ERROR"], help="log level (INFO)"
+    )
+    p.set_defaults(func=cmd_calibrate)
     return parser
 
 
@@ -582,6 +614,8 @@ def _sim_overrides(args: argparse.Namespace) -> dict[str, Any]:
         return over
     if getattr(args, "scenario", None):
         over["scenario"] = args.scenario
+    if getattr(args, "profile", None):
+        over["profile"] = args.profile
     if args.command == "sim":
         if args.drones:
             over["drones"] = list(args.drones)
@@ -597,8 +631,6 @@ def _sim_overrides(args: argparse.Namespace) -> dict[str, Any]:
             over["mocap"] = False
         if args.thrust_bias is not None:
             over["thrust_bias_ratio"] = args.thrust_bias
-        if args.profile is not None:
-            over["profile"] = args.profile
     return over
 
 

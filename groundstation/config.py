@@ -21,7 +21,7 @@ import re
 import tomllib
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Literal, get_args
+from typing import Any, Literal, Self, get_args
 
 from pydantic import (
     BaseModel,
@@ -30,6 +30,7 @@ from pydantic import (
     ValidationError,
     ValidationInfo,
     field_validator,
+    model_validator,
 )
 from pydantic_settings import (
     BaseSettings,
@@ -363,27 +364,34 @@ class RealisticSection(_Section):
     max_thrust_ratio: float = Field(2.0, gt=1.0)
     """Maximum collective thrust over the drone's weight."""
     motor_lag: bool = True
+    """Switch: first-order motor lag (``motor_tau_s``)."""
     motor_tau_s: float = Field(0.030, ge=0.0, le=0.5)
     """Motor time constant, s (issue 9: ~30 ms)."""
     rotor_drag: bool = True
+    """Switch: rotor drag (``rotor_drag_n_s_per_m``)."""
     rotor_drag_n_s_per_m: float = Field(0.0073, ge=0.0)
     """Horizontal rotor drag at hover thrust, N per m/s of body velocity (Förster 2015)."""
     yaw_motion: bool = True
     """Initial yaw uniform in ±π per flight, then a slow yaw swing."""
     yaw_amplitude_rad: float = Field(0.3, ge=0.0, le=3.2)
+    """Amplitude of the yaw swing, rad."""
     yaw_period_s: float = Field(20.0, gt=0.0)
+    """Period of the yaw swing, s."""
     # tether (lumped mass; ω and L come from [tether])
     tether_segments: int = Field(10, ge=2, le=200)
+    """Segments of the lumped-mass tether (10 keeps shape within 0.5 % of L)."""
     tether_stretch_stiffness_n: float = Field(100.0, gt=0.0)
     """EA, N (the real tether is stiffer, ~1e4 N; 100 N stretches 0.1 % at 0.1 N and keeps
     the integration cheap; stiffer costs sub-steps, not stability)."""
-    tether_axial_damping_ratio: float = Field(0.1, ge=0.0, le=1.0)
+    tether_axial_damping_ratio: float = Field(0.25, ge=0.0, le=1.0)
+    """Damping ratio of each segment's stretch."""
     tether_air_damping_n_s_per_m2: float = Field(1e-3, ge=0.0)
     """Effective linear drag per metre of tether (air + internal friction), N·s/m²."""
     floor_friction: float = Field(0.4, ge=0.0)
     """Coulomb friction coefficient of the tether on the floor."""
     # accelerometer and gyro
     vibration: bool = True
+    """Switch: vibration noise (off: only ``accel_noise_floor_mps2``)."""
     accel_noise_mps2: float = Field(1.0, ge=0.0)
     """Vibration noise std per axis at hover, m/s² (issue 9: 0.7–2.0; newer firmware
     0.06–0.39)."""
@@ -394,20 +402,26 @@ class RealisticSection(_Section):
     accel_noise_floor_mps2: float = Field(0.02, ge=0.0)
     """Sensor noise with the motors off, m/s²."""
     gyro_noise_rps: float = Field(0.01, ge=0.0)
+    """Gyro white noise per axis, rad/s."""
     misalignment: bool = True
+    """Switch: per-boot accelerometer misalignment."""
     misalignment_max_rad: float = Field(0.052, ge=0.0, le=0.35)
     """Per-boot accelerometer tilt against the attitude frame, magnitude up to this, rad
     (issue 9: ~3°)."""
     accel_scale: bool = True
+    """Switch: per-boot accelerometer scale error."""
     accel_scale_max: float = Field(0.025, ge=0.0, le=0.5)
     """Per-boot accelerometer scale error, uniform in ±this (issue 9: up to 2.5 %)."""
     accel_bias: bool = True
+    """Switch: per-boot accelerometer bias."""
     accel_bias_std_mps2: float = Field(0.05, ge=0.0)
     """Per-boot accelerometer bias std per axis, m/s² (beyond misalignment and scale)."""
     thrust_axis: bool = True
+    """Switch: thrust axis off body +z."""
     thrust_axis_rad: tuple[float, float] = (-0.037, -0.016)
     """Thrust axis ``[about_x, about_y]`` of body +z, rad, airframe constant (issue 9)."""
     thrust_map: bool = True
+    """Switch: reported thrust through an erroneous nominal map."""
     thrust_report_error: float = Field(-0.0909, ge=-0.5, le=2.0)
     """Reported/true thrust − 1 at ``thrust_vbat_ref_v`` (issue 9: true = 1.10 × reported,
     i.e. −0.091; range −0.10..+0.90)."""
@@ -422,43 +436,75 @@ class RealisticSection(_Section):
     publish_vbat: bool = True
     """Publish ``vbat_v`` in Telemetry."""
     battery_full_v: float = Field(4.20, gt=0.0)
+    """Open-circuit voltage when full, V."""
     battery_empty_v: float = Field(3.50, gt=0.0)
+    """Open-circuit voltage when empty, V (linear in the charge between)."""
     battery_capacity_mah: float = Field(250.0, gt=0.0)
+    """Battery capacity, mAh."""
     battery_internal_ohm: float = Field(0.12, ge=0.0)
+    """Internal resistance, Ω (the sag under load)."""
     battery_hover_current_a: float = Field(1.2, ge=0.0)
+    """Current at hover thrust, A (∝ (thrust/weight)^1.5)."""
     battery_soc_start: float = Field(1.0, ge=0.0, le=1.0)
+    """State of charge at t = 0."""
     # timing
     imu_timing: bool = True
+    """Switch: IMU jitter (off: exactly every 1/``imu_rate_hz``)."""
     imu_rate_hz: float = Field(100.0, gt=0.0, le=1000.0)
     """Mean IMU Telemetry rate, Hz (issue 9: 100 Hz)."""
     imu_jitter_std_s: float = Field(0.0015, ge=0.0)
+    """IMU spacing jitter std, s."""
     imu_late_prob: float = Field(0.05, ge=0.0, le=1.0)
+    """Share of late IMU messages (spacing up to ``imu_spacing_max_s``)."""
     imu_spacing_min_s: float = Field(0.006, gt=0.0)
+    """Shortest IMU spacing, s."""
     imu_spacing_max_s: float = Field(0.027, gt=0.0)
     """IMU spacing bounds, s (issue 9: 6–27 ms)."""
     mocap_timing: bool = True
     """Off: a motion-capture frame at every IMU sample, no latency, no bursts."""
     mocap_rate_min_hz: float = Field(70.0, gt=0.0)
+    """Lowest per-flight motion-capture rate, Hz."""
     mocap_rate_max_hz: float = Field(116.0, gt=0.0)
     """Per-flight frame rate, uniform in [min, max], Hz (issue 9: 70–116 Hz)."""
     mocap_latency_s: float = Field(0.010, ge=0.0)
+    """Capture → arrival latency of motion capture, s."""
     mocap_burst_prob: float = Field(0.175, ge=0.0, lt=1.0)
     """Fraction of frames held back and delivered with the next (issue 9: 15–20 % < 1 ms)."""
     mocap_outage_rate_per_s: float = Field(0.2, ge=0.0)
+    """Motion-capture outages per second (Poisson)."""
     mocap_outage_max_s: float = Field(0.150, gt=0.0)
     """Longest gap, s (issue 9: up to 150 ms)."""
     mocap_noise_m: float = Field(0.0003, ge=0.0)
+    """Motion-capture position noise std per axis, m."""
     mocap_attach: Literal["latest", "new"] = "latest"
     """``latest``: every Telemetry carries the latest arrived frame; ``new``: only the first
     Telemetry after a new frame."""
 
-    @field_validator("accel_noise_ar")
-    @classmethod
-    def _ar_covers_lag1(cls, value: float, info: ValidationInfo) -> float:
-        lag1 = info.data.get("accel_noise_lag1", 0.0)
-        if value < lag1:
-            raise ValueError(f"{value!r} must be >= accel_noise_lag1 {lag1!r}")
-        return value
+    @model_validator(mode="after")
+    def _consistent(self) -> Self:
+        # Cross-field rules (field validators do not see defaults); each message names keys.
+        if self.accel_noise_ar < self.accel_noise_lag1:
+            raise ValueError(
+                f"accel_noise_ar {self.accel_noise_ar!r} must be >= accel_noise_lag1 "
+                f"{self.accel_noise_lag1!r}"
+            )
+        nominal = 1.0 / self.imu_rate_hz
+        if not self.imu_spacing_min_s <= nominal <= self.imu_spacing_max_s:
+            raise ValueError(
+                f"imu_spacing_min_s {self.imu_spacing_min_s!r} <= 1/imu_rate_hz {nominal:.4f} "
+                f"<= imu_spacing_max_s {self.imu_spacing_max_s!r} must hold"
+            )
+        if self.mocap_rate_max_hz < self.mocap_rate_min_hz:
+            raise ValueError(
+                f"mocap_rate_max_hz {self.mocap_rate_max_hz!r} must be >= mocap_rate_min_hz "
+                f"{self.mocap_rate_min_hz!r}"
+            )
+        if self.battery_empty_v >= self.battery_full_v:
+            raise ValueError(
+                f"battery_empty_v {self.battery_empty_v!r} must be below battery_full_v "
+                f"{self.battery_full_v!r}"
+            )
+        return self
 
 
 class SimSection(_Section):
@@ -469,6 +515,7 @@ class SimSection(_Section):
     sensors); ``realistic``: rigid body, lumped-mass tether and real sensor errors
     (``[sim.realistic]``). docs/simulator.md."""
     realistic: RealisticSection = RealisticSection()
+    """``[sim.realistic]``: the realistic profile's parameters."""
 
     scenario: str = "hover"
     """Scenario (``groundstation sim --list``)."""

@@ -13,10 +13,11 @@ are the recorder's JSON schemas (:func:`groundstation.recording.schema_for_key`)
 from __future__ import annotations
 
 import json
+import math
 import re
 from typing import Annotated, Any, Literal, Self
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError
 
 __all__ = [
     "DRONE_ID_RE",
@@ -37,6 +38,7 @@ __all__ = [
     "Telemetry",
     "TetherParams",
     "Truth",
+    "encode_estimate",
     "parse_key",
 ]
 
@@ -478,6 +480,11 @@ class Status(_Out):
     None on an in-memory bus)."""
     events_suppressed: int | None = None
     """Events for this drone not published because of the per-drone cap (a flood)."""
+    rest_calibration: dict[str, Any] | None = None
+    """Rest calibration (``[calibration] rest``): None when off; else ``{"in_force": false}``,
+    or the accelerometer's x/y offset found while the drone sat still and disarmed, applied
+    until the next disarm: ``in_force``, ``offset_mps2`` [x, y], ``std_mps2``, ``duration_s``,
+    ``stamp_s``."""
 
 
 class MocapPoseIn(_In):
@@ -503,3 +510,63 @@ class LandIn(_In):
 
     speed_mps: Finite = Field(default=0.25, gt=0.0, le=1.0)
     """Descent speed, m/s."""
+
+
+# ---------------------------------------------------------------- fast Estimate encoding
+
+
+_ANY_JSON: TypeAdapter[Any] = TypeAdapter(Any, config=ConfigDict(ser_json_inf_nan="constants"))
+"""pydantic's serializer for plain values: the bytes ``model_dump_json`` writes for them (NaN
+and infinities as the words ``NaN``/``Infinity``, for :func:`encode_estimate` to catch,
+rather than a silent ``null``)."""
+
+
+def _non_finite(value: object) -> bool:
+    if isinstance(value, float):
+        return not math.isfinite(value)
+    if isinstance(value, (tuple, list)):
+        return any(_non_finite(v) for v in value)
+    if isinstance(value, dict):
+        return any(_non_finite(v) for v in value.values())
+    return False
+
+
+_REQUIRED = object()
+_ESTIMATE_FIELDS: dict[str, Any] = {
+    name: _REQUIRED if info.is_required() else info.default
+    for name, info in Estimate.model_fields.items()
+}
+"""Estimate's fields in its order, with their defaults (``_REQUIRED`` where none)."""
+
+
+def encode_estimate(**given: Any) -> bytes:
+    """An :class:`Estimate` as compact JSON without building the model (the per-message path).
+
+    Takes the model's fields as keywords (``follow`` as the FollowInfo's ``model_dump()``: it
+    changes only when follow changes state, so the caller keeps it). The same bytes as
+    ``Estimate(...).to_json()``: the fields in the model's order (one the call leaves out
+    takes the model's default), written by pydantic's own serializer (a ``TypeAdapter(Any)``,
+    so floats are spelt as the model spells them), without the model's construction and
+    validation, which cost as much again. ``tests/test_messages.py`` checks the bytes on
+    randomized estimates.
+
+    Raises:
+        TypeError: a field the model does not have, or a required one missing.
+        ValueError: a float is NaN or infinite (the model refuses them; never emitted).
+    """
+    unknown = given.keys() - _ESTIMATE_FIELDS.keys()
+    if unknown:
+        raise TypeError(f"encode_estimate: Estimate has no field(s) {sorted(unknown)}")
+    fields = {}
+    for name, default in _ESTIMATE_FIELDS.items():
+        value = given.get(name, default)
+        if value is _REQUIRED:
+            raise TypeError(f"encode_estimate: required field {name!r} missing")
+        fields[name] = value
+    out = _ANY_JSON.dump_json(fields)
+    # pydantic writes NaN and Infinity as bare words; look closer only if one appears
+    # (a follow reason may contain the word).
+    if (b"NaN" in out or b"Infinity" in out) and _non_finite(fields):
+        bad = [k for k, v in fields.items() if _non_finite(v)]
+        raise ValueError(f"non-finite value in Estimate field(s) {', '.join(bad)}")
+    return out

@@ -25,6 +25,7 @@ import numpy as np
 from groundstation import contact as contact_mod
 from groundstation import follow as follow_mod
 from groundstation.bus import Sample
+from groundstation.calibration import RestCalibrator
 from groundstation.config import CalibrationSection, DroneParams, Settings
 from groundstation.localization import AngleObservation, PositionEstimate, localize
 from groundstation.messages import (
@@ -39,6 +40,7 @@ from groundstation.messages import (
     StopIn,
     Telemetry,
     TetherParams,
+    encode_estimate,
     parse_key,
 )
 from groundstation.tension import (
@@ -143,7 +145,10 @@ class DroneRuntime:
     drops: Counter[str] = field(default_factory=Counter)
     telemetry_rate: _Rate = field(default_factory=_Rate)
     estimate_rate: _Rate = field(default_factory=_Rate)
-    last_estimate: Estimate | None = None
+    last_estimate_fields: dict[str, Any] | None = None
+    """The last Estimate's fields but ``follow`` (see :attr:`last_estimate`)."""
+    follow_json_cache: tuple[FollowInfo, dict[str, Any]] | None = None
+    """The last FollowInfo and its ``model_dump()`` (FollowInfo is frozen and reused)."""
     land_below_m_memory: float | None = None
     """Last tug-to-land height, restored when tug-to-land is switched back on."""
     follow_info_cache: tuple[follow_mod.FollowParams, tuple[Any, ...], FollowInfo] | None = None
@@ -152,6 +157,17 @@ class DroneRuntime:
     """Sensor corrections applied in the observation (None: none in force)."""
     calibration_source: str = "none"
     """Which calibration is in force (Estimate and status ``calibration``)."""
+    rest: RestCalibrator | None = None
+    """The rest calibration (``[calibration] rest``): the accelerometer's x/y offset found
+    while the drone sat still and disarmed, added to the configured bias until the next
+    disarm."""
+
+    @property
+    def last_estimate(self) -> Estimate | None:
+        """The last published Estimate as a model (built on demand, not per message)."""
+        if self.last_estimate_fields is None or self.follow_json_cache is None:
+            return None
+        return Estimate(follow=self.follow_json_cache[0], **self.last_estimate_fields)
 
 
 def calibration_from_config(
@@ -496,6 +512,11 @@ class Pipeline:
             weight_n_per_m=params.tether.weight_n_per_m,
             calibration=calibration,
             calibration_source=calibration_source,
+            rest=(
+                RestCalibrator(bias_body_mps2=params.calibration.accel_bias_mps2)
+                if params.calibration.rest
+                else None
+            ),
             contact_params=contact_mod.ContactParams(
                 ground_thrust_ratio=params.filter.ground_thrust_ratio
             ),
@@ -546,10 +567,17 @@ class Pipeline:
 
     def _telemetry(self, runtime: DroneRuntime, msg: Telemetry, now_s: float) -> list[Sample]:
         runtime.received += 1
+        accel = msg.accel_mps2
+        if runtime.rest is not None:
+            # Rest calibration: the offset found at rest is extra accelerometer bias.
+            rest = runtime.rest.update(msg.stamp_s, accel, msg.quat_wxyz, msg.armed, msg.gyro_rps)
+            if rest is not None:
+                ox, oy, _ = rest.offset_body_mps2.tolist()
+                accel = (accel[0] - ox, accel[1] - oy, accel[2])
         # Malformed content first (whatever its seq), then the stream's order.
         try:
             obs = observe_tension(
-                msg.accel_mps2,
+                accel,
                 msg.quat_wxyz,
                 msg.thrust_n,
                 runtime.params.drone.mass_kg,
@@ -687,10 +715,9 @@ class Pipeline:
         out: list[Sample] = []
         estimate = self._estimate(runtime, msg, tension, std, position, on_ground, converged)
         if estimate is not None:
-            runtime.last_estimate = estimate
             runtime.estimates += 1
             runtime.estimate_rate.add(now_s)
-            out.append(Sample(f"tether/{runtime.drone}/estimate", estimate.to_json()))
+            out.append(Sample(f"tether/{runtime.drone}/estimate", estimate))
         if decision.setpoint_world_m is not None and _finite(decision.setpoint_world_m):
             sp = Setpoint(stamp_s=msg.stamp_s, position_m=_vec3(decision.setpoint_world_m))
             runtime.setpoints += 1
@@ -711,7 +738,8 @@ class Pipeline:
         position: PositionEstimate | None,
         on_ground: bool,
         converged: bool,
-    ) -> Estimate | None:
+    ) -> bytes | None:
+        """The Estimate's JSON (:func:`encode_estimate`: no model per message), or None."""
         if not (_finite(tension) and _finite(std)):
             self.count_drop(runtime.drone, "non_finite_estimate", "filter produced NaN/inf")
             runtime.filter.reset()
@@ -726,8 +754,11 @@ class Pipeline:
             else:
                 position = None
         follow = self._follow_info(runtime)
+        cached = runtime.follow_json_cache
+        if cached is None or cached[0] is not follow:
+            cached = runtime.follow_json_cache = (follow, follow.model_dump())
         lo_hi = position.radial_interval_m if position is not None else None
-        return Estimate(
+        fields: dict[str, Any] = dict(
             seq=msg.seq,
             stamp_s=msg.stamp_s,
             tension_n=tension,
@@ -735,7 +766,6 @@ class Pipeline:
             horizontal_n=math.hypot(tension[0], tension[1]),
             vertical_n=-tension[2],
             position_m=position_m,
-            follow=follow,
             position_std_m=position_std_m,
             radial_m=float(position.radial_m) if position is not None else None,
             radial_interval_m=(float(lo_hi[0]), float(lo_hi[1])) if lo_hi is not None else None,
@@ -748,6 +778,13 @@ class Pipeline:
             base_m=_vec3(runtime.base_world_m),
             calibration=runtime.calibration_source,
         )
+        try:
+            payload = encode_estimate(follow=cached[1], **fields)
+        except ValueError as exc:  # a non-finite field the checks above did not cover
+            self.count_drop(runtime.drone, "non_finite_estimate", str(exc))
+            return None
+        runtime.last_estimate_fields = fields
+        return payload
 
     def _follow_info(self, runtime: DroneRuntime) -> FollowInfo:
         """The Estimate's ``follow`` object (also the status's)."""
@@ -810,6 +847,7 @@ class Pipeline:
             "base_m": list(map(float, runtime.base_world_m)),
             "weight_n_per_m": runtime.weight_n_per_m,
             "calibration": runtime.calibration_source,
+            "rest_calibration": _rest_status(runtime.rest),
         }
 
     def drone_ids(self) -> Iterable[str]:
@@ -818,6 +856,22 @@ class Pipeline:
 
 
 _ZEROS3 = (0.0, 0.0, 0.0)
+
+
+def _rest_status(rest: RestCalibrator | None) -> dict[str, Any] | None:
+    """Status of the rest calibration: off (None), or the offset in force (or none yet)."""
+    if rest is None:
+        return None
+    off = rest.offset
+    if off is None:
+        return {"in_force": False}
+    return {
+        "in_force": True,
+        "offset_mps2": [float(v) for v in off.offset_body_mps2[:2]],
+        "std_mps2": [float(v) for v in off.std_mps2[:2]],
+        "duration_s": off.duration_s,
+        "stamp_s": off.stamp_s,
+    }
 
 
 def _noise_status(filt: TensionFilter) -> dict[str, Any]:

@@ -188,14 +188,19 @@ def payload_tables() -> str:
 
 def config_tables() -> str:
     out = []
+    pending: list[tuple[str, type[BaseModel]]] = []
     for table, field in config.Settings.model_fields.items():
         section = field.annotation
         if table == "drones":
             continue
         assert isinstance(section, type) and issubclass(section, BaseModel), table
+        pending.append((table, section))
+    while pending:
+        table, section = pending.pop(0)
         out += [f"#### `[{table}]`", "", _markdown(section.__doc__), ""]
         out += ["| key | type | default | | meaning |", "| --- | --- | --- | --- | --- |"]
         contract = CONTRACT_CONFIG.get(table, set())
+        nested: list[tuple[str, type[BaseModel]]] = []
         for name, sub in section.model_fields.items():
             meaning, _ = _meaning(sub)
             kind = _kind(sub)
@@ -203,13 +208,16 @@ def config_tables() -> str:
                 default_value: Any = sub.default_factory()  # type: ignore[call-arg]
             else:
                 default_value = sub.default
-            if isinstance(default_value, BaseModel):  # a nested table, e.g. [sim.realistic]
+            if isinstance(default_value, BaseModel):
+                # A sub-table (e.g. [sim.realistic]): its own table follows this one.
+                nested.append((f"{table}.{name}", type(default_value)))
                 default = f"table `[{table}.{name}]`"
             else:
                 default = "none" if default_value is None else f"`{json.dumps(default_value)}`"
             tag = "contract" if name in contract else "added"
             out.append(f"| `{name}` | {kind} | {default} | {tag} | {meaning} |")
         out.append("")
+        pending[:0] = nested
     return "\n".join(out).rstrip() + "\n"
 
 

@@ -1,7 +1,10 @@
 """Contract payloads: strict, finite, exact lengths, ranges, unknown fields ignored."""
 
 import json
+import math
+from typing import Any
 
+import numpy as np
 import pytest
 
 from groundstation.messages import (
@@ -11,6 +14,7 @@ from groundstation.messages import (
     InvalidMessage,
     Reel,
     Telemetry,
+    encode_estimate,
     parse_key,
 )
 
@@ -128,3 +132,103 @@ def test_estimate_serialises_contract_fields() -> None:
     assert set(d["follow"]) >= {"enabled", "active", "threshold_n"}
     with pytest.raises(ValueError):
         Estimate(**(est.model_dump() | {"horizontal_n": float("nan")}))
+
+
+# ---------------------------------------------------------------- the fast Estimate encoder
+
+
+def _random_estimate_fields(rng: np.random.Generator) -> dict[str, Any]:
+    """Estimate fields with floats across magnitudes (1e-9 … 1e9, both signs, ±0.0) and
+    every optional field present or absent."""
+
+    def f() -> float:
+        kind = rng.integers(5)
+        if kind == 0:
+            return float(rng.choice([0.0, -0.0, 1.0, 0.1, 1e-5, 1e-7, 2.5e-4, 1e16, 1e21]))
+        return float(rng.normal() * 10.0 ** rng.integers(-9, 10))
+
+    def v3() -> tuple[float, float, float]:
+        return (f(), f(), f())
+
+    def maybe(x: Any) -> Any:
+        return x if rng.random() < 0.7 else None
+
+    def maybe_bool() -> bool | None:
+        return maybe(bool(rng.integers(2)))
+
+    return {
+        "seq": int(rng.integers(0, 2**40)),
+        "stamp_s": f(),
+        "tension_n": v3(),
+        "tension_std_n": v3(),
+        "horizontal_n": abs(f()),
+        "vertical_n": f(),
+        "position_m": maybe(v3()),
+        "position_std_m": maybe(v3()),
+        "radial_m": maybe(f()),
+        "radial_interval_m": maybe((f(), f())),
+        "azimuth_determined": maybe_bool(),
+        "azimuth_source": maybe(str(rng.choice(["tension", "reel", "mocap", "fused"]))),
+        "floor_contact": maybe_bool(),
+        "on_ground": bool(rng.integers(2)),
+        "converged": bool(rng.integers(2)),
+        "length_m": maybe(abs(f())),
+        "base_m": maybe(v3()),
+    }
+
+
+def _random_follow(rng: np.random.Generator) -> FollowInfo:
+    return FollowInfo(
+        enabled=bool(rng.integers(2)),
+        active=bool(rng.integers(2)),
+        threshold_n=float(rng.uniform(0.01, 1.0)),
+        land_below_m=None if rng.random() < 0.5 else float(rng.normal()),
+        landing_armed=bool(rng.integers(2)),
+        stopped=bool(rng.integers(2)),
+        reason=str(rng.choice(["", "stale", "tug", 'a "quoted" \\ reason', "höhe", "NaN seen"])),
+    )
+
+
+def test_fast_encoder_agrees_with_the_model_on_random_estimates() -> None:
+    """encode_estimate writes the bytes the model writes: its fields in its order, the very
+    same values (compared after parsing too, so a failure says which)."""
+    rng = np.random.default_rng(42)
+    for _ in range(3000):
+        fields = _random_estimate_fields(rng)
+        if rng.random() < 0.2:  # a field left out takes the model's default
+            optional = [k for k, f in Estimate.model_fields.items() if not f.is_required()]
+            fields.pop(str(rng.choice(optional)), None)
+        follow = _random_follow(rng)
+        want = Estimate(follow=follow, **fields).to_json()
+        got = encode_estimate(follow=follow.model_dump(), **fields)
+        parsed = json.loads(got)
+        assert list(parsed) == list(Estimate.model_fields)
+        assert parsed == json.loads(want), (got, want)
+        assert got == want
+
+
+def test_fast_encoder_never_emits_nan() -> None:
+    rng = np.random.default_rng(3)
+    follow = _random_follow(rng).model_dump()
+    for name in ("stamp_s", "tension_n", "horizontal_n", "position_m", "radial_interval_m"):
+        for bad in (math.nan, math.inf, -math.inf):
+            fields = _random_estimate_fields(rng)
+            value = fields[name]
+            if isinstance(value, tuple) or value is None:
+                n = 2 if name == "radial_interval_m" else 3
+                fields[name] = (bad,) + (0.0,) * (n - 1)
+            else:
+                fields[name] = bad
+            with pytest.raises(ValueError, match="non-finite"):
+                encode_estimate(follow=follow, **fields)
+
+
+def test_fast_encoder_refuses_unknown_and_missing_fields() -> None:
+    rng = np.random.default_rng(5)
+    fields = _random_estimate_fields(rng)
+    follow = _random_follow(rng).model_dump()
+    with pytest.raises(TypeError, match="no field"):
+        encode_estimate(follow=follow, not_a_field=1.0, **fields)
+    del fields["seq"]
+    with pytest.raises(TypeError, match="'seq' missing"):
+        encode_estimate(follow=follow, **fields)

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import subprocess
 import sys
 from typing import Any
@@ -471,3 +472,59 @@ def test_realistic_profile_imports_no_estimator_and_no_catenary() -> None:
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "", f"the realistic profile imports {out.stdout.strip()}"
+
+
+def test_no_mocap_drops_position_on_the_realistic_profile_too() -> None:
+    sim = _realistic_sim("hover", mocap=False)
+    tel = [json.loads(p) for k, p in _payloads(sim, 1.0) if k.endswith("/telemetry")]
+    assert len(tel) > 80 and all("position_m" not in t for t in tel)
+
+
+def test_the_service_pipeline_runs_in_lock_step_on_the_realistic_profile() -> None:
+    """The benchmarks' closed loop: one estimate per jittered Telemetry, truth at its stamp."""
+    from groundstation.evaluation import closed_loop
+
+    run, _, _ = closed_loop(settings_for(profile="realistic"), "hover", 3.0)
+    assert run.telemetry > 250 and len(run.estimates) == run.telemetry
+    for e in run.estimates[::25]:
+        truth = run.truth_at(e["stamp_s"])
+        assert truth["profile"] == "realistic"
+        assert all(math.isfinite(v) for v in e["tension_n"])
+
+
+def test_sim_realistic_table_from_a_file_and_its_errors(tmp_path: Any) -> None:
+    from groundstation.config import ConfigError, load_settings
+
+    cfg = tmp_path / "sim.toml"
+    cfg.write_text('[sim]\nprofile = "realistic"\n\n[sim.realistic]\naccel_noise_mps2 = 0.5\n')
+    settings = load_settings(cfg, use_env=False)
+    assert settings.sim.profile == "realistic"
+    assert settings.sim.realistic.accel_noise_mps2 == 0.5
+    assert load_settings(None, use_env=False).sim.profile == "ideal"  # today's default
+    for body, key in (
+        ("accel_noise_lag1 = 0.7", "accel_noise_ar 0.6 must be >= accel_noise_lag1 0.7"),
+        ("imu_spacing_max_s = 0.005", "imu_spacing_max_s 0.005 must hold"),
+        ("mocap_rate_max_hz = 50.0", "mocap_rate_max_hz 50.0 must be >= mocap_rate_min_hz"),
+        ("no_such_key = 1", "sim.realistic.no_such_key"),
+    ):
+        cfg.write_text(f"[sim.realistic]\n{body}\n")
+        with pytest.raises(ConfigError, match=re.escape(key)):
+            load_settings(cfg, use_env=False)
+
+
+def test_truth_calibration_is_a_valid_calibration_table() -> None:
+    from groundstation.config import CalibrationSection
+
+    sim = _realistic_sim("hover")
+    cal = CalibrationSection(**sim.truth_calibration("cf1"))
+    errors = sim.drawn_errors("cf1")
+    assert errors is not None
+    assert cal.thrust_scale == pytest.approx(errors["calibration"]["thrust_scale"])
+    assert cal.thrust_axis_rad == (-0.037, -0.016)
+    flat = CalibrationSection(**sim.truth_calibration("cf1", use_vbat=False))
+    assert flat.thrust_vbat_slope_per_v == 0.0
+    assert flat.thrust_scale == pytest.approx(errors["calibration"]["thrust_scale_hover_start"])
+    ideal = Simulator(settings_for(thrust_bias_ratio=0.1), _Bus(), scenario="hover")  # type: ignore[arg-type]
+    assert CalibrationSection(**ideal.truth_calibration("cf1")).thrust_scale == pytest.approx(
+        1.0 / 1.1
+    )

@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, Any
 from groundstation.sim.rotation import quat_wxyz_from_z_axis, rotation_world_body_wxyz
 from groundstation.sim.runner import Simulator
 from groundstation.sim.scenarios import (
+    PAPER_BASE_M,
     PAPER_HOVER_SPOTS_M,
     SCENARIOS,
     Pull,
@@ -31,6 +32,7 @@ from groundstation.sim.scenarios import (
 
 __all__ = [
     "GRAVITY_MPS2",
+    "PAPER_BASE_M",
     "PAPER_HOVER_SPOTS_M",
     "SCENARIOS",
     "DroneSim",

@@ -29,13 +29,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from groundstation.sim.rotation import (
-    quat_multiply_wxyz,
-    quat_wxyz_from_rotvec,
-    rot_x,
-    rot_y,
-    rotation_world_body_wxyz,
-)
+from groundstation.sim.rotation import rot_x, rot_y, rotation_world_body_wxyz
 
 __all__ = ["AirframeParams", "RigidDrone"]
 
@@ -72,12 +66,12 @@ class AirframeParams:
     motor_tau_s: float = 0.030
     rotor_drag_n_s_per_m: float = 0.0073
     thrust_axis_rad: tuple[float, float] = (0.0, 0.0)
-    kp_per_s2: float = 9.0
-    kd_per_s: float = 5.0
-    ki_per_s3: float = 4.0
+    kp_per_s2: float = 16.0
+    kd_per_s: float = 7.0
+    ki_per_s3: float = 8.0
     attitude_bandwidth_rps: float = 18.0
     attitude_damping: float = 0.8
-    max_tilt_rad: float = math.radians(30.0)
+    max_tilt_rad: float = math.radians(35.0)
     thrust_ramp_s: float = 0.0
 
 
@@ -266,7 +260,8 @@ class RigidDrone:
         self.motor_thrust_n[:] = motors
         M = self._M_t
         thrust = motors[0] + motors[1] + motors[2] + motors[3]
-        tau = [sum(M[r][i] * motors[i] for i in range(4)) for r in (1, 2, 3)]
+        f1, f2, f3, f4 = motors
+        tau = [M[r][0] * f1 + M[r][1] * f2 + M[r][2] * f3 + M[r][3] * f4 for r in (1, 2, 3)]
         self.thrust_n = thrust
         vx, vy, vz = self.velocity_world_mps.tolist()
         # body-frame force: thrust along the thrust axis, rotor drag on horizontal body velocity
@@ -313,10 +308,7 @@ class RigidDrone:
         wy += (tau[1] - (wz * Jx * wx - wx * Jz * wz)) / Jy * dt_s
         wz += (tau[2] - (wx * Jy * wy - wy * Jx * wx)) / Jz * dt_s
         self.omega_body_rps[:] = (wx, wy, wz)
-        q = quat_multiply_wxyz(
-            self.q_world_body, quat_wxyz_from_rotvec(np.array((wx * dt_s, wy * dt_s, wz * dt_s)))
-        )
-        self.q_world_body = q / math.sqrt(float(q @ q))
+        self.q_world_body = _integrate_quat(self.q_world_body, wx * dt_s, wy * dt_s, wz * dt_s)
         # f = Rᵀ(F_non-gravitational)/m, in the reference body frame of the step's start
         self.specific_force_body_mps2[:] = (
             (R[0] * Fx + R[3] * Fy + R[6] * Fz) / m,
@@ -332,13 +324,43 @@ class RigidDrone:
 
 
 def _rotation_rows(q_wxyz: np.ndarray) -> list[float]:
-    """``R_world_body`` row-major as 9 floats, via :func:`rotation_world_body_wxyz`."""
-    return [float(v) for v in rotation_world_body_wxyz(q_wxyz).ravel()]
+    """``R_world_body`` row-major as 9 floats: ``I + 2w[v]× + 2[v]×²`` written out
+    (:func:`~groundstation.sim.rotation.rotation_world_body_wxyz` in plain floats)."""
+    w, x, y, z = q_wxyz.tolist()
+    n = 1.0 / math.sqrt(w * w + x * x + y * y + z * z)
+    w, x, y, z = w * n, x * n, y * n, z * n
+    return [
+        1.0 - 2.0 * (y * y + z * z),
+        2.0 * (x * y - w * z),
+        2.0 * (x * z + w * y),
+        2.0 * (x * y + w * z),
+        1.0 - 2.0 * (x * x + z * z),
+        2.0 * (y * z - w * x),
+        2.0 * (x * z - w * y),
+        2.0 * (y * z + w * x),
+        1.0 - 2.0 * (x * x + y * y),
+    ]
+
+
+def _integrate_quat(q_wxyz: np.ndarray, rx: float, ry: float, rz: float) -> np.ndarray:
+    """``q ⊗ exp(r)`` for a body rotation vector ``r`` (rad), normalised."""
+    angle = math.sqrt(rx * rx + ry * ry + rz * rz)
+    if angle < 1e-12:
+        dw, dx, dy, dz = 1.0, 0.5 * rx, 0.5 * ry, 0.5 * rz
+    else:
+        k = math.sin(0.5 * angle) / angle
+        dw, dx, dy, dz = math.cos(0.5 * angle), k * rx, k * ry, k * rz
+    w, x, y, z = q_wxyz.tolist()
+    q = np.array(
+        (
+            w * dw - x * dx - y * dy - z * dz,
+            w * dx + x * dw + y * dz - z * dy,
+            w * dy - x * dz + y * dw + z * dx,
+            w * dz + x * dy - y * dx + z * dw,
+        )
+    )
+    return q / math.sqrt(float(q @ q))
 
 
 def _yaw_quat(yaw_rad: float) -> np.ndarray:
     return np.array([math.cos(0.5 * yaw_rad), 0.0, 0.0, math.sin(0.5 * yaw_rad)])
-
-
-def _yaw_of(R: np.ndarray) -> float:
-    return math.atan2(float(R[1, 0]), float(R[0, 0]))

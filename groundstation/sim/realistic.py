@@ -64,6 +64,7 @@ class RealisticDrone:
         start_on_ground: sits on the floor at t = 0 (no warm-up).
         thrust_ramp_s: spool-up after arming, s.
         coin_mass_kg, coin_arm_m: the coin bench instead of a tether.
+        mocap: publish motion capture (``[sim] mocap``); False: no ``position_m``.
     """
 
     def __init__(
@@ -82,6 +83,7 @@ class RealisticDrone:
         thrust_ramp_s: float = 0.0,
         coin_mass_kg: float | None = None,
         coin_arm_m: np.ndarray | None = None,
+        mocap: bool = True,
     ) -> None:
         self.cfg = cfg
         self.sensors = sensor_params(cfg)
@@ -95,6 +97,7 @@ class RealisticDrone:
         self.mass_kg = float(mass_kg)
         self.offset_m = np.zeros(3)
         self.coin_mass_kg = coin_mass_kg
+        self.publish_mocap = mocap
         self.coin_arm_m = coin_arm_m
         self.battery = Battery(self.sensors)
         self.errors: DrawnErrors = draw_errors(self.sensors, flight_rng, self.battery.voltage(1.0))
@@ -127,6 +130,7 @@ class RealisticDrone:
             length_m,
             floor_z_m,
         )
+        self._length_target_m: float | None = None
         self.physics_dt_s = 1.0 / cfg.physics_rate_hz
         self.t_s = 0.0
         self.tension_world_n = np.zeros(3)
@@ -183,11 +187,14 @@ class RealisticDrone:
 
     @property
     def length_m(self) -> float:
-        return self.tether.length_m
+        """Tether length, m; a new value is reached gradually over the next step (reeling)."""
+        return self._length_target_m if self._length_target_m is not None else self.tether.length_m
 
     @length_m.setter
     def length_m(self, value: float) -> None:
-        self.tether.set_length(value)
+        if not value > 0.0:
+            raise ValueError(f"length_m must be > 0, got {value!r}")
+        self._length_target_m = float(value)
 
     @property
     def on_ground(self) -> bool:
@@ -248,7 +255,7 @@ class RealisticDrone:
             return d / np.linalg.norm(d) * (self.coin_mass_kg * GRAVITY_MPS2)
         return self.tether.force_on_drone_world_n.copy()
 
-    def _tick(self, h: float) -> None:
+    def _tick(self, h: float, length_m: float | None = None) -> None:
         body = self.body
         if self.cfg.yaw_motion and self.cfg.yaw_period_s > 0.0:
             body.yaw_target_rad = self._yaw0_rad + self.cfg.yaw_amplitude_rad * math.sin(
@@ -256,7 +263,7 @@ class RealisticDrone:
             )
         body.step(h, self.tension_world_n + self.external_world_n)
         if self.coin_mass_kg is None:
-            self.tether.step(h, body.position_world_m, body.velocity_world_mps)
+            self.tether.step(h, body.position_world_m, body.velocity_world_mps, length_m)
         self.tension_world_n = self._tether_force()
 
     def _warm_up(self, seconds: float) -> None:
@@ -274,8 +281,11 @@ class RealisticDrone:
         n = max(1, math.ceil(dt_s / self.physics_dt_s - 1e-9))
         h = dt_s / n
         out: list[dict[str, Any]] = []
-        for _ in range(n):
-            self._tick(h)
+        length0 = self.tether.length_m
+        target = self._length_target_m
+        for i in range(n):
+            reel = None if target is None else length0 + (target - length0) * (i + 1) / n
+            self._tick(h, reel)
             self.t_s += h
             ratio = self.body.thrust_n / self.body.hover_thrust_n
             self.battery.step(h, ratio)
@@ -289,6 +299,9 @@ class RealisticDrone:
                 # stamps on the IMU's 1 ms clock
                 spacing = max(round(spacing * 1000.0), 1) / 1000.0
                 self._next_imu_s += spacing
+        if target is not None:
+            self.tether.set_length(target)
+            self._length_target_m = None
         return out
 
     def _sample(self, stamp_s: float, thrust_ratio: float) -> dict[str, Any]:
@@ -311,7 +324,11 @@ class RealisticDrone:
         if s.battery and s.publish_vbat:
             telemetry["vbat_v"] = float(vbat)
         frame = self._mocap_latest
-        if frame is not None and (self.cfg.mocap_attach == "latest" or self._mocap_new):
+        if (
+            self.publish_mocap
+            and frame is not None
+            and (self.cfg.mocap_attach == "latest" or self._mocap_new)
+        ):
             telemetry["position_m"] = [float(v) for v in frame[2]]
         self._mocap_new = False
         self.seq += 1

@@ -32,7 +32,7 @@ import numpy as np
 from groundstation.bus import Bus, Sample, Subscription
 from groundstation.config import Settings
 from groundstation.messages import InvalidMessage, SetpointIn, StopIn, Truth
-from groundstation.sim.scenarios import SCENARIOS, scenario_names
+from groundstation.sim.scenarios import PAPER_BASE_M, SCENARIOS, scenario_names
 
 if TYPE_CHECKING:
     from groundstation.sim.ideal import DroneSim
@@ -41,6 +41,9 @@ if TYPE_CHECKING:
 __all__ = ["Simulator"]
 
 _log = logging.getLogger("groundstation.sim")
+
+MIN_HEIGHT_M = 0.05
+"""Scripted targets shifted with a low base stay this far above the floor, m."""
 
 
 class Simulator:
@@ -89,22 +92,65 @@ class Simulator:
             return None
         return drone.drawn_errors()  # type: ignore[union-attr]
 
+    def truth_calibration(self, drone_id: str, *, use_vbat: bool = True) -> dict[str, Any]:
+        """``[calibration]`` values equal to this flight's truth ("calibration = truth").
+
+        The keys of :class:`~groundstation.config.CalibrationSection`, ready for
+        ``{"calibration": ...}`` or ``{"drones": {id: {"calibration": ...}}}``. ``use_vbat``
+        False: the exact thrust scale at the first hover voltage and no voltage slope (for an
+        estimator that ignores ``vbat_v``). The ideal profile: the defaults, but
+        ``thrust_scale = 1/(1 + [sim] thrust_bias_ratio)``.
+        """
+        if self.profile != "realistic":
+            return {
+                "thrust_scale": 1.0 / (1.0 + self.settings.sim.thrust_bias_ratio),
+                "source": "sim truth (ideal)",
+            }
+        cal = self._errors_of(drone_id)["calibration"]
+        out = {
+            "thrust_scale": cal["thrust_scale"],
+            "thrust_vbat_slope_per_v": cal["thrust_vbat_slope_per_v"],
+            "thrust_vbat_ref_v": cal["thrust_vbat_ref_v"],
+            "thrust_axis_rad": tuple(cal["thrust_axis_rad"]),
+            "accel_bias_mps2": tuple(cal["accel_bias_mps2"]),
+            "source": f"sim truth (realistic, seed {self.settings.sim.seed}, {drone_id})",
+        }
+        if not use_vbat:
+            out["thrust_scale"] = cal["thrust_scale_hover_start"]
+            out["thrust_vbat_slope_per_v"] = 0.0
+        return out
+
+    def _errors_of(self, drone_id: str) -> dict[str, Any]:
+        errors = self.drawn_errors(drone_id)
+        if errors is None:
+            raise ValueError(f"{drone_id}: the {self.profile} profile draws no errors")
+        return errors
+
     def _placement(
         self, drone_id: str, index: int
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, float]:
-        """Base, start, script offset, tether length and floor of one drone."""
+        """Base, start, script offset, tether length and floor of one drone.
+
+        A scenario's positions are relative to its base: they are written for the paper's base
+        at :data:`~groundstation.sim.scenarios.PAPER_BASE_M` (or the scenario's own
+        ``base_m``), and each drone flies them shifted by its own base's displacement from
+        the paper's (its ``[drones.<id>.base]``, or, for drones without a table of their own,
+        the root ``[base]`` spread 3 m apart in y). The default base flies them unshifted.
+        """
         params = self.settings.for_drone(drone_id)
         sc = self.scenario
-        base = np.array(sc.base_m if sc.base_m is not None else params.base.position_m, float)
-        # Several drones fly the same script, each about its own base: spread them out.
-        offset = np.array([0.0, 3.0 * index, 0.0])
-        if drone_id in self.settings.drones:
-            offset[:] = 0.0  # placed by its own [drones.<id>] table
-        base = base + offset
-        start = np.array(sc.start_m, float) + offset
+        own_base = np.array(params.base.position_m, float)
+        if drone_id not in self.settings.drones:
+            # Several drones fly the same script, each about its own base: spread them out.
+            own_base = own_base + np.array([0.0, 3.0 * index, 0.0])
+        offset = own_base - np.array(PAPER_BASE_M, float)
+        base = own_base if sc.base_m is None else np.array(sc.base_m, float) + offset
         floor = params.base.floor_z_m
+        start = np.array(sc.start_m, float) + offset
         if sc.start_on_ground:
             start[2] = floor
+        else:
+            start[2] = max(start[2], floor + MIN_HEIGHT_M)
         length = sc.length_m if sc.length_m is not None else params.tether.length_m
         return base, start, offset, length, floor
 
@@ -130,6 +176,7 @@ class Simulator:
             coin_arm_m=np.array(sc.coin_arm_m, float) + offset
             if sc.coin_mass_kg is not None
             else None,
+            mocap=self.settings.sim.mocap,
         )
         drone.offset_m = offset
         return drone
@@ -231,7 +278,10 @@ class Simulator:
         offset = drone.offset_m
         for wp in sc.waypoints:
             if wp.at_s <= t_wp < wp.at_s + self.dt_s * 0.999 or (t == 0.0 and wp.at_s == 0.0):
-                drone.target_world_m = np.array(wp.position_m, float) + offset
+                target = np.array(wp.position_m, float) + offset
+                if not (sc.start_on_ground and wp.position_m[2] <= 0.0):
+                    target[2] = max(target[2], drone.floor_z_m + MIN_HEIGHT_M)
+                drone.target_world_m = target
         if sc.start_on_ground and not drone.armed and sc.arm_at_s <= t < sc.arm_at_s + self.dt_s:
             drone.armed = True
         if sc.reel_rate_mps and sc.reel_window_s[0] <= t < sc.reel_window_s[1]:

@@ -6,6 +6,7 @@ import math
 from dataclasses import dataclass
 
 __all__ = [
+    "PAPER_BASE_M",
     "PAPER_HOVER_SPOTS_M",
     "SCENARIOS",
     "Pull",
@@ -13,6 +14,10 @@ __all__ = [
     "Waypoint",
     "scenario_names",
 ]
+
+PAPER_BASE_M: tuple[float, float, float] = (0.0, 0.0, 0.754)
+"""The paper's base exit point, world frame, m: the scenarios' positions are written for it
+and each drone flies them shifted by its own base's displacement from it."""
 
 PAPER_HOVER_SPOTS_M: tuple[tuple[float, float, float], ...] = (
     (1.2, 0.0, 1.0),
@@ -49,10 +54,13 @@ class Scenario:
     Attributes:
         name: scenario name.
         description: one line for ``groundstation sim --list``.
-        start_m: initial drone position (on the floor when ``start_on_ground``).
+        start_m: initial drone position (on the floor when ``start_on_ground``). Every
+            position here is for a base at :data:`PAPER_BASE_M` (or at ``base_m``); the
+            simulator shifts them with each drone's base.
         waypoints: controller targets over time (the service's Setpoints override them).
         pulls: external pulls (tugs).
-        base_m: base exit point, or None for the configured one.
+        base_m: base exit point for the default base (shifted like the positions), or None
+            for the drone's configured base.
         length_m: tether length at t = 0, or None for the configured one.
         reel_rate_mps: reel speed (negative reels in) over ``reel_window_s``.
         arm_at_s: arming time (before it the drone sits disarmed on the floor).

@@ -1,0 +1,557 @@
+"""``groundstation calibrate``: fit the calibration from recordings with motion capture (an edge).
+
+Reads recordings made by ``groundstation record``, turns each drone's Telemetry (with the
+motion-capture ``position_m``), Reel and tether-parameter messages into arrays, calls the
+pure fit (:func:`groundstation.calibration.fit_calibration`), prints the result and writes a
+configuration file: the input configuration plus ``[drones.<id>.calibration]`` tables
+(comment lines say when and from what), which ``groundstation serve --config`` accepts as it
+is. Nothing is written when any input is unusable; the error names the file and what is
+missing.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+import tempfile
+import tomllib
+from collections import defaultdict
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from groundstation import messages
+from groundstation.calibration import (
+    CalibrationData,
+    CalibrationError,
+    CalibrationFit,
+    RestCalibrator,
+    fit_calibration,
+    hover_mask,
+)
+from groundstation.config import ConfigError, Settings, load_settings
+from groundstation.recording.mcap_io import RecordingError, iter_messages
+
+__all__ = [
+    "CalibrateInputError",
+    "DroneRecording",
+    "format_fit",
+    "read_recordings",
+    "run_calibrate",
+    "toml_dumps",
+]
+
+MIN_HOVER_S = 3.0
+"""Steady hover under motion capture each recording must hold, s."""
+
+
+class CalibrateInputError(RecordingError):
+    """A recording cannot be calibrated from; the message names the file and what is missing."""
+
+
+@dataclass
+class _Columns:
+    stamp_s: list[float] = field(default_factory=list)
+    accel: list[tuple[float, float, float]] = field(default_factory=list)
+    quat: list[tuple[float, float, float, float]] = field(default_factory=list)
+    thrust: list[float] = field(default_factory=list)
+    armed: list[bool] = field(default_factory=list)
+    position: list[tuple[float, float, float]] = field(default_factory=list)
+    gyro: list[tuple[float, float, float]] = field(default_factory=list)
+    vbat: list[float] = field(default_factory=list)
+    length: list[float] = field(default_factory=list)
+    base: list[tuple[float, float, float]] = field(default_factory=list)
+    weight: list[float] = field(default_factory=list)
+    with_mocap: int = 0
+    base_from_reel: bool = False
+
+
+@dataclass(frozen=True)
+class DroneRecording:
+    """One drone's samples from one or more recordings."""
+
+    drone: str
+    data: CalibrationData
+    files: tuple[str, ...]
+    weight_n_per_m: float
+    base_from_reel: bool
+    invalid: int
+
+
+_NAN3 = (math.nan, math.nan, math.nan)
+
+
+def _read_file(path: Path, settings: Settings) -> tuple[dict[str, _Columns], int]:
+    """Per-drone columns of one recording, and the count of invalid messages skipped."""
+    cols: dict[str, _Columns] = {}
+    tether: dict[str, tuple[float, tuple[float, float, float]]] = {}
+    weight: dict[str, float] = {}
+    invalid = 0
+    for rec in iter_messages(path):
+        try:
+            drone, kind = messages.parse_key(rec.key)
+        except messages.InvalidMessage:
+            continue
+        try:
+            if kind == "telemetry":
+                tel = messages.Telemetry.parse(rec.payload)
+            elif kind == "reel":
+                reel = messages.Reel.parse(rec.payload)
+                prev = tether.get(drone)
+                base = reel.base_m if reel.base_m is not None else None
+                if prev is None:
+                    params = settings.for_drone(drone)
+                    prev = (params.tether.length_m, params.base.position_m)
+                tether[drone] = (reel.length_m, base if base is not None else prev[1])
+                if base is not None:
+                    cols.setdefault(drone, _Columns()).base_from_reel = True
+                continue
+            elif kind == "params":
+                tp = messages.TetherParams.parse(rec.payload)
+                if tp.weight_n_per_m is not None:
+                    weight[drone] = tp.weight_n_per_m
+                continue
+            else:
+                continue
+        except messages.InvalidMessage:
+            invalid += 1
+            continue
+        c = cols.setdefault(drone, _Columns())
+        if drone not in tether:
+            params = settings.for_drone(drone)
+            tether[drone] = (params.tether.length_m, params.base.position_m)
+        if drone not in weight:
+            weight[drone] = settings.for_drone(drone).tether.weight_n_per_m
+        length, base = tether[drone]
+        c.stamp_s.append(tel.stamp_s)
+        c.accel.append(tel.accel_mps2)
+        c.quat.append(tel.quat_wxyz)
+        c.thrust.append(tel.thrust_n)
+        c.armed.append(tel.armed)
+        c.position.append(tel.position_m if tel.position_m is not None else _NAN3)
+        c.with_mocap += tel.position_m is not None
+        c.gyro.append(tel.gyro_rps if tel.gyro_rps is not None else _NAN3)
+        c.vbat.append(tel.vbat_v if tel.vbat_v is not None else math.nan)
+        c.length.append(length)
+        c.base.append(base)
+        c.weight.append(weight[drone])
+    return cols, invalid
+
+
+def read_recordings(
+    paths: Sequence[str | Path], settings: Settings, drone: str | None = None
+) -> dict[str, DroneRecording]:
+    """Each drone's samples from the recordings (one segment per file).
+
+    Raises:
+        CalibrateInputError: a file without telemetry, without the requested drone, or
+            whose telemetry carries no motion-capture ``position_m``.
+        RecordingError: a file that cannot be read.
+    """
+    per_drone: dict[str, list[tuple[int, str, _Columns]]] = defaultdict(list)
+    invalid: dict[str, int] = defaultdict(int)
+    for index, raw in enumerate(paths):
+        path = Path(raw)
+        if not path.is_file():
+            raise CalibrateInputError(f"{str(path)!r}: no such file")
+        cols, bad = _read_file(path, settings)
+        cols = {d: c for d, c in cols.items() if c.stamp_s}
+        if not cols:
+            raise CalibrateInputError(f"{str(path)!r}: no telemetry in the recording")
+        if drone is not None:
+            if drone not in cols:
+                raise CalibrateInputError(
+                    f"{str(path)!r}: no telemetry from drone {drone!r} "
+                    f"(drones in it: {', '.join(sorted(cols))})"
+                )
+            cols = {drone: cols[drone]}
+        for d, c in cols.items():
+            if c.with_mocap == 0:
+                raise CalibrateInputError(
+                    f"{str(path)!r}: drone {d!r} has no motion capture "
+                    "(no Telemetry carries position_m)"
+                )
+            per_drone[d].append((index, str(path), c))
+            invalid[d] += bad
+    out: dict[str, DroneRecording] = {}
+    for d, parts in per_drone.items():
+        arrays: dict[str, list[np.ndarray]] = defaultdict(list)
+        for index, _, c in parts:
+            n = len(c.stamp_s)
+            arrays["stamp_s"].append(np.asarray(c.stamp_s, float))
+            arrays["accel"].append(np.asarray(c.accel, float).reshape(n, 3))
+            arrays["quat"].append(np.asarray(c.quat, float).reshape(n, 4))
+            arrays["thrust"].append(np.asarray(c.thrust, float))
+            arrays["armed"].append(np.asarray(c.armed, bool))
+            arrays["position"].append(np.asarray(c.position, float).reshape(n, 3))
+            arrays["gyro"].append(np.asarray(c.gyro, float).reshape(n, 3))
+            arrays["vbat"].append(np.asarray(c.vbat, float))
+            arrays["length"].append(np.asarray(c.length, float))
+            arrays["base"].append(np.asarray(c.base, float).reshape(n, 3))
+            arrays["segment"].append(np.full(n, index, np.int64))
+            arrays["weight"].append(np.asarray(c.weight, float))
+        cat = {k: np.concatenate(v) for k, v in arrays.items()}
+        data = CalibrationData.from_arrays(
+            cat["stamp_s"],
+            cat["accel"],
+            cat["quat"],
+            cat["thrust"],
+            armed=cat["armed"],
+            position_world_m=cat["position"],
+            gyro_rps=cat["gyro"],
+            vbat_v=cat["vbat"],
+            length_m=cat["length"],
+            base_world_m=cat["base"],
+            segment=cat["segment"],
+        )
+        out[d] = DroneRecording(
+            drone=d,
+            data=data,
+            files=tuple(p for _, p, _ in parts),
+            weight_n_per_m=float(np.median(cat["weight"])),
+            base_from_reel=any(c.base_from_reel for _, _, c in parts),
+            invalid=invalid[d],
+        )
+    return out
+
+
+def _rest_offsets(data: CalibrationData, bias: Sequence[float]) -> np.ndarray:
+    """The rest offset the service would apply to each sample (NaN where none)."""
+    out = np.full((len(data), 3), math.nan)
+    for seg in np.unique(data.segment):
+        cal = RestCalibrator(bias_body_mps2=bias)
+        for i in np.flatnonzero(data.segment == seg).tolist():
+            gyro = data.gyro_rps[i]
+            off = cal.update(
+                float(data.stamp_s[i]),
+                data.accel_body_mps2[i],
+                data.quat_wxyz[i],
+                bool(data.armed[i]),
+                gyro if np.all(np.isfinite(gyro)) else None,
+            )
+            if off is not None:
+                out[i] = off.offset_body_mps2
+    return out
+
+
+def calibrate_drone(
+    rec: DroneRecording, settings: Settings, *, fit_tether: bool = False
+) -> CalibrationFit:
+    """Fit one drone's calibration, starting from its configured one.
+
+    With ``[calibration] rest = true`` the rest offsets the service would apply are applied
+    here too; where they cover the hover samples, the configured x/y bias has no effect at
+    run time (the rest measures x/y at every power-on), so it is kept and the thrust axis is
+    fitted instead.
+
+    Raises:
+        CalibrateInputError: too little hover in a file.
+    """
+    params = settings.for_drone(rec.drone)
+    cal = params.calibration
+    initial = {
+        "thrust_scale": cal.thrust_scale,
+        "about_x_rad": cal.thrust_axis_rad[0],
+        "about_y_rad": cal.thrust_axis_rad[1],
+        "bias_x_mps2": cal.accel_bias_mps2[0],
+        "bias_y_mps2": cal.accel_bias_mps2[1],
+        "bias_z_mps2": cal.accel_bias_mps2[2],
+        "vbat_slope_per_v": cal.thrust_vbat_slope_per_v,
+    }
+    mass = params.drone.mass_kg
+    hover = hover_mask(rec.data, mass)
+    for seg, path in enumerate(rec.files):
+        in_seg = rec.data.segment == np.unique(rec.data.segment)[seg]
+        t = rec.data.stamp_s[in_seg & hover]
+        # hover time of this file (sum of run lengths ≈ samples × median step)
+        steps = np.diff(rec.data.stamp_s[in_seg])
+        dt = float(np.median(steps)) if steps.size else 0.0
+        held = t.size * dt
+        if held < MIN_HOVER_S:
+            raise CalibrateInputError(
+                f"{path!r}: drone {rec.drone!r}: too short: {held:.1f} s of steady hover "
+                f"under motion capture (need at least {MIN_HOVER_S:.0f} s)"
+            )
+    offsets = None
+    fix: dict[str, str] = {}
+    rest_xy = True
+    if cal.rest:
+        off = _rest_offsets(rec.data, cal.accel_bias_mps2)
+        covered = np.all(np.isfinite(off[hover]), axis=1)
+        if covered.size and covered.mean() >= 0.9:
+            offsets = np.nan_to_num(off)
+            rest_xy = False
+            why = (
+                "kept as configured: rest calibration ([calibration] rest = true) measures "
+                "the x/y offset at every power-on, which replaces it"
+            )
+            fix = {"bias_x_mps2": why, "bias_y_mps2": why}
+    try:
+        return fit_calibration(
+            rec.data,
+            mass,
+            weight_n_per_m=rec.weight_n_per_m,
+            floor_z_m=params.base.floor_z_m,
+            initial=initial,
+            vbat_ref_v=cal.thrust_vbat_ref_v,
+            fit_tether=fit_tether,
+            rest_offsets_body_mps2=offsets,
+            hover=hover,
+            rest_bias_xy=rest_xy,
+            min_hover_s=MIN_HOVER_S,
+            fix=fix,
+        )
+    except CalibrationError as exc:
+        files = ", ".join(repr(f) for f in rec.files)
+        raise CalibrateInputError(f"{files}: drone {rec.drone!r}: {exc}") from None
+
+
+# ------------------------------------------------------------------------------- output
+
+
+def _pm(fit: CalibrationFit, name: str, fmt: str, scale: float = 1.0) -> str:
+    value = fit.values[name] * scale
+    std = fit.std[name]
+    if std is not None:
+        return f"{value:{fmt}} ± {std * scale:{fmt}}"
+    fixed = next((f for f in fit.fixed if f.name == name), None)
+    if fixed is not None:
+        return f"{value:{fmt}} (fixed)"
+    return f"{value:{fmt}} (not fitted)"
+
+
+def format_fit(drone: str, fit: CalibrationFit, files: Sequence[str]) -> str:
+    """The report printed for one drone."""
+    mn = 1e3
+    lines = [
+        f"drone {drone}: {fit.hover_s:.1f} s of hover ({fit.hover_samples} samples, "
+        f"n_eff {fit.n_eff:.0f} after autocorrelation), {fit.rest_samples} still samples "
+        f"at rest, from {', '.join(files)}",
+        f"  thrust_scale             {_pm(fit, 'thrust_scale', '.4f')}",
+        "  thrust_axis_rad          ["
+        + ", ".join(_pm(fit, n, ".4f") for n in ("about_x_rad", "about_y_rad"))
+        + "]",
+        "  accel_bias_mps2          ["
+        + ", ".join(_pm(fit, n, ".3f") for n in ("bias_x_mps2", "bias_y_mps2", "bias_z_mps2"))
+        + "]",
+        f"  thrust_vbat_slope_per_v  {_pm(fit, 'vbat_slope_per_v', '.4f')}"
+        f"  (about thrust_vbat_ref_v = {fit.vbat_ref_v:g} V)",
+    ]
+    if "weight_n_per_m" in fit.fitted:
+        lines.append(f"  tether weight_n_per_m    {_pm(fit, 'weight_n_per_m', '.4f')}")
+        lines.append(
+            "  base offset_m            ["
+            + ", ".join(_pm(fit, n, ".3f") for n in ("base_dx_m", "base_dy_m", "base_dz_m"))
+            + "]"
+        )
+    for f in fit.fixed:
+        lines.append(f"  fixed {f.name} = {f.value:g}: {f.reason}")
+    for note in fit.notes:
+        lines.append(f"  note: {note}")
+    b, a = fit.rms_before_n * mn, fit.rms_after_n * mn
+    mb, ma = fit.mean_before_n * mn, fit.mean_after_n * mn
+    lines.append(
+        f"  tension residual RMS x/y/z, mN: before {b[0]:.1f} {b[1]:.1f} {b[2]:.1f}"
+        f"  after {a[0]:.1f} {a[1]:.1f} {a[2]:.1f}"
+    )
+    lines.append(
+        f"  tension residual mean x/y/z, mN: before {mb[0]:.1f} {mb[1]:.1f} {mb[2]:.1f}"
+        f"  after {ma[0]:.1f} {ma[1]:.1f} {ma[2]:.1f}"
+    )
+    if fit.spots:
+        lines.append(
+            "  predicted position error at hover (from the mean tension residual; ± from the"
+            " parameters' standard errors):"
+        )
+        for s in fit.spots:
+            p = s.position_world_m
+            lines.append(
+                f"    at ({p[0]:.2f}, {p[1]:.2f}, {p[2]:.2f}) m: before {s.before_m * 100:.1f} cm"
+                f", after {s.after_m * 100:.1f} cm ± {s.uncertainty_m * 100:.1f} cm"
+            )
+    return "\n".join(lines)
+
+
+def _calibration_table(fit: CalibrationFit, rest: bool, source: str) -> dict[str, Any]:
+    v = fit.values
+    return {
+        "thrust_scale": round(v["thrust_scale"], 6),
+        "thrust_axis_rad": [round(v["about_x_rad"], 6), round(v["about_y_rad"], 6)],
+        "accel_bias_mps2": [
+            round(v["bias_x_mps2"], 5),
+            round(v["bias_y_mps2"], 5),
+            round(v["bias_z_mps2"], 5),
+        ],
+        "thrust_vbat_slope_per_v": round(v["vbat_slope_per_v"], 6),
+        "thrust_vbat_ref_v": fit.vbat_ref_v,
+        "rest": rest,
+        "source": source,
+    }
+
+
+_BARE_KEY = re.compile(r"[A-Za-z0-9_-]+")
+
+
+def _key(k: str) -> str:
+    return k if _BARE_KEY.fullmatch(k) else '"' + k.replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+
+def _value(v: Any) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, int):
+        return str(v)
+    if isinstance(v, float):
+        if math.isnan(v):
+            return "nan"
+        if math.isinf(v):
+            return "inf" if v > 0 else "-inf"
+        return repr(v)
+    if isinstance(v, str):
+        escaped = v.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n")
+        return f'"{escaped}"'
+    if isinstance(v, list | tuple):
+        return "[" + ", ".join(_value(x) for x in v) + "]"
+    if isinstance(v, Mapping):
+        return "{" + ", ".join(f"{_key(k)} = {_value(x)}" for k, x in v.items()) + "}"
+    raise TypeError(f"cannot write {type(v).__name__} to TOML")
+
+
+def toml_dumps(data: Mapping[str, Any], comments: Mapping[str, list[str]] | None = None) -> str:
+    """TOML for nested dicts of scalars and lists; ``comments`` by dotted table name go
+    above that table's header."""
+    out: list[str] = []
+
+    def table(prefix: tuple[str, ...], d: Mapping[str, Any]) -> None:
+        scalars = {k: v for k, v in d.items() if not isinstance(v, Mapping)}
+        tables = {k: v for k, v in d.items() if isinstance(v, Mapping)}
+        if prefix and (scalars or not tables):
+            name = ".".join(prefix)
+            if out:
+                out.append("")
+            out.extend(f"# {c}" for c in (comments or {}).get(name, []))
+            out.append("[" + ".".join(_key(p) for p in prefix) + "]")
+        for k, v in scalars.items():
+            out.append(f"{_key(k)} = {_value(v)}")
+        for k, v in tables.items():
+            table((*prefix, k), v)
+
+    table((), data)
+    return "\n".join(out) + "\n"
+
+
+def _merge(base: dict[str, Any], patch: Mapping[str, Any]) -> dict[str, Any]:
+    out = dict(base)
+    for k, v in patch.items():
+        if isinstance(v, Mapping) and isinstance(out.get(k), Mapping):
+            out[k] = _merge(dict(out[k]), v)
+        else:
+            out[k] = v
+    return out
+
+
+def _compose(
+    input_text: str,
+    input_data: dict[str, Any],
+    patch: dict[str, Any],
+    comments: dict[str, list[str]],
+) -> str:
+    """The input file plus the new tables: appended verbatim when that yields the merged
+    document, else the merged document written afresh (an input that already had them)."""
+    merged = _merge(input_data, patch)
+    appended = input_text.rstrip("\n") + "\n\n" if input_text.strip() else ""
+    appended += toml_dumps(patch, comments).lstrip("\n")
+    try:
+        if tomllib.loads(appended) == tomllib.loads(toml_dumps(merged)):
+            return appended
+    except tomllib.TOMLDecodeError:
+        pass
+    head = [
+        "# Rewritten by groundstation calibrate from the input configuration (its comments"
+        " are not kept): it already had the tables below.",
+        "",
+    ]
+    return "\n".join(head) + toml_dumps(merged, comments)
+
+
+def run_calibrate(
+    settings: Settings,
+    config_path: str | None,
+    files: Sequence[str],
+    out_path: str,
+    *,
+    drone: str | None = None,
+    fit_tether: bool = False,
+    now: Callable[[], datetime] = lambda: datetime.now(UTC),
+    echo: Callable[[str], None] = print,
+) -> int:
+    """Fit, print, write; returns the exit status (0). Nothing is written on error.
+
+    Raises:
+        CalibrateInputError, RecordingError, ConfigError: unusable input (names the file).
+    """
+    recs = read_recordings(files, settings, drone)
+    fits = {d: calibrate_drone(r, settings, fit_tether=fit_tether) for d, r in recs.items()}
+    stamp = now().strftime("%Y-%m-%dT%H:%M:%SZ")
+    names = ", ".join(Path(f).name for f in files)
+    patch: dict[str, Any] = {"drones": {}}
+    comments: dict[str, list[str]] = {}
+    for d in sorted(fits):
+        fit = fits[d]
+        rec = recs[d]
+        echo(format_fit(d, fit, rec.files))
+        params = settings.for_drone(d)
+        source = f"groundstation calibrate {stamp} from {names}"
+        tables: dict[str, Any] = {
+            "calibration": _calibration_table(fit, params.calibration.rest, source)
+        }
+        head = [
+            f"groundstation calibrate, {stamp}, from {names}:",
+            f"{fit.hover_s:.1f} s of hover under motion capture, {fit.rest_samples} still"
+            f" samples at rest; residual RMS x/y/z {fit.rms_before_n[0] * 1e3:.1f}/"
+            f"{fit.rms_before_n[1] * 1e3:.1f}/{fit.rms_before_n[2] * 1e3:.1f} mN before, "
+            f"{fit.rms_after_n[0] * 1e3:.1f}/{fit.rms_after_n[1] * 1e3:.1f}/"
+            f"{fit.rms_after_n[2] * 1e3:.1f} mN after.",
+        ]
+        for name in fit.fitted:
+            std = fit.std[name]
+            head.append(f"  {name} = {fit.values[name]:.6g} ± {std:.2g}")
+        for f in fit.fixed:
+            head.append(f"  {f.name} fixed at {f.value:g}: {f.reason}")
+        comments[f"drones.{d}.calibration"] = head
+        if "weight_n_per_m" in fit.fitted:
+            tables["tether"] = {"weight_n_per_m": round(fit.values["weight_n_per_m"], 6)}
+            if not rec.base_from_reel:
+                offset = [fit.values[n] for n in ("base_dx_m", "base_dy_m", "base_dz_m")]
+                base = np.array(params.base.position_m) + np.array(offset)
+                tables["base"] = {"position_m": [round(float(x), 5) for x in base]}
+        patch["drones"][d] = tables
+
+    input_text = ""
+    input_data: dict[str, Any] = {}
+    if config_path is not None:
+        input_text = Path(config_path).read_text(encoding="utf-8")
+        input_data = tomllib.loads(input_text)
+    text = _compose(input_text, input_data, patch, comments)
+
+    # Validate as serve would (load_settings resolves every [drones.<id>]), then move it in.
+    out = Path(out_path)
+    fd, tmp = tempfile.mkstemp(prefix=".calibrate-", suffix=".toml", dir=out.parent or ".")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text)
+        try:
+            load_settings(tmp, use_env=False)
+        except ConfigError as exc:
+            raise CalibrateInputError(f"the written configuration is invalid: {exc}") from None
+        os.replace(tmp, out)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+    echo(f"wrote {out}")
+    return 0
