@@ -779,12 +779,13 @@ class TensionFilter:
     at any noise level and any rate (dt_mean an average of the measured spacing); an
     irregular or missing sample widens P in proportion to the time elapsed. Hover error
     per axis is then ``sqrt(r dt_mean / (2 tau))``. tau = 6 s: on the realistic simulator
-    (hover at the paper's spots, 1 m/s^2, calibrated) a fixed filter told the true noise
-    did best at 6 s (10 and 20 s within 1 %; 2.5 s, the earlier default, 17 % worse in
-    median and 37 % in p95 position error: the tether's swing and the drone's own hover
-    motion make the tension not quite constant). On the ideal profile (0.3 m/s^2, 250 Hz)
-    that is 0.16 mN per axis; ramps and tugs are the drift adaptation's and the change
-    test's.
+    (hover at the paper's six spots, calibrated; docs/realistic_benchmark.md) a fixed
+    filter told the true noise has a median position error of 9.7 cm at 1 m/s^2 with tau =
+    6 or 10 s, 10.1 cm at 20 s and 13.2 cm at 2.5 s, the earlier default (the tether's swing
+    and the drone's own hover motion make the tension not quite constant). On the ideal
+    profile (0.3 m/s^2, 250 Hz) that is 0.16 mN per axis; ramps and tugs are the drift
+    adaptation's and the change test's (ramps lag more than at 2.5 s: 2.7 mN RMS at
+    10 mN/s against 2.0 mN, docs/filter_benchmark.md).
 
     **Tug detection (GLR on whitened innovations).** Each innovation nu is whitened by
     the Cholesky factor of S = P- + R, so that at constant tension w ~ N(0, I). A step
@@ -821,9 +822,10 @@ class TensionFilter:
     ``sqrt(r dt / 0.3)`` per axis. At 250 Hz and 0.3 m/s^2 that is 1.04 mN, and that
     oracle stays within 3 mN (error norm) from median 0.12 s / p95 0.32 s; at 100 Hz (the
     Crazyflie's IMU rate) it is 1.64 mN and the oracle needs median 0.29 s / p90 0.65 s /
-    p95 0.80 s (400 trials); this filter measures the same at both rates, since its
-    replay *is* that mean (benchmarks/bench_realistic.py). An independent check's
-    0.68-0.73 s for "within 10 %" matches the 100 Hz tail, not a filter lag.
+    p95 0.80 s (400 trials, ``python -m benchmarks.step_oracle``); this filter's replay *is*
+    that mean, and docs/filter_benchmark.md measures it at 250 Hz (norm median 0.12 s,
+    p95 0.28 s). An independent check's 0.68-0.73 s for "within 10 %" matches the 100 Hz
+    tail of the oracle (p90-p95), i.e. the Crazyflie's rate, not a filter lag.
 
     **Slow drifts.** A tension that ramps (the drone moving) makes the slow filter lag by
     rate * tau. An exponential average b of the whitened innovations over
