@@ -53,7 +53,7 @@ DOC_PATH = Path(__file__).resolve().parent.parent / "docs" / "filter_benchmark.m
 # one); "fast" holds tau = 0.13 s, the time constant a fixed filter needs for the tug target.
 FILTERS: dict[str, TensionFilterParams] = {
     "adaptive": TensionFilterParams(),
-    "fixed-hover": TensionFilterParams(change_threshold=1e300, drift_min_time_constant_s=2.5),
+    "fixed-hover": TensionFilterParams(change_threshold=1e300, drift_min_time_constant_s=6.0),
     "fixed-fast": TensionFilterParams(
         hover_time_constant_s=0.13, change_threshold=1e300, drift_min_time_constant_s=0.13
     ),
@@ -334,8 +334,8 @@ def main(argv: list[str] | None = None) -> int:
         "",
         "Target: RMS <= 0.5 mN per axis. The reported std is sqrt(diag P); under the",
         "random-walk model it is sqrt(2) larger than the error of a truly constant tension.",
-        "Worst seed: the RMS of one 25 s window of a slow (2.5 s) average scatters by about",
-        "+-30 %. Cost: best of 20 x 500 updates on a shared 2-core machine;"
+        "Worst seed: the RMS of one 25 s window of a slow (6 s) average scatters widely (a",
+        "few independent averages). Cost: best of 20 x 500 updates on a shared 2-core machine;"
         f" `observe_tension` adds {observe_us:.0f} µs per sample.",
         "",
         "## 30 mN steps in random directions",

@@ -455,7 +455,8 @@ class Status(_Out):
     queue_overflow: int | None = None
     """Inputs dropped because the processing queue was full."""
     filter: dict[str, Any] | None = None
-    """Filter state (``initialized``, ``change_detections``)."""
+    """Filter state (``initialized``, ``change_detections``; the measured observation noise
+    ``noise_std_n`` and ``noise_autocorrelation`` per world axis, ``time_constant_s``)."""
     follow: FollowInfo | None = None
     """Follow mode, as in the Estimate."""
     contact: dict[str, Any] | None = None
@@ -469,6 +470,9 @@ class Status(_Out):
     """Base exit point in use, world frame, metres."""
     weight_n_per_m: float | None = None
     """Tether weight per length ω in use, N/m."""
+    calibration: str | None = None
+    """(added) Which ``[calibration]`` the observation applies (its ``source``, ``config`` for
+    unlabelled values) or ``none``, as in the Estimate."""
     service: str | None = None
     """The answering service instance (liveliness token ``groundstation/service/{instance}``)."""
     peers: int | None = None

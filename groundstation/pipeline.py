@@ -630,7 +630,7 @@ class Pipeline:
             runtime.contact_params,
             dt_s=dt_s,
             armed=msg.armed,
-            thrust_n=msg.thrust_n,
+            thrust_n=obs.thrust_n,  # calibrated
             mass_kg=runtime.params.drone.mass_kg,
             vertical_accel_mps2=contact_mod.vertical_accel_mps2(msg.accel_mps2, msg.quat_wxyz),
             upward_force_n=float(obs.tension_world_n[2])

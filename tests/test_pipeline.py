@@ -181,7 +181,13 @@ def test_calibration_is_applied_and_reported_per_drone() -> None:
         use_env=False,
     )
     pipe = Pipeline(settings)
-    level = GOOD | {"accel_mps2": [0.0, 0.0, 9.81], "thrust_n": 0.30, "vbat_v": 3.7}
+    # position_m: motion capture at 1 m, so the contact rules see the drone in the air at once
+    level = GOOD | {
+        "accel_mps2": [0.0, 0.0, 9.81],
+        "thrust_n": 0.30,
+        "vbat_v": 3.7,
+        "position_m": [1.0, 0.0, 1.0],
+    }
     outs = {}
     for drone in ("cf1", "cf2"):
         # 1 s of level hover: the contact state starts on the ground and finds the drone in
@@ -317,12 +323,16 @@ def test_reel_exit_angles_are_used_while_fresh_and_named_in_the_estimate() -> No
     ).encode()
     # The drone 0.3 m above the base, just off plumb: T_v = 0.3 * 0.05 N, H = 2 mN along -x.
     accel = [0.0, 0.0, 9.81 + (0.33 - 0.03 * 9.81 - 0.015) / 0.030]
+    # The accelerometer's noise (0.3 m/s^2): the filter measures it, and a noise-free
+    # stream would tell it that the 2 mN direction is exact.
+    noise = np.random.default_rng(12).normal(0.0, 0.3, (500, 3))
     sources = []
     for seq in range(500):
         now = seq * 0.004
         if seq % 25 == 0 and now < 1.0:  # 10 Hz for 1 s, then silent
             pipe.handle(Sample("tether/cf1/reel", reel), now)
-        patch = {"accel_mps2": [0.002 / 0.030, 0.0, accel[2]]}
+        a = noise[seq]
+        patch = {"accel_mps2": [0.002 / 0.030 + a[0], a[1], accel[2] + a[2]]}
         (out,) = pipe.handle(_telemetry(seq, **patch), now)
         est = json.loads(out.payload)
         sources.append((now, est["azimuth_source"], est["position_m"]))
