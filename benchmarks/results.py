@@ -651,7 +651,10 @@ def _summary_table(o: Outcome) -> list[str]:
 
 def readme_block(o: Outcome, prov: dict[str, str], wall_s: float) -> str:
     lines = [
-        f"Simulation, and this machine for speed ({prov['machine']}); from "
+        "Simulation on the **ideal** profile (the estimator's own assumptions: quasi-static "
+        "catenary, white accelerometer noise, exact thrust and IMU alignment; every figure in "
+        "this block), and this machine for speed "
+        f"({prov['machine']}); from "
         f"`.venv/bin/python -m benchmarks.results` ({wall_s / 60:.1f} min; `--quick`, "
         f"every section in under a minute, runs in CI), {prov['date']}, commit "
         f"`{prov['commit']}`. Tables, figures and method: [docs/RESULTS.md](docs/RESULTS.md).",
