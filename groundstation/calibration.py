@@ -41,6 +41,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import least_squares
 
 from groundstation.catenary import CatenaryError, locate_with_floor, tether_force
+from groundstation.tension import thrust_axis_body
 
 __all__ = [
     "CONVENTIONS",
@@ -58,7 +59,6 @@ __all__ = [
     "fit_calibration",
     "hover_mask",
     "rest_mask",
-    "thrust_axis_body",
 ]
 
 GRAVITY_MPS2 = 9.81
@@ -130,17 +130,6 @@ _CONVENTION_VALUE = {
 
 class CalibrationError(ValueError):
     """The samples cannot be calibrated from (too few, no motion capture, ...)."""
-
-
-def thrust_axis_body(about_x_rad: float, about_y_rad: float) -> FloatArray:
-    """The thrust axis ``R_x(about_x) · R_y(about_y) · e3`` in the body frame, shape (3,).
-
-    ``R_y(β)·e3 = (sin β, 0, cos β)``; then ``R_x(α)`` gives
-    ``(sin β, −sin α·cos β, cos α·cos β)``.
-    """
-    sa, ca = math.sin(about_x_rad), math.cos(about_x_rad)
-    sb, cb = math.sin(about_y_rad), math.cos(about_y_rad)
-    return np.array([sb, -sa * cb, ca * cb])
 
 
 def _rotations(quat_wxyz: FloatArray) -> FloatArray:
@@ -795,7 +784,7 @@ def fit_calibration(
     def model(theta: FloatArray) -> tuple[FloatArray, FloatArray]:
         """(hover residuals (nh, 3), rest residuals (nr, 3)), world frame, N."""
         s, ax, ay, bx, by, bz, k, om = theta[:8]
-        u = thrust_axis_body(ax, ay)
+        u = np.asarray(thrust_axis_body(ax, ay))
         b = np.array([bx, by, bz])
         F = thr_h * (s + k * dv)
         body = m * (acc_h - b) - F[:, None] * u[None, :]  # m·f − u·F, body frame

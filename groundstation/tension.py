@@ -43,6 +43,7 @@ __all__ = [
     "observation_cov_n2",
     "observe_tension",
     "rotation_world_body",
+    "thrust_axis_body",
 ]
 
 GRAVITY_MPS2 = 9.81
@@ -173,6 +174,26 @@ def rotation_world_body(quat_wxyz: ArrayLike) -> FloatArray:
     )
 
 
+def thrust_axis_body(about_x_rad: float, about_y_rad: float) -> tuple[float, float, float]:
+    """The thrust axis ``R_x(about_x) · R_y(about_y) · e3`` in the body frame, unit.
+
+    ``R_y(β)·e3 = (sin β, 0, cos β)``; then ``R_x(α)`` gives
+    ``(sin β, −sin α·cos β, cos α·cos β)``. Exactly ``(0, 0, 1)`` for zero angles, so the
+    default calibration leaves eq:NE_tether bit for bit as it was.
+
+    Args:
+        about_x_rad: Rotation about body x, rad.
+        about_y_rad: Rotation about body y, rad.
+    """
+    if about_x_rad == 0.0 and about_y_rad == 0.0:
+        return (0.0, 0.0, 1.0)
+    return (
+        math.sin(about_y_rad),
+        -math.sin(about_x_rad) * math.cos(about_y_rad),
+        math.cos(about_x_rad) * math.cos(about_y_rad),
+    )
+
+
 @dataclass(frozen=True)
 class ObservationCalibration:
     """Sensor corrections applied in :func:`observe_tension` (config ``[calibration]``).
@@ -228,16 +249,7 @@ class ObservationCalibration:
                 "ObservationCalibration.thrust_scale and thrust_vbat_ref_v must be > 0, got "
                 f"{self.thrust_scale!r} and {self.thrust_vbat_ref_v!r}"
             )
-        about_x, about_y = self.thrust_axis_rad
-        if about_x == 0.0 and about_y == 0.0:
-            axis = (0.0, 0.0, 1.0)
-        else:
-            axis = (
-                math.sin(about_y),
-                -math.sin(about_x) * math.cos(about_y),
-                math.cos(about_x) * math.cos(about_y),
-            )
-        object.__setattr__(self, "thrust_axis_body", axis)
+        object.__setattr__(self, "thrust_axis_body", thrust_axis_body(*self.thrust_axis_rad))
 
     @property
     def is_identity(self) -> bool:
