@@ -105,7 +105,9 @@ def select_drone(page: Any, drone_id: str) -> None:
 def position_chart_ok(page: Any) -> dict[str, Any] | None:
     """The visible position chart if it shows a 20 s window ending now, else None."""
     for chart in page.evaluate(VISIBLE_CHARTS_JS):
-        window_ok = chart["xmin"] < -5.0 and -1.0 < chart["xmax"] <= 0.5
+        xmin, xmax = chart["xmin"], chart["xmax"]
+        # uPlot's scales are null between mounting a chart and its first draw: not ready yet.
+        window_ok = xmin is not None and xmax is not None and xmin < -5.0 and -1.0 < xmax <= 0.5
         if chart["title"].startswith("Position") and chart["n"] > 10 and window_ok:
             return dict(chart)
     return None
