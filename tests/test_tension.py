@@ -389,6 +389,11 @@ def test_invalid_observation_in_filter_raises() -> None:
         {"drift_min_time_constant_s": 7.0},
         {"noise_prior_samples": 0.0},
         {"gap_s": -1.0},
+        {"long_threshold": 0.0},
+        {"long_min_step_n": -0.02},
+        {"long_max_window_s": math.inf},
+        {"long_reference_s": 0.0},
+        {"long_history_size": 4},
     ],
 )
 def test_params_validation(kwargs: dict[str, float]) -> None:
@@ -646,6 +651,109 @@ def test_any_rate_with_jitter_detects_a_tug_and_holds_hover(rate_hz: float) -> N
     # 1 s after the tug: within the information of 1 s of samples (3 sigma)
     after = est[n_hover + int(1.0 * rate_hz) :] - (HOVER_TENSION_N + step)
     assert np.all(np.abs(after) < 3 * math.sqrt(sigma_n**2 * 1.5 * dt / 1.0) + 1e-3)
+
+
+def vibration_mix(rng: np.random.Generator, n: int, sigma_n: float) -> np.ndarray:
+    """The realistic simulator's vibration: white + AR(0.6), lag-1 0.2, long-run 2 s2."""
+    beta = 0.2 / 0.6
+    return math.sqrt(beta) * ar1_noise(rng, n, sigma_n, 0.6) + math.sqrt(1.0 - beta) * (
+        rng.normal(0.0, sigma_n, (n, 3))
+    )
+
+
+def step_detection_limit_s(r_n2: float, step_n: float, dt_s: float) -> float:
+    """When a step's samples hold the step test's threshold as non-centrality, s.
+
+    ``n step^2 / (r (1 + n / m)) = h`` with m = ``long_reference_s`` of samples before it:
+    the information a test at that false-alarm rate needs (TensionFilter docstring).
+    """
+    p = TensionFilterParams()
+    m = p.long_reference_s / dt_s
+    per_sample = step_n**2 / r_n2
+    return p.long_threshold / (per_sample - p.long_threshold / m) * dt_s
+
+
+@pytest.mark.parametrize("accel_noise", [1.0, 2.0])
+def test_a_step_in_strong_coloured_noise_is_found_near_the_information_limit(
+    accel_noise: float,
+) -> None:
+    """30 mN at 1 and 2 m/s^2, AR(1) rho = 0.3, jittered ~94 Hz, after 40 s of hover.
+
+    The information limit (``step_detection_limit_s``) is 0.86 s at 1 m/s^2 and 4.6 s at
+    2 m/s^2: at the limit about half the trials are detected, so the median delay is
+    bounded by 1.3 times it, every trial by the longest window (7.1 s) plus 1 s, and the
+    estimate is then within the information of the samples since the step.
+    """
+    sigma_n = MASS_KG * accel_noise
+    r = sigma_n**2 * 1.3 / 0.7
+    delays = []
+    for seed in range(8):
+        rng = np.random.default_rng(900 + seed + int(10 * accel_noise))
+        n_hover = 4000
+        n = n_hover + 900
+        v = ar1_noise(rng, n, sigma_n, 0.3)
+        dts = jittered_dt(rng, n)
+        d = rng.normal(0.0, 1.0, 3)
+        step = 0.030 * d / np.linalg.norm(d)
+        filt = TensionFilter()
+        found = None
+        for k in range(n):
+            truth = HOVER_TENSION_N + (step if k >= n_hover else 0.0)
+            e = filt.update(truth + v[k], float(dts[k]))
+            if e.change_detected:
+                assert k >= n_hover, f"false detection at sample {k} (seed {seed})"
+                if found is None:
+                    found = float(np.sum(dts[n_hover : k + 1]))
+                    err = e.tension_world_n - truth
+                    # x = the mean of the window's samples: within 4 sigma of n samples
+                    window_n = found / float(np.mean(dts))
+                    assert np.linalg.norm(err) < 4.0 * math.sqrt(3 * r / window_n) + 3e-3
+        assert found is not None, f"not detected in 9.5 s (seed {seed})"
+        delays.append(found)
+    limit_s = step_detection_limit_s(r, 0.030, float(np.mean(dts)))
+    assert np.median(delays) <= 1.3 * limit_s, (np.round(delays, 2), limit_s)
+    # n_max: the window in which a 20 mN step reaches the threshold (here below the cap)
+    p = TensionFilterParams()
+    longest_s = p.long_threshold * r / p.long_min_step_n**2 * float(np.mean(dts))
+    assert max(delays) <= min(longest_s, p.long_max_window_s) + 1.0, np.round(delays, 2)
+
+
+@pytest.mark.parametrize(("accel_noise", "colour"), [(1.0, "ar1"), (2.0, "ar1"), (2.0, "mix")])
+def test_no_step_detection_in_minutes_of_coloured_noise(accel_noise: float, colour: str) -> None:
+    """Six 60 s hovers per case, AR(1) rho = 0.3 or the simulator's mix, told 0.3 m/s^2.
+
+    The step test's windows reach 1.8 s (1 m/s^2) and 6 s (2 m/s^2) here; its false-alarm
+    rate with the noise known is ~0.02 and ~0.007 per hour, so any detection is a fault.
+    """
+    sigma_n = MASS_KG * accel_noise
+    largest = 0.0
+    for seed in range(6):
+        rng = np.random.default_rng(700 + seed + int(10 * accel_noise))
+        n = 5700  # ~60 s at ~94 Hz
+        v = ar1_noise(rng, n, sigma_n, 0.3) if colour == "ar1" else vibration_mix(rng, n, sigma_n)
+        dts = jittered_dt(rng, n)
+        filt = TensionFilter()
+        for k in range(n):
+            e = filt.update(HOVER_TENSION_N + v[k], float(dts[k]))
+            assert not e.change_detected, f"false detection at {k} (seed {seed})"
+            largest = max(largest, e.change_statistic)
+    assert largest < TensionFilterParams().change_threshold
+
+
+def test_the_step_test_leaves_the_ideal_profile_as_it_was() -> None:
+    """At 0.3 m/s^2 and 250 Hz its longest window is a few samples: it stays off."""
+    rng = np.random.default_rng(77)
+    n = int(8.0 / DT_S)
+    truth = np.tile(HOVER_TENSION_N, (n, 1))
+    truth[n // 2 :] += [0.0, 0.030, 0.0]
+    truth[n // 2 + 500 :] += np.outer(np.arange(n - n // 2 - 500) * DT_S * 0.01, [1, 0, 0])
+    off = TensionFilterParams(long_max_window_s=1e-9)
+    est_on, _, det_on = run_filter(truth, np.random.default_rng(78))
+    est_off, _, det_off = run_filter(truth, np.random.default_rng(78), params=off)
+    assert det_on.any()
+    np.testing.assert_array_equal(est_on, est_off)
+    np.testing.assert_array_equal(det_on, det_off)
+    del rng
 
 
 def test_a_gap_keeps_the_state_and_a_change_during_it_is_found() -> None:
