@@ -43,6 +43,7 @@ __all__ = [
     "observation_cov_n2",
     "observe_tension",
     "rotation_world_body",
+    "scan_threshold",
     "thrust_axis_body",
 ]
 
@@ -443,6 +444,51 @@ def observation_cov_n2(
     return cov
 
 
+def scan_threshold(
+    false_alarms_per_h: float, n_lo: float, n_hi: float, dt_s: float, dof: int = 3
+) -> float:
+    """Threshold of a sliding chi-square scan over windows [n_lo, n_hi] for a false-alarm rate.
+
+    For white Gaussian noise of known variance, ``max_n |S_n|^2 / n`` over the windows
+    ending at each sample crosses h at a rate of about (the Brownian scan approximation)::
+
+        nu(h) = h^(d/2) e^(-h/2) / (2^(d/2) Gamma(d/2)) * (h/2) * (1/n_lo - 1/n_hi)
+
+    per sample, d = ``dof``; this solves ``nu(h) = false_alarms_per_h * dt_s / 3600`` by
+    Newton's method on its logarithm (decreasing in h beyond d + 2). The rate per hour
+    does not depend on the sample rate: windows in samples grow with it, looks per
+    second too.
+
+    Args:
+        false_alarms_per_h: Target rate, 1/h, > 0.
+        n_lo: Shortest window, samples, > 0.
+        n_hi: Longest window, samples, > n_lo.
+        dt_s: Sample spacing, s, > 0.
+        dof: Degrees of freedom of each window's statistic.
+
+    Returns:
+        The threshold h, dimensionless (at least d + 2).
+    """
+    span = 1.0 / n_lo - 1.0 / n_hi
+    if not (false_alarms_per_h > 0.0 and dt_s > 0.0 and span > 0.0):
+        raise ValueError(
+            f"scan_threshold needs a rate, dt_s > 0 and 0 < n_lo < n_hi, got "
+            f"{false_alarms_per_h!r}, {dt_s!r}, {n_lo!r}, {n_hi!r}"
+        )
+    half = 0.5 * dof
+    # log nu(h) = (d/2 + 1) log h - h/2 - log(2^(d/2 + 1) Gamma(d/2)) + log(span)
+    target = math.log(false_alarms_per_h * dt_s / 3600.0)
+    const = math.log(span) - (half + 1.0) * math.log(2.0) - math.lgamma(half)
+    h = max(2.0 * (const - target), dof + 4.0)
+    for _ in range(30):
+        f = (half + 1.0) * math.log(h) - 0.5 * h + const - target
+        step = f / ((half + 1.0) / h - 0.5)
+        h = max(h - step, dof + 2.0)
+        if abs(step) < 1e-9 * h:
+            break
+    return h
+
+
 @dataclass(frozen=True)
 class TensionFilterParams:
     """Noise prior and tuning of :class:`TensionFilter`.
@@ -472,11 +518,13 @@ class TensionFilterParams:
             cannot trigger a detection).
         change_max_window_s: Longest window of the change test, s.
         ring_size: Capacity of the change test's history, samples (1 s at 500 Hz).
-        long_threshold: Threshold of the long-window change test (the step test of the
-            class docstring), chi-square with 3 dof per window, dimensionless.
-        long_min_step_n: The step the long-window test is sized for, N: its longest
-            window is the one in which a step this large, the level before it known,
-            reaches ``long_threshold`` (``n = long_threshold * r / step^2`` samples).
+        long_sizing_threshold: Non-centrality that sizes the long-window step test's
+            windows (class docstring), dimensionless: its longest window is the one in
+            which a step of ``long_min_step_n``, the level before it known, reaches it
+            (``n_max = long_sizing_threshold * r / step^2`` samples).
+        long_min_step_n: The step the long-window test is sized for, N.
+        long_false_alarms_per_h: False detections per hour of hover the step test's
+            threshold is set for (:func:`scan_threshold`, noise known), 1/h.
         long_max_window_s: Cap on the long-window test's longest window, s.
         long_reference_s: Longest stretch before a window that serves as its reference
             level in the long-window test, s.
@@ -508,8 +556,9 @@ class TensionFilterParams:
     change_min_window: int = 4
     change_max_window_s: float = 1.0
     ring_size: int = 512
-    long_threshold: float = 40.0
+    long_sizing_threshold: float = 40.0
     long_min_step_n: float = 0.020
+    long_false_alarms_per_h: float = 0.005
     long_max_window_s: float = 8.0
     long_reference_s: float = 10.0
     long_history_size: int = 4096
@@ -530,8 +579,9 @@ class TensionFilterParams:
             "hover_time_constant_s": self.hover_time_constant_s,
             "change_threshold": self.change_threshold,
             "change_max_window_s": self.change_max_window_s,
-            "long_threshold": self.long_threshold,
+            "long_sizing_threshold": self.long_sizing_threshold,
             "long_min_step_n": self.long_min_step_n,
+            "long_false_alarms_per_h": self.long_false_alarms_per_h,
             "long_max_window_s": self.long_max_window_s,
             "long_reference_s": self.long_reference_s,
             "drift_time_constant_s": self.drift_time_constant_s,
@@ -909,35 +959,40 @@ class TensionFilter:
     r the long-run variance a window of correlated noise has at most that variance, so
     vibration makes it err toward silence). It reads the observations, not the
     innovations, so what the filter did after the step costs it nothing. A step delta
-    gives non-centrality ``|delta|^2 / (r (1/n + 1/m))``. Windows: n from n_max / 4 to
-    ``n_max = h r_max / delta_min^2`` (spaced by 5 %), the window in which a step of
-    ``long_min_step_n`` = 20 mN, the level before it known, reaches the threshold h, at
-    most ``long_max_window_s`` = 6 s; the test is off while n_max lies within the fast
-    test's 1 s (below ~0.85 m/s^2 at 100 Hz; ~7 samples on the ideal profile, whose
-    results it therefore leaves as they were). r is the larger of the 5 s level and a
-    30 s one (the 5 s level's +-6 % scatter reads as evidence on long windows; the 30 s
-    one lags a rise), divided by the fast test's youth factor and by one for kappa's
-    youth (``2 sqrt(1.3 / B)`` beyond its equilibrium value after B blocks, see
-    :meth:`_step_normaliser`). On detection the filter restarts as after the fast test
-    (x = the window's mean, P = R / n).
+    gives non-centrality ``|delta|^2 / (r (1/n + 1/m))``. Windows
+    (:meth:`step_test_design`): n from n_max / 4 to ``n_max = 40 r_max / delta_min^2``
+    (spaced by 5 %), the window in which a step of ``long_min_step_n`` = 20 mN, the level
+    before it known, reaches a non-centrality of ``long_sizing_threshold`` = 40, at most
+    ``long_max_window_s`` = 8 s: 0.45-1.8 s at 1 m/s^2, 1.8-7.6 s at 2 m/s^2 (100 Hz,
+    r = 2 s2). The test is off while n_max lies within the fast test's 1 s (below
+    ~0.85 m/s^2 at 100 Hz; ~7 samples on the ideal profile, whose results it therefore
+    leaves bit for bit as they were). r is the larger of the 5 s level and a 30 s one
+    (the 5 s level's +-6 % scatter reads as evidence on long windows; the 30 s one lags a
+    rise), and the statistic is divided by the fast test's youth factor and by one for
+    kappa's youth (:meth:`_step_normaliser`). On detection the filter restarts as after
+    the fast test (x = the window's mean, P = R / n).
 
-    *Threshold* ``long_threshold`` = h = 40, for a false-alarm rate: a sliding chi-square
-    scan over windows [n0, n1] crosses h at a rate of about
+    *Threshold, for a false-alarm rate* (:func:`scan_threshold`). A sliding chi-square
+    scan over windows [n0, n1] crosses h at about
     ``h^(d/2) e^(-h/2) / (2^(d/2) Gamma(d/2)) * (h/2) * (1/n0 - 1/n1)`` per sample
-    (d = 3; the Brownian scan approximation), which is 0.025 per hour at 1 m/s^2
-    (windows 45-180 samples) and 0.008 per hour at 2 m/s^2 (150-600) at 100 Hz with the
-    noise known; h = 32 would be ~1 per hour. The on-line noise estimate adds its own
-    scatter and bias (kappa reads 2.29 for the simulator's 2.5, 8 % low, +-7 %), so the
-    rate was measured: the largest step statistic in 10 min of simulated vibration (white
-    + AR(0.6), lag-1 0.2, jittered 100 Hz, the filter not told the noise) was 23-31 at
-    1 m/s^2 in 12 flights (h = 32 would have fired in 1 of 18), and none crossed 40.
+    (d = 3, the Brownian scan approximation, noise known), so h is set per noise level
+    for ``long_false_alarms_per_h`` = 0.005 per hour: 43.5 at 1 m/s^2 and 40.4 at
+    2 m/s^2 (longer windows, fewer independent looks); one fixed h = 32 would be
+    0.7 per hour at 1 m/s^2. The on-line noise estimate adds its scatter and bias (kappa
+    reads 2.29 for the simulator's 2.5, 8 % low, +-7 %), which made measured crossings
+    about ten times the formula's at 30-36. Measured with h sized as here: the largest
+    step statistic in 12 hovers of 10 min (the filter not told the noise, jittered
+    ~94 Hz) was 22.8-36.8 at 1 m/s^2 and 20.8-30.6 at 2 m/s^2 for white + AR(0.6)
+    (lag-1 0.2, the realistic simulator's), 21.4-37.7 at 1 m/s^2 for AR(1) rho = 0.3;
+    none reached 40.
 
     *Information limit.* With the level before the step known exactly, a GLR at threshold
     h detects a step delta about half the time once ``n delta^2 / r = h``: for 30 mN at
-    1 m/s^2 (delta^2 / r = 0.5 per sample) after 80 samples, 0.8 s, and at 2 m/s^2
-    (0.125) after 320, 3.2 s; with m = 1000 samples (10 s) of reference,
-    ``n delta^2 / (r (1 + n/m)) = h`` gives 0.87 s and 4.7 s. That is the price of the
+    1 m/s^2 (delta^2 / r = 0.5 per sample) after 87 samples, 0.9 s, and at 2 m/s^2
+    (0.125) after 323, 3.4 s; with m = 1000 samples (10 s) of reference,
+    ``n delta^2 / (r (1 + n/m)) = h`` gives 0.95 s and 4.8 s. That is the price of the
     false-alarm rate: any detector that fires on noise this rarely needs this much data.
+    In the first minute the youth factors (1.25 after 10 s) delay it further.
 
     **Re-initialisation by replay.** On detection the window with the largest statistic
     is the maximum-likelihood change point. The filter restarts from the observations
@@ -1031,6 +1086,7 @@ class TensionFilter:
         self._noise = _NoiseEstimate(self._prior_var, p.noise_prior_samples)
         self._dt_mean = math.nan
         self._beta_cache: tuple[float, float] = (math.nan, math.nan)
+        self._threshold_cache: tuple[tuple[int, int] | None, float] = (None, math.inf)
         self._decay_cache: tuple[float, float] = (math.nan, math.nan)
         self.reset()
 
@@ -1218,12 +1274,12 @@ class TensionFilter:
                 # is what a long window would read as evidence, the 30 s one lags a rise.
                 q0, q1, q2 = self._noise.long_run_slow()
                 r_step = (max(r0, q0), max(r1, q1), max(r2, q2))
-            step_stat, window, mean = self._step_statistic(z, r_step)
-            change = step_stat > p.long_threshold
+            step_stat, window, mean, h_step = self._step_statistic(z, r_step)
+            change = step_stat > h_step
             if change:
                 self._restart(mean, window, r)
             # On the fast test's scale: a detection is a statistic above change_threshold.
-            stat = max(stat, step_stat * (p.change_threshold / p.long_threshold))
+            stat = max(stat, step_stat * (p.change_threshold / h_step))
         if self._noise.samples >= p.noise_warmup_samples or not p.estimate_noise:
             self._hist.push(z)
         return self._publish(change, stat, scale, s2, rho, r, tau)
@@ -1330,40 +1386,33 @@ class TensionFilter:
 
     def _step_statistic(
         self, z: list[float], r: tuple[float, ...]
-    ) -> tuple[float, int, list[float]]:
-        """The long-window step test: ``(G, n, mean of the last n z)`` of the best window.
+    ) -> tuple[float, int, list[float], float]:
+        """The long-window step test: ``(G, n, mean of the last n z, threshold)``.
 
         For the last n samples (the one just taken included) against the m before them
         (``m`` up to ``long_reference_s``, within the regime)::
 
             d_n = zbar_post - zbar_pre,   G_n = sum_i d_n,i^2 / (r_i (1/n + 1/m))
 
-        for n from ``n_max / 4`` to ``n_max`` (class docstring), divided by the youth
-        factor; 0 while the test is off (``n_max`` not beyond the fast test's longest
-        window) or the history holds less than its shortest window.
+        over the windows of :meth:`step_test_design`, divided by the youth factor; G = 0
+        while the test is off or the history holds less than its shortest window.
         """
         p = self.params
         h = self._hist
         dt_mean = self._dt_mean
         if h.count < 2 or not (dt_mean == dt_mean and dt_mean > 0.0):
-            return 0.0, 0, []
-        n_fast = max(p.change_min_window, int(p.change_max_window_s / dt_mean))
+            return 0.0, 0, [], math.inf
         r0, r1, r2 = r
-        # n_max = h r / step^2: a step of long_min_step_n, the level before it known,
-        # reaches the threshold's non-centrality in n_max samples.
-        n_max = min(
-            p.long_threshold * max(r0, r1, r2) / (p.long_min_step_n * p.long_min_step_n),
-            p.long_max_window_s / dt_mean,
-            0.5 * h.size,
-        )
-        if n_max <= n_fast:
-            return 0.0, 0, []
+        design = self.step_test_design(max(r0, r1, r2), dt_mean)
+        if design is None:
+            return 0.0, 0, [], math.inf
+        n_lo, n_max, threshold = design
         grid = self._long_grid
-        lo = int(np.searchsorted(grid, 0.25 * n_max, side="left"))
+        lo = int(np.searchsorted(grid, n_lo, side="left"))
         # a window needs at least one sample before it
         hi = int(np.searchsorted(grid, min(n_max, h.count - 1.0), side="right"))
         if hi <= lo:
-            return 0.0, 0, []
+            return 0.0, 0, [], threshold
         n_int = grid[lo:hi]
         m_int = np.minimum(h.count - n_int, max(1, int(p.long_reference_s / dt_mean)))
         c = h.cum
@@ -1376,7 +1425,39 @@ class TensionFilter:
         var = np.array([r0, r1, r2]) * (1.0 / n + 1.0 / m)  # r (1/n + 1/m)
         stats = np.einsum("ij,ij->i", d, d / var) / self._step_normaliser()
         best = int(stats.argmax())
-        return float(stats[best]), int(n_int[best]), post[best].tolist()
+        return float(stats[best]), int(n_int[best]), post[best].tolist(), threshold
+
+    def step_test_design(self, r_n2: float, dt_s: float) -> tuple[float, float, float] | None:
+        """Windows and threshold of the long-window step test at a noise level and rate.
+
+        ``n_max = long_sizing_threshold * r / long_min_step_n^2`` samples (a 20 mN step,
+        the level before it known, reaches the sizing non-centrality in n_max samples),
+        at most ``long_max_window_s`` and half the history; windows from n_max / 4; the
+        threshold from :func:`scan_threshold` for ``long_false_alarms_per_h``. None (the
+        test off) while n_max lies within the fast test's longest window.
+
+        Args:
+            r_n2: Long-run noise variance, the largest of the axes, N^2.
+            dt_s: Mean sample spacing, s, > 0.
+
+        Returns:
+            ``(n_lo, n_max, threshold)`` (samples, samples, dimensionless), or None.
+        """
+        p = self.params
+        n_fast = max(p.change_min_window, int(p.change_max_window_s / dt_s))
+        n_max = min(
+            p.long_sizing_threshold * r_n2 / (p.long_min_step_n * p.long_min_step_n),
+            p.long_max_window_s / dt_s,
+            0.5 * p.long_history_size,
+        )
+        if n_max <= n_fast:
+            return None
+        # The threshold moves with log(n_max): recomputed once n_max or dt moves by 1 %.
+        key = (round(50.0 * math.log(n_max)), round(50.0 * math.log(dt_s)))
+        if self._threshold_cache[0] != key:
+            h = scan_threshold(p.long_false_alarms_per_h, 0.25 * n_max, n_max, dt_s)
+            self._threshold_cache = (key, h)
+        return 0.25 * n_max, n_max, self._threshold_cache[1]
 
     def _step_normaliser(self) -> float:
         """The youth factor of the step test, >= 1: the fast test's times the shape's.

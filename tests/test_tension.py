@@ -23,6 +23,7 @@ from groundstation.tension import (
     observation_cov_n2,
     observe_tension,
     rotation_world_body,
+    scan_threshold,
 )
 
 MASS_KG = 0.030
@@ -389,7 +390,8 @@ def test_invalid_observation_in_filter_raises() -> None:
         {"drift_min_time_constant_s": 7.0},
         {"noise_prior_samples": 0.0},
         {"gap_s": -1.0},
-        {"long_threshold": 0.0},
+        {"long_sizing_threshold": 0.0},
+        {"long_false_alarms_per_h": 0.0},
         {"long_min_step_n": -0.02},
         {"long_max_window_s": math.inf},
         {"long_reference_s": 0.0},
@@ -662,15 +664,32 @@ def vibration_mix(rng: np.random.Generator, n: int, sigma_n: float) -> np.ndarra
 
 
 def step_detection_limit_s(r_n2: float, step_n: float, dt_s: float) -> float:
-    """When a step's samples hold the step test's threshold as non-centrality, s.
+    """When a step's samples hold the step test's threshold h as non-centrality, s.
 
     ``n step^2 / (r (1 + n / m)) = h`` with m = ``long_reference_s`` of samples before it:
     the information a test at that false-alarm rate needs (TensionFilter docstring).
     """
-    p = TensionFilterParams()
-    m = p.long_reference_s / dt_s
-    per_sample = step_n**2 / r_n2
-    return p.long_threshold / (per_sample - p.long_threshold / m) * dt_s
+    filt = TensionFilter()
+    design = filt.step_test_design(r_n2, dt_s)
+    assert design is not None
+    h = design[2]
+    m = filt.params.long_reference_s / dt_s
+    return h / (step_n**2 / r_n2 - h / m) * dt_s
+
+
+def test_scan_threshold_solves_the_false_alarm_rate() -> None:
+    """h from the rate: nu(h) per sample equals the target, and h grows as the rate falls."""
+    h = scan_threshold(0.005, 45.0, 180.0, 0.01)
+    nu = h**1.5 * math.exp(-h / 2) / (2**1.5 * math.gamma(1.5)) * (h / 2) * (1 / 45 - 1 / 180)
+    assert nu == pytest.approx(0.005 * 0.01 / 3600, rel=1e-6)
+    assert 43.0 < h < 44.0
+    # Longer windows: fewer independent looks, a lower threshold for the same rate.
+    assert scan_threshold(0.005, 180.0, 720.0, 0.01) < h - 2.5
+    assert scan_threshold(0.0005, 45.0, 180.0, 0.01) > h + 4.0
+    # The same seconds at 5 times the rate: the same threshold.
+    assert scan_threshold(0.005, 225.0, 900.0, 0.002) == pytest.approx(h, rel=1e-9)
+    with pytest.raises(ValueError, match="scan_threshold"):
+        scan_threshold(0.005, 180.0, 45.0, 0.01)
 
 
 @pytest.mark.parametrize("accel_noise", [1.0, 2.0])
@@ -712,10 +731,11 @@ def test_a_step_in_strong_coloured_noise_is_found_near_the_information_limit(
         delays.append(found)
     limit_s = step_detection_limit_s(r, 0.030, float(np.mean(dts)))
     assert np.median(delays) <= 1.3 * limit_s, (np.round(delays, 2), limit_s)
-    # n_max: the window in which a 20 mN step reaches the threshold (here below the cap)
-    p = TensionFilterParams()
-    longest_s = p.long_threshold * r / p.long_min_step_n**2 * float(np.mean(dts))
-    assert max(delays) <= min(longest_s, p.long_max_window_s) + 1.0, np.round(delays, 2)
+    # n_max: the window in which a 20 mN step reaches the sizing non-centrality
+    design = TensionFilter().step_test_design(r, float(np.mean(dts)))
+    assert design is not None
+    longest_s = design[1] * float(np.mean(dts))
+    assert max(delays) <= longest_s + 1.0, (np.round(delays, 2), longest_s)
 
 
 @pytest.mark.parametrize(("accel_noise", "colour"), [(1.0, "ar1"), (2.0, "ar1"), (2.0, "mix")])
