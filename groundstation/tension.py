@@ -639,8 +639,10 @@ class TensionEstimate:
         change_detected: True when this step detected a change of tension (a tug) and
             re-initialised the filter from the samples since the change.
         samples: Observations taken since start or reset.
-        change_statistic: Largest windowed chi-square statistic of this step
-            (dimensionless; a detection when above ``change_threshold``).
+        change_statistic: Largest windowed chi-square statistic of this step: the fast
+            test's, or the step test's times ``change_threshold`` over its own threshold
+            when larger, so that either is a detection above ``change_threshold``
+            (dimensionless; the step test's is 0 on the samples it is not evaluated).
         process_noise_scale: Factor on the process noise applied this step by the drift
             adaptation (1 at hover).
         noise_std_n: Estimated observation noise std per world axis and sample, N,
