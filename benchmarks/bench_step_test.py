@@ -69,7 +69,8 @@ def spacing(rng: np.random.Generator, n: int) -> np.ndarray:
 
 
 def hover(level: float, colour: str, minutes: float, flights: int) -> dict[str, Any]:
-    largest, detections = [], 0
+    largest, detections, r_ratio = [], 0, []
+    r_true = (MASS_KG * level) ** 2 * LONG_RUN[colour]
     for f in range(flights):
         rng = np.random.default_rng(5000 + f + int(100 * level) + (7 if colour == "ar1" else 0))
         n = int(minutes * 60.0 / 0.0106)
@@ -82,7 +83,13 @@ def hover(level: float, colour: str, minutes: float, flights: int) -> dict[str, 
             detections += e.change_detected
             top = max(top, e.change_statistic)
         largest.append(top)
-    return {"largest": largest, "detections": detections, "hours": flights * minutes / 60.0}
+        r_ratio.append(float(np.mean(filt.noise_model()[2])) / r_true)
+    return {
+        "largest": largest,
+        "detections": detections,
+        "hours": flights * minutes / 60.0,
+        "r_ratio": r_ratio,
+    }
 
 
 def steps(level: float, colour: str, trials: int) -> dict[str, Any]:
@@ -133,14 +140,17 @@ def render(res: dict[str, Any], cmd: str, wall_s: float) -> str:
         "",
         "On the fast test's scale: a detection is a value above 50, whichever test it comes from.",
         "",
-        "| noise | colour | hover | largest per flight (min / median / max) | detections |",
-        "| --- | --- | --- | --- | --- |",
+        "| noise | colour | hover | largest per flight (min / median / max) | detections "
+        "| estimated / true long-run variance at the end (min / median / max) |",
+        "| --- | --- | --- | --- | --- | --- |",
     ]
     for h in res["hover"]:
         a = np.array(h["largest"])
+        q = np.array(h["r_ratio"])
         L.append(
             f"| {h['level']:.1f} m/s^2 | {h['colour']} | {h['hours']:.1f} h | "
-            f"{a.min():.1f} / {np.median(a):.1f} / {a.max():.1f} | {h['detections']} |"
+            f"{a.min():.1f} / {np.median(a):.1f} / {a.max():.1f} | {h['detections']} | "
+            f"{q.min():.2f} / {np.median(q):.2f} / {q.max():.2f} |"
         )
     L += [
         "",
