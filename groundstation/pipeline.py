@@ -45,7 +45,7 @@ from groundstation.messages import (
     StopIn,
     Telemetry,
     TetherParams,
-    encode_estimate,
+    encode_estimate_ordered,
     parse_key,
 )
 from groundstation.tension import (
@@ -156,7 +156,8 @@ class DroneRuntime:
     telemetry_rate: _Rate = field(default_factory=_Rate)
     estimate_rate: _Rate = field(default_factory=_Rate)
     last_estimate_fields: dict[str, Any] | None = None
-    """The last Estimate's fields but ``follow`` (see :attr:`last_estimate`)."""
+    """The last Estimate's fields, ``follow`` as its ``model_dump()`` (see
+    :attr:`last_estimate`)."""
     follow_json_cache: tuple[FollowInfo, dict[str, Any]] | None = None
     """The last FollowInfo and its ``model_dump()`` (FollowInfo is frozen and reused)."""
     land_below_m_memory: float | None = None
@@ -173,6 +174,9 @@ class DroneRuntime:
     disarm."""
     estimate_key: str = field(init=False, default="")
     """``tether/{drone}/estimate`` (made once, not per message)."""
+    base_cache: tuple[np.ndarray, tuple[float, float, float]] | None = None
+    """``base_world_m`` and its floats, for the Estimate (the array is replaced, never
+    written, when the base moves)."""
 
     def __post_init__(self) -> None:
         self.estimate_key = f"tether/{self.drone}/estimate"
@@ -182,7 +186,7 @@ class DroneRuntime:
         """The last published Estimate as a model (built on demand, not per message)."""
         if self.last_estimate_fields is None or self.follow_json_cache is None:
             return None
-        return Estimate(follow=self.follow_json_cache[0], **self.last_estimate_fields)
+        return Estimate(**{**self.last_estimate_fields, "follow": self.follow_json_cache[0]})
 
 
 def calibration_from_config(
@@ -891,40 +895,68 @@ class Pipeline:
         """
         tension = _vec3(tension)
         std = _vec3(std)
-        position_m = position_std_m = None
-        if position is not None:
-            if _finite(position.position_world_m) and _finite(position.std_world_m):
-                position_m = _vec3(position.position_world_m)
-                position_std_m = _vec3(position.std_world_m)
-            else:
-                position = None
         follow = self._follow_info(runtime)
         cached = runtime.follow_json_cache
         if cached is None or cached[0] is not follow:
             cached = runtime.follow_json_cache = (follow, follow.model_dump())
-        lo_hi = position.radial_interval_m if position is not None else None
-        fields: dict[str, Any] = dict(
-            seq=msg.seq,
-            stamp_s=msg.stamp_s,
-            tension_n=tension,
-            tension_std_n=std,
-            horizontal_n=math.hypot(tension[0], tension[1]),
-            vertical_n=-tension[2],
-            position_m=position_m,
-            position_std_m=position_std_m,
-            radial_m=float(position.radial_m) if position is not None else None,
-            radial_interval_m=(float(lo_hi[0]), float(lo_hi[1])) if lo_hi is not None else None,
-            azimuth_determined=position.azimuth_determined if position is not None else None,
-            azimuth_source=position.azimuth_source if position is not None else None,
-            floor_contact=bool(position.floor_contact) if position is not None else None,
-            on_ground=on_ground,
-            converged=converged,
-            length_m=runtime.length_m,
-            base_m=_vec3(runtime.base_world_m),
-            calibration=runtime.calibration_source,
-        )
+        base = runtime.base_cache
+        if base is None or base[0] is not runtime.base_world_m:
+            base = runtime.base_cache = (runtime.base_world_m, _vec3(runtime.base_world_m))
+        position_m = position_std_m = None
+        if position is not None:
+            position_m = _vec3(position.position_world_m)
+            position_std_m = _vec3(position.std_world_m)
+            if not (_finite(position_m) and _finite(position_std_m)):
+                position = position_m = position_std_m = None
+        # In the model's order (ESTIMATE_FIELD_ORDER): encode_estimate_ordered takes it as is.
+        fields: dict[str, Any]
+        if position is None:
+            fields = {
+                "seq": msg.seq,
+                "stamp_s": msg.stamp_s,
+                "tension_n": tension,
+                "tension_std_n": std,
+                "horizontal_n": math.hypot(tension[0], tension[1]),
+                "vertical_n": -tension[2],
+                "position_m": None,
+                "follow": cached[1],
+                "position_std_m": None,
+                "radial_m": None,
+                "radial_interval_m": None,
+                "azimuth_determined": None,
+                "azimuth_source": None,
+                "floor_contact": None,
+                "on_ground": on_ground,
+                "converged": converged,
+                "length_m": runtime.length_m,
+                "base_m": base[1],
+                "calibration": runtime.calibration_source,
+            }
+        else:
+            lo, hi = position.radial_interval_m
+            fields = {
+                "seq": msg.seq,
+                "stamp_s": msg.stamp_s,
+                "tension_n": tension,
+                "tension_std_n": std,
+                "horizontal_n": math.hypot(tension[0], tension[1]),
+                "vertical_n": -tension[2],
+                "position_m": position_m,
+                "follow": cached[1],
+                "position_std_m": position_std_m,
+                "radial_m": float(position.radial_m),
+                "radial_interval_m": (float(lo), float(hi)),
+                "azimuth_determined": position.azimuth_determined,
+                "azimuth_source": position.azimuth_source,
+                "floor_contact": bool(position.floor_contact),
+                "on_ground": on_ground,
+                "converged": converged,
+                "length_m": runtime.length_m,
+                "base_m": base[1],
+                "calibration": runtime.calibration_source,
+            }
         try:
-            payload = encode_estimate(follow=cached[1], **fields)
+            payload = encode_estimate_ordered(fields)
         except ValueError as exc:  # a non-finite field the checks above did not cover
             self.count_drop(runtime.drone, "non_finite_estimate", str(exc))
             return None
