@@ -311,7 +311,7 @@ class Service:
         self.published += len(outputs)
 
 
-_MAX_BATCH = 16
+_MAX_BATCH = 32
 """Messages stepped before their outputs are published (bounds the first one's wait)."""
 
 
