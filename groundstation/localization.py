@@ -43,7 +43,9 @@ Cost: :func:`try_localize` runs once per telemetry message. Its 3-vector and 3x3
 arithmetic is done in Python floats, and the one catenary call on 8 points goes to
 ``catenary.locate_free``, the body of :func:`catenary.locate` without its input checks,
 which this module has already made (see :func:`_locate_points`); the elevation's fusion
-adds a 2x2 Gauss-Newton and a 5-point call.
+adds a 2x2 Gauss-Newton and a 5-point call. :func:`try_localize_batch` does the common case
+of many messages at once over arrays (the service's batched drain), with the same results
+to the bit; numpy's per-call overhead is then paid once per batch instead of per message.
 """
 
 from __future__ import annotations
@@ -65,7 +67,9 @@ __all__ = [
     "LocalizationFailure",
     "PositionEstimate",
     "localize",
+    "localize_batch",
     "try_localize",
+    "try_localize_batch",
 ]
 
 FloatArray = NDArray[np.float64]
