@@ -157,6 +157,15 @@ class DroneRuntime:
     """Sensor corrections applied in the observation (None: none in force)."""
     calibration_source: str = "none"
     """Which calibration is in force (Estimate and status ``calibration``)."""
+    vbat_range_v: tuple[float, float] | None = None
+    """``[calibration] thrust_vbat_range_v``: the battery range the thrust map was calibrated
+    over (None: not recorded)."""
+    last_vbat_v: float | None = None
+    """The last accepted Telemetry's ``vbat_v`` (None: absent)."""
+    calibration_extrapolated: bool | None = None
+    """The last Telemetry's ``vbat_v`` outside :attr:`vbat_range_v` (None: unknown)."""
+    extrapolation_told: bool = False
+    """The one ``warning`` Event for flying outside the calibrated battery range was sent."""
     rest: RestCalibrator | None = None
     """The rest calibration (``[calibration] rest``): the accelerometer's x/y offset found
     while the drone sat still and disarmed, added to the configured bias until the next
@@ -512,6 +521,7 @@ class Pipeline:
             weight_n_per_m=params.tether.weight_n_per_m,
             calibration=calibration,
             calibration_source=calibration_source,
+            vbat_range_v=params.calibration.thrust_vbat_range_v,
             rest=(
                 RestCalibrator(bias_body_mps2=params.calibration.accel_bias_mps2)
                 if params.calibration.rest
@@ -640,6 +650,7 @@ class Pipeline:
             floor_z_m=runtime.params.base.floor_z_m,
         )
         on_ground = runtime.contact.on_ground or obs.tension_world_n is None
+        self._check_vbat_range(runtime, msg.vbat_v, on_ground, now_s)
 
         position: PositionEstimate | None = None
         tension: Sequence[float] = _ZEROS3
@@ -729,6 +740,41 @@ class Pipeline:
             self._emit(runtime.drone, "stop", "service", now_s, self.self_id, decision.stop_reason)
         return out
 
+    def _check_vbat_range(
+        self, runtime: DroneRuntime, vbat_v: float | None, on_ground: bool, now_s: float
+    ) -> None:
+        """Flag a battery voltage outside the calibrated range; tell it once per drone.
+
+        The thrust map (``thrust_scale``, ``thrust_vbat_slope_per_v``) holds where it was
+        fitted; outside ``[calibration] thrust_vbat_range_v`` it is an extrapolation, which a
+        battery effect on thrust turns into a position error of tens of cm (docs/calibration.md).
+        The flag follows every sample; the ``warning`` Event (logged by the service) is sent
+        the first time only. On the ground no tension is estimated from the thrust, and an
+        unloaded battery reads well above its voltage in flight (0.5–0.6 V on the NanoBench
+        Crazyflie 2.1 flights), so there the flag is None rather than a false alarm.
+        """
+        runtime.last_vbat_v = vbat_v
+        rng = runtime.vbat_range_v
+        if rng is None or vbat_v is None or on_ground:
+            runtime.calibration_extrapolated = None
+            return
+        outside = not (rng[0] <= vbat_v <= rng[1])
+        runtime.calibration_extrapolated = outside
+        if outside and not runtime.extrapolation_told:
+            runtime.extrapolation_told = True
+            self._emit(
+                runtime.drone,
+                "warning",
+                "telemetry",
+                now_s,
+                self.self_id,
+                f"{runtime.drone}: battery {vbat_v:.3f} V outside the range the thrust map was "
+                f"calibrated over ({rng[0]:.3f}–{rng[1]:.3f} V, [calibration] "
+                "thrust_vbat_range_v): thrust, tension and position are extrapolated "
+                "(calibration_extrapolated in Estimate and status; told once)",
+                field="vbat_v",
+            )
+
     def _estimate(
         self,
         runtime: DroneRuntime,
@@ -777,6 +823,7 @@ class Pipeline:
             length_m=runtime.length_m,
             base_m=_vec3(runtime.base_world_m),
             calibration=runtime.calibration_source,
+            calibration_extrapolated=runtime.calibration_extrapolated,
         )
         try:
             payload = encode_estimate(follow=cached[1], **fields)
@@ -847,6 +894,11 @@ class Pipeline:
             "base_m": list(map(float, runtime.base_world_m)),
             "weight_n_per_m": runtime.weight_n_per_m,
             "calibration": runtime.calibration_source,
+            "calibration_extrapolated": runtime.calibration_extrapolated,
+            "calibration_vbat_range_v": (
+                None if runtime.vbat_range_v is None else list(runtime.vbat_range_v)
+            ),
+            "vbat_v": runtime.last_vbat_v,
             "rest_calibration": _rest_status(runtime.rest),
         }
 
