@@ -315,6 +315,12 @@ class Estimate(_Out):
     calibration: str = "none"
     """(added) Which sensor calibration the observation applied (``[calibration] source``,
     ``config`` for unlabelled values), or ``none``."""
+    calibration_extrapolated: bool | None = None
+    """(added) True when this Telemetry's ``vbat_v`` lies outside the battery range the
+    thrust map was calibrated over (``[calibration] thrust_vbat_range_v``): the thrust, and
+    with it the tension and position, rest on an extrapolation; null when no range is
+    recorded, the Telemetry carries no ``vbat_v``, or the drone is on the ground (no thrust
+    in use; an unloaded battery reads higher)."""
 
 
 class Setpoint(_Out):
@@ -473,6 +479,12 @@ class Status(_Out):
     calibration: str | None = None
     """(added) Which ``[calibration]`` the observation applies (its ``source``, ``config`` for
     unlabelled values) or ``none``, as in the Estimate."""
+    calibration_extrapolated: bool | None = None
+    """(added) As in the Estimate, for the last Telemetry."""
+    calibration_vbat_range_v: tuple[float, float] | None = None
+    """(added) ``[calibration] thrust_vbat_range_v`` in force, V, or null."""
+    vbat_v: float | None = None
+    """(added) The last Telemetry's ``vbat_v``, V, or null."""
     service: str | None = None
     """The answering service instance (liveliness token ``groundstation/service/{instance}``)."""
     peers: int | None = None

@@ -168,6 +168,15 @@ class DroneRuntime:
     """Sensor corrections applied in the observation (None: none in force)."""
     calibration_source: str = "none"
     """Which calibration is in force (Estimate and status ``calibration``)."""
+    vbat_range_v: tuple[float, float] | None = None
+    """``[calibration] thrust_vbat_range_v``: the battery range the thrust map was calibrated
+    over (None: not recorded)."""
+    last_vbat_v: float | None = None
+    """The last accepted Telemetry's ``vbat_v`` (None: absent)."""
+    calibration_extrapolated: bool | None = None
+    """The last Telemetry's ``vbat_v`` outside :attr:`vbat_range_v` (None: unknown)."""
+    extrapolation_told: bool = False
+    """The one ``warning`` Event for flying outside the calibrated battery range was sent."""
     rest: RestCalibrator | None = None
     """The rest calibration (``[calibration] rest``): the accelerometer's x/y offset found
     while the drone sat still and disarmed, added to the configured bias until the next
@@ -431,7 +440,11 @@ class Pipeline:
         localizations together (:meth:`_localize_many`), then every message's follow step
         and Estimate in order (:meth:`_telemetry_back`). Any other input (reel, params,
         follow, stop) changes what localization or follow read, so it ends the run: the
-        run is finished first, then that input is processed.
+        run is finished first, then that input is processed. What the front pass sets for
+        the back pass of the same message (``calibration_extrapolated``) travels with it.
+        The published samples are those of :meth:`process`, in its order; only the
+        operator-log Events told from the front pass (the battery warning) may come before
+        those of an earlier message's back pass (a Stop) in the same batch.
 
         Args:
             batch: Validated inputs, each drone's in their order.
@@ -589,6 +602,7 @@ class Pipeline:
             weight_n_per_m=params.tether.weight_n_per_m,
             calibration=calibration,
             calibration_source=calibration_source,
+            vbat_range_v=params.calibration.thrust_vbat_range_v,
             rest=(
                 RestCalibrator(bias_body_mps2=params.calibration.accel_bias_mps2)
                 if params.calibration.rest
@@ -732,6 +746,8 @@ class Pipeline:
             floor_z_m=runtime.params.base.floor_z_m,
         )
         on_ground = runtime.contact.on_ground or obs.tension_world_n is None
+        self._check_vbat_range(runtime, msg.vbat_v, on_ground, now_s)
+        ext = runtime.calibration_extrapolated  # this sample's (a later front moves it)
 
         tension: Sequence[float] = _ZEROS3
         std: Sequence[float] = _ZEROS3
@@ -766,7 +782,7 @@ class Pipeline:
                 # drone's next message is filtered (in a batch, before its localization).
                 self.count_drop(runtime.drone, "non_finite_estimate", "filter produced NaN/inf")
                 runtime.filter.reset()
-                return (runtime, msg, now_s, tension, std, on_ground, converged, False, None)
+                return (runtime, msg, now_s, tension, std, on_ground, converged, False, None, ext)
             if converged:
                 # Exit angles only while fresh: the reel reports at its own rate.
                 loc = self.settings.localization
@@ -784,8 +800,8 @@ class Pipeline:
                     else None,
                     msg.position_m,
                 )
-                return (runtime, msg, now_s, tension, std, on_ground, converged, True, loc_in)
-        return (runtime, msg, now_s, tension, std, on_ground, converged, True, None)
+                return (runtime, msg, now_s, tension, std, on_ground, converged, True, loc_in, ext)
+        return (runtime, msg, now_s, tension, std, on_ground, converged, True, None, ext)
 
     def _localize_one(self, loc_in: _LocalizeIn) -> PositionEstimate | None:
         loc = self.settings.localization
@@ -828,7 +844,10 @@ class Pipeline:
 
     def _telemetry_back(self, front: _Front, position: PositionEstimate | None) -> list[Sample]:
         """A telemetry message from its localization on: follow, the Estimate, commands."""
-        runtime, msg, now_s, tension, std, on_ground, converged, finite, _ = front
+        runtime, msg, now_s, tension, std, on_ground, converged, finite, _, ext = front
+        # This sample's flag, as the front pass left it (in a batch, later messages' front
+        # passes have moved it since).
+        runtime.calibration_extrapolated = ext
         fs = runtime.follow_state
         if not (fs.enabled or fs.active) and math.isfinite(msg.stamp_s):
             # Follow off: follow_step's steps 1 and 2 would only move the stamp (no
@@ -878,6 +897,41 @@ class Pipeline:
             out.append(Sample(f"tether/{runtime.drone}/cmd/stop", stop.to_json()))
             self._emit(runtime.drone, "stop", "service", now_s, self.self_id, decision.stop_reason)
         return out
+
+    def _check_vbat_range(
+        self, runtime: DroneRuntime, vbat_v: float | None, on_ground: bool, now_s: float
+    ) -> None:
+        """Flag a battery voltage outside the calibrated range; tell it once per drone.
+
+        The thrust map (``thrust_scale``, ``thrust_vbat_slope_per_v``) holds where it was
+        fitted; outside ``[calibration] thrust_vbat_range_v`` it is an extrapolation, which a
+        battery effect on thrust turns into a position error of tens of cm (docs/calibration.md).
+        The flag follows every sample; the ``warning`` Event (logged by the service) is sent
+        the first time only. On the ground no tension is estimated from the thrust, and an
+        unloaded battery reads well above its voltage in flight (0.5–0.6 V on the NanoBench
+        Crazyflie 2.1 flights), so there the flag is None rather than a false alarm.
+        """
+        runtime.last_vbat_v = vbat_v
+        rng = runtime.vbat_range_v
+        if rng is None or vbat_v is None or on_ground:
+            runtime.calibration_extrapolated = None
+            return
+        outside = not (rng[0] <= vbat_v <= rng[1])
+        runtime.calibration_extrapolated = outside
+        if outside and not runtime.extrapolation_told:
+            runtime.extrapolation_told = True
+            self._emit(
+                runtime.drone,
+                "warning",
+                "telemetry",
+                now_s,
+                self.self_id,
+                f"{runtime.drone}: battery {vbat_v:.3f} V outside the range the thrust map was "
+                f"calibrated over ({rng[0]:.3f}–{rng[1]:.3f} V, [calibration] "
+                "thrust_vbat_range_v): thrust, tension and position are extrapolated "
+                "(calibration_extrapolated in Estimate and status; told once)",
+                field="vbat_v",
+            )
 
     def _estimate(
         self,
@@ -931,6 +985,7 @@ class Pipeline:
                 "length_m": runtime.length_m,
                 "base_m": base[1],
                 "calibration": runtime.calibration_source,
+                "calibration_extrapolated": runtime.calibration_extrapolated,
             }
         else:
             lo, hi = position.radial_interval_m
@@ -954,6 +1009,7 @@ class Pipeline:
                 "length_m": runtime.length_m,
                 "base_m": base[1],
                 "calibration": runtime.calibration_source,
+                "calibration_extrapolated": runtime.calibration_extrapolated,
             }
         try:
             payload = encode_estimate_ordered(fields)
@@ -1024,6 +1080,11 @@ class Pipeline:
             "base_m": list(map(float, runtime.base_world_m)),
             "weight_n_per_m": runtime.weight_n_per_m,
             "calibration": runtime.calibration_source,
+            "calibration_extrapolated": runtime.calibration_extrapolated,
+            "calibration_vbat_range_v": (
+                None if runtime.vbat_range_v is None else list(runtime.vbat_range_v)
+            ),
+            "vbat_v": runtime.last_vbat_v,
             "rest_calibration": _rest_status(runtime.rest),
         }
 
@@ -1057,10 +1118,11 @@ _Front = tuple[
     bool,
     bool,
     "_LocalizeIn | None",
+    "bool | None",
 ]
 """A telemetry message stepped up to its localization (:meth:`Pipeline._telemetry_front`):
 runtime, message, receive time, tension, its std, on the ground, converged, finite, the
-localization's inputs (None: nothing to localize)."""
+localization's inputs (None: nothing to localize), calibration_extrapolated."""
 
 
 def _follow_stamped(state: follow_mod.FollowState, stamp_s: float) -> follow_mod.FollowState:

@@ -176,6 +176,7 @@ def _random_estimate_fields(rng: np.random.Generator) -> dict[str, Any]:
         "converged": bool(rng.integers(2)),
         "length_m": maybe(abs(f())),
         "base_m": maybe(v3()),
+        "calibration_extrapolated": maybe_bool(),
     }
 
 

@@ -1,12 +1,13 @@
 """Pipeline.process_batch (the service's batched drain) against Pipeline.handle, message by
 message: the same outputs, byte for byte, in the same order.
 
-The input is a realistic mix of eight drones at 250 Hz, interleaved at random as they
+The input is a realistic mix of nine drones at 250 Hz, interleaved at random as they
 arrive: hovering, a plumb tether, a tether resting on the floor with a landing (thrust below
 the weight, then disarmed), a tug with follow switched on and motion capture (setpoints),
 a drone that starts late, one that falls silent for 1.2 s and comes back (the filter
 restarts), one whose reel reports an exit azimuth (its localizations go one by one inside
-the batch), one sending a bad quaternion; with invalid payloads, repeated seqs, reel,
+the batch), one sending a bad quaternion, one whose battery leaves the calibrated range and
+comes back every few samples; with invalid payloads, repeated seqs, reel,
 params and follow commands mixed in. It is cut into batches of random sizes, once with the
 vectorised localization forced on every run of telemetry (``BATCH_LOCALIZE_MIN = 1``) and
 once with the service's own threshold.
@@ -44,6 +45,7 @@ def settings() -> Settings:
             "drone": {"mass_kg": MASS_KG, "accel_noise_mps2": 0.3, "thrust_noise_n": 0.003},
             "tether": {"weight_n_per_m": 0.05, "length_m": 1.6},
             "base": {"position_m": [0.0, 0.0, 0.754], "floor_z_m": 0.0},
+            "calibration": {"thrust_vbat_range_v": [3.8, 4.0]},
         },
         use_env=False,
     )
@@ -80,6 +82,7 @@ def _telemetry(
     thrust_scale: float = 1.0,
     position_m: list[float] | None = None,
     quat: list[float] | None = None,
+    vbat_v: float | None = None,
 ) -> bytes:
     thrust_vec = -(tension_n + MASS_KG * np.array([0.0, 0.0, -GRAVITY_MPS2]))
     q = _quat_aligning_e3(thrust_vec)
@@ -95,6 +98,8 @@ def _telemetry(
     }
     if position_m is not None:
         body["position_m"] = position_m
+    if vbat_v is not None:
+        body["vbat_v"] = vbat_v
     return json.dumps(body).encode()
 
 
@@ -150,7 +155,14 @@ def _scenarios() -> dict[str, Scenario]:
             out.append(out[0])  # a repeated seq
         return out
 
+    def battery(k: int, rng: np.random.Generator) -> list[tuple[str, bytes]]:
+        # In and out of the calibrated battery range every few samples: the Estimate's
+        # calibration_extrapolated is each sample's own, whatever else the batch holds.
+        vbat = 3.9 if (k // 3) % 2 else 3.7
+        return [("telemetry", _telemetry("battery", k, HOVER_N, rng, vbat_v=vbat))]
+
     return {
+        "battery": battery,
         "hover": tel("hover", HOVER_N),
         "plumb": tel("plumb", np.array([0.0, 0.0, -0.080])),
         "floor": floor,
@@ -250,6 +262,8 @@ def test_process_batch_publishes_what_handle_publishes(
     assert any(e["drone"] == "floor" and e["floor_contact"] for e in est)
     assert any(e["drone"] == "floor" and e["on_ground"] for e in est)
     assert any(e["drone"] == "reel" and e["azimuth_source"] == "reel" for e in est)
+    flags = {e["calibration_extrapolated"] for e in est if e["drone"] == "battery"}
+    assert {True, False} <= flags
     assert plain.drones["pause"].received == STEPS  # silent for 300 of its STEPS + 300
 
 
