@@ -967,7 +967,7 @@ class TensionFilter:
     before it known, reaches a non-centrality of ``long_sizing_threshold`` = 40, at most
     ``long_max_window_s`` = 8 s: 0.45-1.8 s at 1 m/s^2, 1.8-7.6 s at 2 m/s^2 (100 Hz,
     r = 2 s2). The test is off while n_max lies within the fast test's 1 s (below
-    ~0.85 m/s^2 at 100 Hz; ~7 samples on the ideal profile, whose results it therefore
+    ~0.75 m/s^2 at 100 Hz; ~8 samples on the ideal profile, whose results it therefore
     leaves bit for bit as they were). r is the larger of the 5 s level and a 30 s one
     (the 5 s level's +-6 % scatter reads as evidence on long windows; the 30 s one lags a
     rise), and the statistic is divided by the fast test's youth factor and by one for
@@ -982,9 +982,10 @@ class TensionFilter:
     (d = 3, the Brownian scan approximation, noise known), so h is set per noise level
     for ``long_false_alarms_per_h`` = 0.005 per hour: 43.5 at 1 m/s^2 and 40.4 at
     2 m/s^2 (longer windows, fewer independent looks); one fixed h = 32 would be
-    0.7 per hour at 1 m/s^2. The on-line noise estimate adds its scatter and bias (kappa
-    reads 2.29 for the simulator's 2.5, 8 % low, +-7 %), which fattens the tail beyond
-    the formula's, so the margin was measured
+    0.7 per hour at 1 m/s^2. The on-line noise estimate adds its scatter and bias (at
+    the end of a 10 min hover it reads r at 0.74-1.11 of the truth, median 0.90-0.98 per
+    case, below on the realistic simulator's mix), which fattens the tail beyond the
+    formula's, so the margin was measured
     (docs/step_test_benchmark.md, ``python -m benchmarks.bench_step_test``: the filter
     alone, not told the noise, jittered ~94 Hz): in 12 hovers of 10 min per case, at 1
     and 2 m/s^2, white + AR(0.6) (lag-1 0.2, the realistic simulator's) and AR(1)
@@ -998,8 +999,8 @@ class TensionFilter:
     ``n delta^2 / (r (1 + n/m)) = h`` gives 0.95 s and 4.8 s. That is the price of the
     false-alarm rate: any detector that fires on noise this rarely needs this much data.
     Measured after 40 s of hover (same benchmark, 12 steps per case): median 0.76-0.82 s
-    at 1 m/s^2 and 3.5-3.6 s at 2 m/s^2, 1 of 48 not detected within 9.5 s (the noise
-    estimate reads r ~10 % low, which shortens them). In the first minute the youth
+    at 1 m/s^2 and 3.5-3.6 s at 2 m/s^2, 1 of 48 not detected within 9.5 s (an r read
+    low shortens them). In the first minute the youth
     factors (1.25 after 10 s) delay it further.
 
     **Re-initialisation by replay.** On detection the window with the largest statistic
