@@ -148,6 +148,16 @@ class Outcome:
     load_start: float
 
 
+@dataclass(frozen=True)
+class EnvelopeOutcome:
+    """What section (d) and the bullets need: ``--only envelope`` runs just this."""
+
+    quick: bool
+    paper: rp.PaperResults
+    envelope: renv.EnvelopeResult
+    figures: dict[str, str]
+
+
 def _log(msg: str, t0: float) -> None:
     print(f"[results {time.perf_counter() - t0:6.1f} s] {msg}", file=sys.stderr, flush=True)
 
@@ -258,7 +268,7 @@ def _digits(x: float) -> int:
     return 4
 
 
-def trust_bullets(o: Outcome) -> list[str]:
+def trust_bullets(o: Outcome | EnvelopeOutcome) -> list[str]:
     """'When it works, when it doesn't', each with its numbers and its profile: the envelope
     (d) on the realistic profile, and (a) on the ideal one."""
     out: list[str] = []
@@ -337,13 +347,17 @@ def trust_bullets(o: Outcome) -> list[str]:
             f"{_cm(worst[1].raw.median_m)})."
         )
     sw = env.sweep("omega_error")
-    lo, hi_pt = sw.points[0], sw.points[-1]
+    off = [p for p in sw.points if p.value != sw.sweep.nominal]
+    nominal = next(p for p in sw.points if p.value == sw.sweep.nominal)
     out.append(
-        f"**ω must be known (realistic):** with the weight per metre configured "
-        f"{_signed(lo.value)} % off the median is {_cm(lo.stats.median_m)}, "
-        f"{_signed(hi_pt.value)} % {_cm(hi_pt.stats.median_m)} (height "
-        f"{_cm(lo.stats.vertical_median_m)} / {_cm(hi_pt.stats.vertical_median_m)}). Weigh "
-        "the tether."
+        "**ω must be known (realistic):** with the weight per metre configured "
+        + ", ".join(
+            f"{_signed(p.value)} % off the median is {_cm(p.stats.median_m)} (height "
+            f"{_cm(p.stats.vertical_median_m)})"
+            for p in off
+        )
+        + f", against {_cm(nominal.stats.median_m)} (height "
+        f"{_cm(nominal.stats.vertical_median_m)}) known. Weigh the tether."
     )
     sw = env.sweep("length")
     longest = sw.points[-1]
@@ -582,13 +596,22 @@ def headline(o: Outcome) -> dict[str, Any]:
         "service_8_floor_p99_ms": None if floor8 is None else floor8["p99_ms"],
         "service_bursts_p99_ms": {k: v["p99_ms"] for k, v in o.service.bursts.items()},
         "service_capacity_msgs_per_s": {k: v["msgs_per_s"] for k, v in o.service.capacity.items()},
+        **envelope_headline(o.envelope),
+    }
+
+
+def envelope_headline(env: renv.EnvelopeResult) -> dict[str, Any]:
+    """Section (d)'s headline numbers (SI units): per class at its real size, uncalibrated
+    and calibration = truth (None: not flown)."""
+    return {
         "envelope_profile": renv.PROFILE,
+        "envelope_quick": env.plan.quick,
         "envelope_real_median_m": {
             c.cls.name: [c.real.raw.median_m, None if c.real.cal is None else c.real.cal.median_m]
-            for c in o.envelope.classes
+            for c in env.classes
         },
         "envelope_real_tension_median_n": {
-            c.cls.name: c.real.raw.tension_median_n for c in o.envelope.classes
+            c.cls.name: c.real.raw.tension_median_n for c in env.classes
         },
     }
 
@@ -664,28 +687,39 @@ def _summary_table(o: Outcome) -> list[str]:
             )
         )
     rows.append(("service saturation on this machine", saturation_text(o), "—"))
-    return _table(("", "ours (ideal-profile simulation / this machine)", "paper / target"), rows)
+    return _table(SUMMARY_COLUMNS, rows)
+
+
+README_PROFILES = (
+    "Simulation, each figure with its profile: the table and the bullets marked *ideal "
+    "profile* are the **ideal** profile (the estimator's own assumptions: quasi-static "
+    "catenary, white accelerometer noise, exact thrust and IMU alignment); the bullets "
+    "marked *realistic* and the envelope figure are the **realistic** profile (real "
+    "Crazyflie sensor errors, one error class at a time, uncalibrated and with "
+    "calibration = truth: docs/simulator.md); and this machine for speed"
+)
+README_TAIL = "### When it works, when it doesn't"
+
+
+def _readme_tail(o: Outcome | EnvelopeOutcome) -> list[str]:
+    return [
+        README_TAIL,
+        "",
+        *[f"- {b}" for b in trust_bullets(o)],
+        "",
+        "![envelope](docs/figures/envelope.png)",
+    ]
 
 
 def readme_block(o: Outcome, prov: dict[str, str], wall_s: float) -> str:
     lines = [
-        "Simulation, each figure with its profile: the table and the bullets marked *ideal "
-        "profile* are the **ideal** profile (the estimator's own assumptions: quasi-static "
-        "catenary, white accelerometer noise, exact thrust and IMU alignment); the bullets "
-        "marked *realistic* and the envelope figure are the **realistic** profile (real "
-        "Crazyflie sensor errors, one error class at a time, uncalibrated and with "
-        "calibration = truth: docs/simulator.md); and this machine for speed "
-        f"({prov['machine']}); from "
+        f"{README_PROFILES} ({prov['machine']}); from "
         f"`.venv/bin/python -m benchmarks.results` ({wall_s / 60:.1f} min; `--quick`, "
         f"every section, shorter, runs in CI), {prov['date']}, commit "
         f"`{prov['commit']}`. Tables, figures and method: [docs/RESULTS.md](docs/RESULTS.md).",
         "",
         *_summary_table(o),
-        "### When it works, when it doesn't",
-        "",
-        *[f"- {b}" for b in trust_bullets(o)],
-        "",
-        "![envelope](docs/figures/envelope.png)",
+        *_readme_tail(o),
     ]
     return "\n".join(lines)
 
@@ -1216,7 +1250,7 @@ def _cal_text(st: renv.Stats | None) -> str:
     return f"{_cm(st.median_m)} / {_cm(st.p95_m)}"
 
 
-def _envelope_section(o: Outcome) -> list[str]:
+def _envelope_section(o: Outcome | EnvelopeOutcome) -> list[str]:
     env = o.envelope
     ep = env.plan
     spots = ", ".join(str(i + 1) for i in ep.spots)
@@ -1250,8 +1284,8 @@ def _envelope_section(o: Outcome) -> list[str]:
     base = env.cls("vibration").at(renv.BASELINE_NOISE_MPS2).raw
     rows = [
         (
-            "baseline (vibration only)",
-            f"{renv.BASELINE_NOISE_MPS2:g} m/s²",
+            "baseline",
+            f"vibration σ {renv.BASELINE_NOISE_MPS2:g} m/s², every other class off",
             "—",
             f"{_cm(base.median_m)} / {_cm(base.p95_m)}",
             "—",
@@ -1266,7 +1300,7 @@ def _envelope_section(o: Outcome) -> list[str]:
         rows.append(
             (
                 c.cls.name.replace("_", " "),
-                f"{pt.value:g} ({c.cls.label})",
+                renv.size_text(c.cls, pt.value),
                 _drawn_text(c.cls, pt.drawn),
                 f"**{_cm(pt.raw.median_m)}** / {_cm(pt.raw.p95_m)}",
                 _cal_text(pt.cal),
@@ -1289,7 +1323,11 @@ def _envelope_section(o: Outcome) -> list[str]:
     L += [f"![envelope](figures/{o.figures['envelope']})", ""]
     L += ["### Each error class over its range (realistic profile)", ""]
     for c in env.classes:
-        L += [f"**{c.cls.name.replace('_', ' ')}: {c.cls.label}** (real size {c.cls.real:g})", ""]
+        L += [
+            f"**{c.cls.name.replace('_', ' ')}: {c.cls.label}** (real size: "
+            f"{renv.size_text(c.cls, c.cls.real)})",
+            "",
+        ]
         L += _table(
             (
                 "size",
@@ -1304,7 +1342,8 @@ def _envelope_section(o: Outcome) -> list[str]:
             ),
             [
                 (
-                    f"{pt.value:g}" + (" (baseline)" if renv.is_baseline(c.cls, pt.value) else ""),
+                    renv.size_text(c.cls, pt.value)
+                    + (" (baseline)" if renv.is_baseline(c.cls, pt.value) else ""),
                     _drawn_text(c.cls, pt.drawn),
                     _cm(pt.raw.median_m),
                     _cm(pt.raw.p95_m),
@@ -1362,6 +1401,19 @@ def _envelope_section(o: Outcome) -> list[str]:
     return L
 
 
+PAGE_PROFILES = (
+    "Everything here is simulation or this machine. Two simulator profiles, named in "
+    "every section and figure: the summary, (a) and the 'ideal profile' bullets are the "
+    "**ideal** profile, whose tether is the quasi-static catenary the estimator assumes "
+    "(no tether dynamics, no stretch, no drag) and whose sensors are exact but for white "
+    "noise, so those numbers are an upper bound on what the method does in a lab; (d) is "
+    "the **realistic** profile (a lumped-mass tether of its own and real Crazyflie "
+    "sensor errors, one class at a time: docs/simulator.md). The paper's figures are "
+    "missing from its source; where its text states a number it is given beside ours."
+)
+SUMMARY_COLUMNS = ("", "ours (ideal-profile simulation / this machine)", "paper / target")
+
+
 def results_markdown(o: Outcome, prov: dict[str, str], wall_s: float) -> str:
     cmd = ".venv/bin/python -m benchmarks.results" + (" --quick" if o.quick else "")
     phases = ", ".join(f"{k} {v:.0f} s" for k, v in o.phases_s.items())
@@ -1381,14 +1433,7 @@ def results_markdown(o: Outcome, prov: dict[str, str], wall_s: float) -> str:
             "",
         ]
     L += [
-        "Everything here is simulation or this machine. Two simulator profiles, named in "
-        "every section and figure: the summary, (a) and the 'ideal profile' bullets are the "
-        "**ideal** profile, whose tether is the quasi-static catenary the estimator assumes "
-        "(no tether dynamics, no stretch, no drag) and whose sensors are exact but for white "
-        "noise, so those numbers are an upper bound on what the method does in a lab; (d) is "
-        "the **realistic** profile (a lumped-mass tether of its own and real Crazyflie "
-        "sensor errors, one class at a time: docs/simulator.md). The paper's figures are "
-        "missing from its source; where its text states a number it is given beside ours.",
+        PAGE_PROFILES,
         "",
         SECTIONS[0],
         "",
@@ -1407,6 +1452,95 @@ def results_markdown(o: Outcome, prov: dict[str, str], wall_s: float) -> str:
         "",
     ]
     return "\n".join(L)
+
+
+def run_envelope_only(quick: bool, out_dir: Path, workers: int) -> EnvelopeOutcome:
+    """Section (d) alone: its flights and (a)'s (the bullets cite both), its two figures."""
+    t0 = time.perf_counter()
+    pplan, eplan = rp.plan(quick), renv.plan(quick)
+    jobs = rp.jobs(pplan) + renv.jobs(eplan)
+    _log(f"closed loop: {len(jobs)} runs, {sum(j.seconds for j in jobs):.0f} s simulated", t0)
+    results = run_jobs(jobs, workers, lambda key: None)
+    traces = {k: v for k, v in results.items() if not k.startswith(("envr/", "envm/"))}
+    paper = rp.summarize(traces, pplan)
+    env = renv.summarize(results, eplan)
+    figures = {
+        "envelope": rfig.envelope(env, out_dir / "figures"),
+        "envelope_model": rfig.envelope_model(env, out_dir / "figures"),
+    }
+    _log("envelope done", t0)
+    return EnvelopeOutcome(quick, paper, env, figures)
+
+
+_SECTION_D = re.compile(r"^## \(d\) .*$", re.MULTILINE)
+_SECTION_A = re.compile(r"^## \(a\) .*$", re.MULTILINE)
+_HEADLINE = re.compile(r"^<!-- headline: (\{.*\}) -->$", re.MULTILINE)
+_ONLY_NOTE = re.compile(r"^Section \(d\) regenerated alone by .*\n\n", re.MULTILINE)
+
+
+def splice_envelope(page: str, o: EnvelopeOutcome, prov: dict[str, str], wall_s: float) -> str:
+    """``page`` (a RESULTS.md) with section (d), its headline numbers and the profile labels
+    replaced from ``o``; every other section as it was (and says so)."""
+    d, head = _SECTION_D.search(page), _HEADLINE.search(page)
+    if d is None or head is None or head.start() < d.start():
+        raise RuntimeError("RESULTS.md: section (d) or the headline comment not found")
+    numbers = {**json.loads(head.group(1)), **envelope_headline(o.envelope)}
+    page = (
+        page[: d.start()]
+        + "\n".join(_envelope_section(o))
+        + f"<!-- headline: {json.dumps(numbers)} -->"
+        + page[head.end() :]
+    )
+    page = _SECTION_A.sub(lambda _: SECTIONS[1], page, count=1)
+    page = re.sub(
+        r"^Everything here is simulation.*$", lambda _: PAGE_PROFILES, page, count=1, flags=re.M
+    )
+    header = _table(SUMMARY_COLUMNS, [])[0]
+    page = re.sub(
+        r"^\|  \| ours \(.*\| paper / target \|$", lambda _: header, page, count=1, flags=re.M
+    )
+    note = (
+        f"Section (d) regenerated alone by `.venv/bin/python -m benchmarks.results --only "
+        f"envelope{' --quick' if o.quick else ''}` on {prov['date']}, commit "
+        f"`{prov['commit']}`"
+        + (f" (with uncommitted changes in {prov['dirty']})" if prov["dirty"] else "")
+        + f", {wall_s:.0f} s; the other sections are from the run above.\n\n"
+    )
+    page = _ONLY_NOTE.sub("", page)
+    first = page.index("\n\n", page.index("Generated by")) + 2
+    return page[:first] + note + page[first:]
+
+
+def splice_readme_block(text: str, o: EnvelopeOutcome, prov: dict[str, str]) -> str:
+    """The README block with its bullets, figure and profile sentence from ``o`` (and a line
+    saying so); its table as it was."""
+    start = README_START.search(text)
+    end = text.find(README_END)
+    if start is None or end < start.end():
+        raise RuntimeError(f"{README}: results markers not found")
+    block = text[start.end() : end]
+    tail = block.find(README_TAIL)
+    if tail < 0:
+        raise RuntimeError(f"{README}: {README_TAIL!r} not found in the results block")
+    tail_lines = _readme_tail(o)
+    tail_lines[-1:-1] = [
+        f"(Section (d), the bullets marked *realistic* and the figure: `.venv/bin/python -m "
+        f"benchmarks.results --only envelope`, {prov['date']}, commit `{prov['commit']}`.)",
+        "",
+    ]
+    block = block[:tail] + "\n".join(tail_lines) + "\n"
+    block = re.sub(
+        r"^\nSimulation.*?and this machine for speed",
+        lambda _: "\n" + README_PROFILES,
+        block,
+        count=1,
+        flags=re.S,
+    )
+    header = _table(SUMMARY_COLUMNS, [])[0]
+    block = re.sub(
+        r"^\|  \| ours \(.*\| paper / target \|$", lambda _: header, block, count=1, flags=re.M
+    )
+    return text[: start.end()] + block + text[end:]
 
 
 def write_readme_block(block: str, readme: Path = README) -> None:
@@ -1437,11 +1571,34 @@ def main(argv: list[str] | None = None) -> int:
         action="store_true",
         help="do not rewrite the README block (full runs into docs/ do)",
     )
+    parser.add_argument(
+        "--only",
+        choices=("envelope",),
+        help="rerun one section into the existing <out-dir>/RESULTS.md (and, for docs/, the "
+        "README block's bullets and figure); the other sections stay as they are",
+    )
     args = parser.parse_args(argv)
     t0 = time.perf_counter()
     out_dir: Path = args.out_dir.resolve()
     out_dir.mkdir(parents=True, exist_ok=True)
     prov = provenance()
+    if args.only == "envelope":
+        page_path = out_dir / "RESULTS.md"
+        if not page_path.exists():
+            parser.error(f"--only envelope: {page_path} does not exist (run the full page first)")
+        only = run_envelope_only(args.quick, out_dir, max(1, args.workers))
+        wall = time.perf_counter() - t0
+        page = splice_envelope(page_path.read_text(encoding="utf-8"), only, prov, wall)
+        page_path.write_text(page, encoding="utf-8")
+        print(f"rewrote section (d) of {page_path}", file=sys.stderr)
+        if not args.quick and not args.no_readme and out_dir == (REPO / "docs").resolve():
+            text = splice_readme_block(README.read_text(encoding="utf-8"), only, prov)
+            README.write_text(text, encoding="utf-8")
+            print(
+                f"rewrote the bullets and figure of the results block of {README}", file=sys.stderr
+            )
+        print(f"wall time {wall:.0f} s", file=sys.stderr)
+        return 0
     outcome = run(args.quick, out_dir, max(1, args.workers))
     wall = time.perf_counter() - t0
     (out_dir / "RESULTS.md").write_text(results_markdown(outcome, prov, wall), encoding="utf-8")

@@ -19,7 +19,12 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
 from benchmarks import results_paper as rp
-from benchmarks.results_envelope import BASELINE_NOISE_MPS2, TRUST_P95_M, EnvelopeResult
+from benchmarks.results_envelope import (
+    BASELINE_NOISE_MPS2,
+    TRUST_P95_M,
+    EnvelopeResult,
+    size_text,
+)
 from benchmarks.results_peers import (
     SERVICE_TARGET_P99_MS,
     CatenaryResult,
@@ -475,7 +480,8 @@ def envelope(env: EnvelopeResult, out_dir: Path) -> str:
     base = env.cls("vibration").at(BASELINE_NOISE_MPS2).raw
     classes = [c for c in env.classes if c.cls.name != "vibration"]
     names = ["baseline\n(vibration\nonly)"] + [
-        c.cls.name.replace("_", "\n") + f"\n{c.real.value:g}" for c in classes
+        c.cls.name.replace("_", " ") + "\n" + size_text(c.cls, c.real.value).replace(" ", "\n", 1)
+        for c in classes
     ]
     x = np.arange(len(names))
     raw_med = [base.median_m] + [c.real.raw.median_m for c in classes]
@@ -502,20 +508,20 @@ def envelope(env: EnvelopeResult, out_dir: Path) -> str:
     for i, c in enumerate(cal):
         if c is None:
             ax.text(
-                i + 1 + w / 2, 0.6, "nothing to\ncalibrate", fontsize=6.5, ha="center", rotation=90
+                i + 1 + w / 2, 1.2, "nothing to calibrate", fontsize=6.5, ha="center", rotation=90
             )
     ax.axhline(100 * base.median_m, color="0.4", ls="--", lw=0.8, label="baseline median")
     ax.set_xticks(x)
     ax.set_xticklabels(names, fontsize=7.5)
     ax.set_yscale("log")
-    ax.set_ylim(0.5, 500)
+    ax.set_ylim(1, 500)
     ax.set_ylabel("3D position error (cm, log)")
     ax.set_title("Each error class at its real size, on top of the baseline")
     ax.legend(fontsize=8, loc="upper left")
     ax.grid(alpha=0.3, axis="y", which="both")
     for c in env.classes:
-        if c.cls.real == c.cls.baseline or c.cls.name == "all":
-            continue
+        if c.cls.real == c.cls.baseline or c.cls.name in ("all", "battery"):
+            continue  # no size to scale (battery: a state of charge; its table has it)
         pts = [p for p in c.points if p.value * c.cls.real >= 0 or p.value == 0]
         rel = [abs(p.value / c.cls.real) if c.cls.real else 0.0 for p in pts]
         order = np.argsort(rel)
