@@ -1460,7 +1460,14 @@ def run_envelope_only(quick: bool, out_dir: Path, workers: int) -> EnvelopeOutco
     pplan, eplan = rp.plan(quick), renv.plan(quick)
     jobs = rp.jobs(pplan) + renv.jobs(eplan)
     _log(f"closed loop: {len(jobs)} runs, {sum(j.seconds for j in jobs):.0f} s simulated", t0)
-    results = run_jobs(jobs, workers, lambda key: None)
+    done = [0]
+
+    def progress(key: str) -> None:
+        done[0] += 1
+        if done[0] % 20 == 0 or done[0] == len(jobs):
+            _log(f"closed loop: {done[0]}/{len(jobs)}", t0)
+
+    results = run_jobs(jobs, workers, progress)
     traces = {k: v for k, v in results.items() if not k.startswith(("envr/", "envm/"))}
     paper = rp.summarize(traces, pplan)
     env = renv.summarize(results, eplan)

@@ -122,6 +122,7 @@ def test_quick_results(tmp_path: Path) -> None:
 
     # (d) is the realistic profile's envelope, uncalibrated beside calibration = truth; an
     # envelope on the ideal profile only (no sensor error classes) fails every line below.
+    assert "realistic" in SECTIONS[4] and "ideal" in SECTIONS[1]
     envelope = page[page.index(SECTIONS[4]) :]
     assert "Profile **realistic**" in envelope
     assert "calibration = truth" in envelope
@@ -140,6 +141,6 @@ def test_quick_results(tmp_path: Path) -> None:
     assert med["all"][1] < 0.5 * med["all"][0]
     # Classes with no calibration parameter show no calibrated figure.
     assert med["motor_lag"][1] is None
-    # The section's tables carry the numbers: the summary row of every class has two cm pairs.
+    # The section's table carries them: the thrust map's row, uncalibrated and calibrated.
     rows = [r for r in envelope.splitlines() if r.startswith("| thrust map | ")]
     assert rows and len(re.findall(r"\d+\.\d cm", rows[0])) >= 4, rows
