@@ -327,10 +327,26 @@ def trust_bullets(o: Outcome | EnvelopeOutcome) -> list[str]:
         "= truth:** " + "; ".join(parts) + ". They cannot be averaged away: they bias the "
         "horizontal tension, hence the distance and the azimuth."
     )
+    if any(c.cls.name == "battery" for c in env.classes):
+        bat = env.cls("battery")
+        drained = [p for p in bat.points if p.value not in (0.0, bat.cls.real)]
+        out.append(
+            "**The thrust map drifts as the battery sags (realistic):** a map exact at "
+            "4.05 V, uncalibrated → calibration = truth (with its `vbat_v` term), median: "
+            + "; ".join(
+                f"{renv.size_text(bat.cls, p.value)} ({_drawn_text(bat.cls, p.drawn)}) "
+                f"{_cm(p.raw.median_m)} → {_cal_text(p.cal).split(' / ')[0]}"
+                for p in [bat.real, *drained]
+            )
+            + ". The calibration's voltage term is linear in V, the map's drift is not: the "
+            "further the battery from the calibration's voltage, the more remains."
+        )
     vib = env.cls("vibration")
     out.append(
-        "**Vibration noise costs in proportion and no calibration removes it (realistic):** "
-        + ", ".join(f"σ = {pt.value:g} m/s²: {_cm(pt.raw.median_m)}" for pt in vib.points)
+        "**Vibration noise grows the error and no calibration removes it (realistic):** "
+        + ", ".join(
+            f"{renv.size_text(vib.cls, pt.value)}: {_cm(pt.raw.median_m)}" for pt in vib.points
+        )
         + " (median)."
     )
     dyn = [c for c in env.classes if c.cls.name in renv.DYNAMICS_CLASSES]
@@ -343,7 +359,8 @@ def trust_bullets(o: Outcome | EnvelopeOutcome) -> list[str]:
             "**The dynamics cost little (realistic):** "
             + ", ".join(f"{c.cls.name.replace('_', ' ')} {_cm(c.real.raw.median_m)}" for c in dyn)
             + f" against the baseline's {_cm(base.median_m)} (largest change: "
-            f"{worst[0].cls.name.replace('_', ' ')} at {worst[1].value:g}, "
+            f"{worst[0].cls.name.replace('_', ' ')} at "
+            f"{renv.size_text(worst[0].cls, worst[1].value)}, "
             f"{_cm(worst[1].raw.median_m)})."
         )
     sw = env.sweep("omega_error")
@@ -352,12 +369,12 @@ def trust_bullets(o: Outcome | EnvelopeOutcome) -> list[str]:
     out.append(
         "**ω must be known (realistic):** with the weight per metre configured "
         + ", ".join(
-            f"{_signed(p.value)} % off the median is {_cm(p.stats.median_m)} (height "
+            f"{_signed(p.value)} % off: median {_cm(p.stats.median_m)} (height "
             f"{_cm(p.stats.vertical_median_m)})"
             for p in off
         )
-        + f", against {_cm(nominal.stats.median_m)} (height "
-        f"{_cm(nominal.stats.vertical_median_m)}) known. Weigh the tether."
+        + f"; known: {_cm(nominal.stats.median_m)} (height "
+        f"{_cm(nominal.stats.vertical_median_m)}). Weigh the tether."
     )
     sw = env.sweep("length")
     longest = sw.points[-1]

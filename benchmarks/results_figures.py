@@ -6,6 +6,7 @@ file name (relative to the figures directory) for the page to link.
 
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 from typing import Any
 
@@ -480,7 +481,7 @@ def envelope(env: EnvelopeResult, out_dir: Path) -> str:
     base = env.cls("vibration").at(BASELINE_NOISE_MPS2).raw
     classes = [c for c in env.classes if c.cls.name != "vibration"]
     names = ["baseline\n(vibration\nonly)"] + [
-        c.cls.name.replace("_", " ") + "\n" + size_text(c.cls, c.real.value).replace(" ", "\n", 1)
+        c.cls.name.replace("_", " ") + "\n" + textwrap.fill(size_text(c.cls, c.real.value), 12)
         for c in classes
     ]
     x = np.arange(len(names))
@@ -534,7 +535,7 @@ def envelope(env: EnvelopeResult, out_dir: Path) -> str:
         )
     ax2.axhline(100 * base.median_m, color="0.4", ls="--", lw=0.8)
     ax2.set_yscale("log")
-    ax2.set_ylim(0.5, 500)
+    ax2.set_ylim(1, 500)
     ax2.set_xlabel("size / its real size (0: off; 1: the real flights of issue 9)")
     ax2.set_ylabel("median 3D position error, uncalibrated (cm, log)")
     ax2.set_title("Over the range (same sign as the real size)")
