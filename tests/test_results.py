@@ -78,7 +78,8 @@ def test_quick_results(tmp_path: Path) -> None:
     )
     elapsed = time.monotonic() - t0
     assert proc.returncode == 0, proc.stderr[-3000:]
-    # The budget is 60 s on an idle 2-core machine; allow for a loaded CI box.
+    # The budget is ~80 s on an idle 2-core machine (section (d) flies the realistic profile:
+    # 28 s of CPU, against 11 s for the ideal-only envelope before); allow for a loaded box.
     assert elapsed < 180, f"--quick took {elapsed:.0f} s"
     assert (REPO / "README.md").read_text(encoding="utf-8") == readme_before
 
