@@ -36,7 +36,7 @@ from groundstation.bus import Sample
 from groundstation.config import Settings, load_settings
 from groundstation.pipeline import Pipeline
 from groundstation.recording.calibrate import run_calibrate
-from groundstation.recording.mcap_io import RecordedMessage, _copy_messages
+from groundstation.recording.reader import RecordedMessage, copy_messages
 from groundstation.sim import PAPER_HOVER_SPOTS_M, SCENARIOS, Scenario, Simulator, Waypoint
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -121,7 +121,7 @@ def write_calibration_recording(path: Path, flight: Flight, spots: tuple[int, ..
         if any(a <= t < b for a, b in wins):
             ns = t0 + int((t + 1.0) * 1e9)
             msgs.append(RecordedMessage("tether/cf1/telemetry", payload, ns, ns))
-    _copy_messages(msgs, path)
+    copy_messages(msgs, path)
 
 
 def position_errors(

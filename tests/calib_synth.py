@@ -175,7 +175,7 @@ def write_mcap(
     """A recording as ``groundstation record`` writes it: Telemetry (and a Reel) as JSON."""
     import json
 
-    from groundstation.recording.mcap_io import RecordedMessage, _copy_messages
+    from groundstation.recording.reader import RecordedMessage, copy_messages
 
     msgs = []
     t_ns = 1_700_000_000_000_000_000
@@ -201,4 +201,4 @@ def write_mcap(
             tel["vbat_v"] = float(data.vbat_v[i])
         t = t_ns + int((float(data.stamp_s[i]) + 1.0) * 1e9)
         msgs.append(RecordedMessage(f"tether/{drone}/telemetry", json.dumps(tel).encode(), t, t))
-    _copy_messages(msgs, __import__("pathlib").Path(path))
+    copy_messages(msgs, __import__("pathlib").Path(path))

@@ -35,7 +35,8 @@ from groundstation.calibration import (
     hover_mask,
 )
 from groundstation.config import ConfigError, Settings, load_settings
-from groundstation.recording.mcap_io import RecordingError, iter_messages
+from groundstation.recording.format import RecordingError
+from groundstation.recording.reader import iter_messages
 
 __all__ = [
     "CalibrateInputError",

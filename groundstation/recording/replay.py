@@ -1,0 +1,251 @@
+"""Playing a recording back on a bus, and re-running estimation on one offline."""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Protocol
+
+from groundstation.bus import Bus, Sample, keyexpr_matches
+from groundstation.config import Settings
+from groundstation.recording.figures import write_figures
+from groundstation.recording.format import (
+    INPUT_KEY_RE,
+    ORIGINAL_PREFIX,
+    OUTPUT_KEY_RE,
+    ChannelTable,
+    open_writer,
+)
+from groundstation.recording.reader import iter_messages
+
+_log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True, slots=True)
+class ReplayStats:
+    """What a replay published."""
+
+    messages: int
+    duration_s: float
+    """Wall-clock time the replay took."""
+    span_s: float
+    """Log-time span of the published messages."""
+    max_lag_s: float
+    """Largest delay of a publication behind its scheduled time."""
+
+
+def replay(
+    bus: Bus,
+    path: str | Path,
+    *,
+    speed: float = 1.0,
+    stop_event: threading.Event | None = None,
+    keyexprs: Sequence[str] | None = None,
+    clock: Callable[[], float] = time.monotonic,
+) -> ReplayStats:
+    """Publish a recording on ``bus`` with its original timing.
+
+    Message *i* goes out at ``start + (log_time_i − log_time_0) / speed``; a replay that falls
+    behind publishes at once and never skips.
+
+    Args:
+        bus: where to publish (each message on its recorded key, payload unchanged).
+        path: the recording (finished or truncated).
+        speed: time scale; 2 plays twice as fast. ``inf`` publishes as fast as possible.
+        stop_event: set it to stop early.
+        keyexprs: publish only keys matching one of these (default: everything).
+        clock: seconds, monotonic (tests may pass a fake).
+
+    Raises:
+        ValueError: ``speed`` is not > 0.
+        RecordingError: the file is unreadable.
+    """
+    if not speed > 0:
+        raise ValueError(f"replay speed must be > 0, got {speed!r}")
+    stop = stop_event if stop_event is not None else threading.Event()
+    count = 0
+    first_ns: int | None = None
+    last_ns = 0
+    start_s = clock()
+    max_lag_s = 0.0
+    for msg in iter_messages(path):
+        if keyexprs is not None and not any(keyexpr_matches(k, msg.key) for k in keyexprs):
+            continue
+        if first_ns is None:
+            first_ns = msg.log_time_ns
+            start_s = clock()
+        due_s = start_s + (msg.log_time_ns - first_ns) / 1e9 / speed
+        delay_s = due_s - clock()
+        if delay_s <= 0:
+            max_lag_s = max(max_lag_s, -delay_s)
+        # Short waits keep the main thread responsive to signals across long gaps.
+        while delay_s > 0 and not stop.wait(min(delay_s, 0.2)):
+            delay_s = due_s - clock()
+        if stop.is_set():
+            break
+        bus.publish(msg.key, msg.payload)
+        count += 1
+        last_ns = msg.log_time_ns
+    span_s = 0.0 if first_ns is None else (last_ns - first_ns) / 1e9
+    return ReplayStats(count, clock() - start_s, span_s, max_lag_s)
+
+
+class PipelineLike(Protocol):
+    """What offline replay needs of :class:`groundstation.pipeline.Pipeline`."""
+
+    def handle(self, sample: Sample, now_s: float) -> list[Sample]: ...
+
+    def tick(self, now_s: float) -> list[Sample]: ...
+
+
+def replay_offline(
+    path: str | Path,
+    out_path: str | Path,
+    pipeline: PipelineLike,
+    *,
+    tick_period_s: float = 0.05,
+) -> int:
+    """Re-run estimation on a recording as fast as possible and write inputs plus outputs.
+
+    Every recorded message is copied to ``out_path`` at its log time, except the recording's
+    own estimates and commands (``tether/*/estimate``, ``tether/*/cmd/*``), which move under
+    ``replay/original/`` so the new outputs can take their keys. Inputs
+    (``tether/*/telemetry|reel|follow|params``) go through ``pipeline.handle`` with
+    ``now_s`` = log time in seconds; ``pipeline.tick`` runs every ``tick_period_s`` of log
+    time (as the live service's staleness check does). Outputs are written at the log time of
+    the input that produced them.
+
+    Returns:
+        The number of output samples the pipeline produced.
+
+    Raises:
+        RecordingError: unreadable input or uncreatable output.
+    """
+    stream, writer = open_writer(Path(out_path), 1024 * 1024)
+    channels = ChannelTable(writer)
+    produced = 0
+    next_tick_s: float | None = None
+
+    def write(key: str, payload: bytes, t_ns: int) -> None:
+        writer.add_message(channels.channel_id(key), t_ns, payload, t_ns)
+
+    try:
+        for msg in iter_messages(path):
+            now_s = msg.log_time_ns / 1e9
+            if next_tick_s is None:
+                next_tick_s = now_s + tick_period_s
+            while now_s >= next_tick_s:
+                tick_ns = int(next_tick_s * 1e9)
+                for out in pipeline.tick(next_tick_s):
+                    write(out.key, out.payload, tick_ns)
+                    produced += 1
+                next_tick_s += tick_period_s
+            if OUTPUT_KEY_RE.fullmatch(msg.key):
+                write(ORIGINAL_PREFIX + msg.key, msg.payload, msg.log_time_ns)
+                continue
+            write(msg.key, msg.payload, msg.log_time_ns)
+            if INPUT_KEY_RE.fullmatch(msg.key):
+                for out in pipeline.handle(Sample(msg.key, msg.payload), now_s):
+                    write(out.key, out.payload, msg.log_time_ns)
+                    produced += 1
+        writer.finish()
+    finally:
+        stream.close()
+    return produced
+
+
+def run_replay(
+    settings: Settings,
+    path: str | Path,
+    *,
+    speed: float = 1.0,
+    stop_event: threading.Event | None = None,
+    wait_for_subscribers_s: float = 2.0,
+) -> int:
+    """Body of ``groundstation replay``: publish a recording on Zenoh with its timing.
+
+    Before the first message it waits up to ``wait_for_subscribers_s`` for a subscriber to
+    match the first key, so a replay into a network that is still connecting does not lose
+    its beginning.
+
+    Returns:
+        0 when the recording has been played (or ``stop_event`` was set).
+
+    Raises:
+        ValueError: ``speed`` is not > 0.
+        RecordingError: the file is unreadable.
+    """
+    from groundstation.zenoh_bus import ZenohBus
+
+    stop = stop_event if stop_event is not None else threading.Event()
+    first = next(iter_messages(path), None)
+    if first is None:
+        _log.warning("%s holds no message; nothing to replay", path)
+        return 0
+    with ZenohBus(settings.zenoh) as bus:
+        _wait_for_match(bus, first.key, wait_for_subscribers_s, stop)
+        stats = replay(bus, path, speed=speed, stop_event=stop)
+    _log.info(
+        "replayed %d messages (%.1f s of recording in %.1f s, max lag %.3f s)",
+        stats.messages,
+        stats.span_s,
+        stats.duration_s,
+        stats.max_lag_s,
+    )
+    return 0
+
+
+def _wait_for_match(bus: Any, key: str, timeout_s: float, stop: threading.Event) -> bool:
+    session = getattr(bus, "session", None)
+    if session is None or timeout_s <= 0:
+        return False
+    publisher = session.declare_publisher(key)
+    try:
+        deadline = time.monotonic() + timeout_s
+        while not publisher.matching_status.matching:
+            if time.monotonic() >= deadline or stop.wait(0.02):
+                return False
+        return True
+    finally:
+        with contextlib.suppress(Exception):
+            publisher.undeclare()
+
+
+def run_replay_offline(
+    settings: Settings,
+    path: str | Path,
+    out_path: str | Path,
+    *,
+    figures_dir: str | Path | None = None,
+    pipeline: PipelineLike | None = None,
+) -> int:
+    """Body of ``groundstation replay --offline``: re-run estimation, write OUT (and figures).
+
+    Args:
+        settings: configuration for the pipeline (as the live service would have).
+        path: the recording.
+        out_path: the MCAP file to write (see :func:`replay_offline`).
+        figures_dir: also draw PNGs there (see :func:`write_figures`).
+        pipeline: the estimator to run; default ``groundstation.pipeline.Pipeline(settings)``.
+
+    Returns:
+        0 on success.
+
+    Raises:
+        RecordingError: unreadable input, uncreatable output, matplotlib missing for figures.
+    """
+    if pipeline is None:
+        from groundstation.pipeline import Pipeline
+
+        pipeline = Pipeline(settings)
+    produced = replay_offline(path, out_path, pipeline)
+    _log.info("offline replay of %s: %d outputs written to %s", path, produced, out_path)
+    if figures_dir is not None:
+        for png in write_figures(out_path, figures_dir):
+            _log.info("wrote %s", png)
+    return 0
