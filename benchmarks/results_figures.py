@@ -40,7 +40,16 @@ TRUTH: dict[str, Any] = {"color": "black", "linestyle": "--", "linewidth": 1.2}
 DPI = 100
 
 
-def _save(fig: Figure, out_dir: Path, name: str) -> str:
+IDEAL_PROFILE = (
+    "simulator profile: ideal (quasi-static catenary; error classes: white accelerometer noise "
+    "0.3 m/s², thrust noise 3 mN, both told to the service; no others)"
+)
+
+
+def _save(fig: Figure, out_dir: Path, name: str, profile: str | None = None) -> str:
+    """Write ``fig``; ``profile``: a line naming the simulator profile, under the figure."""
+    if profile is not None:
+        fig.text(0.5, -0.01, profile, ha="center", va="top", fontsize=8, color="0.3")
     out_dir.mkdir(parents=True, exist_ok=True)
     fig.savefig(out_dir / name, dpi=DPI, bbox_inches="tight")
     plt.close(fig)
@@ -109,7 +118,7 @@ def vertical_tension(traces: dict[str, Trace], out_dir: Path) -> str:
         ax.set_ylabel("H (mN)")
         ax.set_xlabel("time (s)")
         ax.legend(loc="upper right", fontsize=8)
-    return _save(fig, out_dir, "vertical_tension.png")
+    return _save(fig, out_dir, "vertical_tension.png", IDEAL_PROFILE)
 
 
 def coin(traces: dict[str, Trace], out_dir: Path) -> str:
@@ -126,7 +135,7 @@ def coin(traces: dict[str, Trace], out_dir: Path) -> str:
     ax.set_xlabel("time (s)")
     ax.set_ylabel("H (mN)")
     ax.legend(loc="upper right", fontsize=9)
-    return _save(fig, out_dir, "coin.png")
+    return _save(fig, out_dir, "coin.png", IDEAL_PROFILE)
 
 
 def position_spots(traces: dict[str, Trace], out_dir: Path) -> str:
@@ -159,7 +168,7 @@ def position_spots(traces: dict[str, Trace], out_dir: Path) -> str:
                 ax.set_xlabel("time (s)")
     fig.suptitle("Position from tension at the paper's six hover spots: estimate vs truth", y=1.0)
     fig.tight_layout()
-    return _save(fig, out_dir, "position_spots.png")
+    return _save(fig, out_dir, "position_spots.png", IDEAL_PROFILE)
 
 
 def position_start(traces: dict[str, Trace], out_dir: Path) -> str:
@@ -196,7 +205,7 @@ def position_start(traces: dict[str, Trace], out_dir: Path) -> str:
     ax2.set_xlabel("time (s)")
     ax2.set_ylabel("|estimate − truth| (cm)")
     ax2.legend(loc="upper right", fontsize=7, ncol=2)
-    return _save(fig, out_dir, "position_start.png")
+    return _save(fig, out_dir, "position_start.png", IDEAL_PROFILE)
 
 
 def tension(traces: dict[str, Trace], paper: rp.PaperResults, out_dir: Path) -> str:
@@ -246,7 +255,7 @@ def tension(traces: dict[str, Trace], paper: rp.PaperResults, out_dir: Path) -> 
         ax.set_xlabel("time (s)")
         ax.set_ylabel("T_x (mN)")
         ax.legend(loc="lower right" if t0 == pull.end_s else "upper right", fontsize=8)
-    return _save(fig, out_dir, "tension.png")
+    return _save(fig, out_dir, "tension.png", IDEAL_PROFILE)
 
 
 def follow(traces: dict[str, Trace], out_dir: Path) -> str:
@@ -328,7 +337,7 @@ def follow(traces: dict[str, Trace], out_dir: Path) -> str:
         ax.set_ylabel("|T| (mN)")
         ax.legend(fontsize=7, loc="upper left")
     fig.tight_layout()
-    return _save(fig, out_dir, "follow.png")
+    return _save(fig, out_dir, "follow.png", IDEAL_PROFILE)
 
 
 def tug_landing(traces: dict[str, Trace], out_dir: Path) -> str:
@@ -383,7 +392,7 @@ def tug_landing(traces: dict[str, Trace], out_dir: Path) -> str:
     ax.set_xlabel("time (s)")
     ax.set_ylabel("|T| (mN)")
     ax.legend(fontsize=7, loc="upper right")
-    return _save(fig, out_dir, "tug_landing.png")
+    return _save(fig, out_dir, "tug_landing.png", IDEAL_PROFILE)
 
 
 def catenary(cat: CatenaryResult, out_dir: Path) -> str:
