@@ -17,7 +17,14 @@ message runs the whole path: observation, filter, localization, follow, Estimate
 * Stages: each stage alone over the same converged messages (mean per call, best of the
   repeats): ``validate`` (key + JSON → Telemetry), ``observe_tension``,
   ``TensionFilter.update`` (a copy of the converged filter fed the stream),
-  ``localize``, ``follow_step``, ``estimate`` (the Estimate's JSON, ``messages.encode_estimate``).
+  ``localize``, ``follow_step`` (follow is off: what the pipeline does instead of
+  ``follow.follow_step``, whose own cost is the row below), ``estimate`` (the Estimate's
+  JSON, ``messages.encode_estimate_ordered``).
+* Rows in parentheses, not in the sum: filterpy's own predict + update (the floor under
+  ``filter_update``), ``localize`` over batches (``localization.localize_batch``).
+* The drone rows: 8 drones interleaved, ``Pipeline.process`` one message at a time against
+  ``Pipeline.process_batch`` in batches of 32 grouped by drone (the service's drain while a
+  backlog exists), CPU time per message, validation not included.
 
 As :mod:`timeit` does, the garbage collector is off while timing. The machine is shared:
 compare runs made close together, and trust the best repeat more than one run.
@@ -45,14 +52,21 @@ from benchmarks.bench_service import _telemetry_payloads
 from groundstation import follow as follow_mod
 from groundstation.bus import Sample
 from groundstation.evaluation import settings_for
-from groundstation.localization import localize
+from groundstation.localization import localize, localize_batch
 from groundstation.messages import Telemetry
-from groundstation.pipeline import Pipeline
+from groundstation.pipeline import Pipeline, _follow_stamped
+from groundstation.service import group_by_drone
 from groundstation.tension import TensionFilter, observe_tension
 
 DOC_PATH = Path(__file__).resolve().parent.parent / "docs" / "pipeline_benchmark.md"
 KEY = "tether/d0/telemetry"
 STAGES = ("validate", "observe_tension", "filter_update", "localize", "follow_step", "estimate")
+EXTRA = ("filterpy_bare", "localize_batch", "follow_step_itself")
+"""Not in the sum: filterpy's own predict + update (the floor under ``filter_update``), and
+``localize`` over the batch (``localization.localize_batch``, BATCH cases per call)."""
+BATCH = 32
+"""Batch size of the batched rows (the service's ``_MAX_BATCH``)."""
+DRONES = 8
 
 
 def _best_mean_us(run: Callable[[], int], repeats: int) -> float:
@@ -164,20 +178,49 @@ def measure(warmup: int, messages: int, repeats: int, seed: int = 0) -> dict[str
                 )
             return len(msgs)
 
+        def run_follow_off() -> int:
+            # What the pipeline does per message while follow is off (no follow_step).
+            state = rt.follow_state
+            assert not (state.enabled or state.active)
+            for m in msgs:
+                _follow_stamped(state, m.stamp_s)
+            return len(msgs)
+
         def run_estimate() -> int:
             for m, e, p in zip(msgs, ests, positions, strict=True):
                 est = pipe._estimate(rt, m, e.tension_world_n, e.std_n, p, False, True)
                 assert est is not None  # the Estimate's JSON bytes
             return len(msgs)
 
+        def run_localize_batch() -> int:
+            n = 0
+            for i in range(0, len(ests) - BATCH + 1, BATCH):
+                chunk = ests[i : i + BATCH]
+                localize_batch(
+                    np.array([e.tension_world_n for e in chunk]),
+                    np.array([e.cov_n2 for e in chunk]),
+                    rt.weight_n_per_m,
+                    rt.length_m,
+                    rt.base_world_m,
+                    floor_z_m,
+                )
+                n += len(chunk)
+            return n
+
         stages = {
             "validate": _best_mean_us(run_validate, repeats),
             "observe_tension": _best_mean_us(run_observe, repeats),
             "filter_update": _filter_us(filt0, msgs, obs, repeats),
             "localize": _best_mean_us(run_localize, repeats),
-            "follow_step": _best_mean_us(run_follow, repeats),
+            "follow_step": _best_mean_us(run_follow_off, repeats),
             "estimate": _best_mean_us(run_estimate, repeats),
         }
+        extra = {
+            "filterpy_bare": _filterpy_us(filt0, msgs, obs, repeats),
+            "follow_step_itself": _best_mean_us(run_follow, repeats),
+            "localize_batch": _best_mean_us(run_localize_batch, repeats),
+        }
+        drones = _drones_us(warmup, messages, repeats, seed)
     finally:
         if gc_was:
             gc.enable()
@@ -187,6 +230,8 @@ def measure(warmup: int, messages: int, repeats: int, seed: int = 0) -> dict[str
         "repeats": repeats,
         "stages_us": stages,
         "stages_sum_us": sum(stages.values()),
+        "extra_us": extra,
+        **drones,
         "total_median_us": float(np.median(per_msg_us)),
         "total_p90_us": float(np.percentile(per_msg_us, 90)),
         "total_best_mean_us": min(means),
@@ -211,12 +256,65 @@ def _filter_us(filt0: TensionFilter, msgs: list[Telemetry], obs: list[Any], repe
     return best
 
 
+def _filterpy_us(
+    filt0: TensionFilter, msgs: list[Telemetry], obs: list[Any], repeats: int
+) -> float:
+    """filterpy's KalmanFilter predict + update alone, with the converged filter's Q and R
+    (set once: the floor of ``filter_update``, which also sets them and adds the noise
+    estimate, the change test and the estimate around these two calls)."""
+    best = math.inf
+    zs = [np.array(o.tension_world_n, dtype=float) for o in obs]
+    for _ in range(repeats):
+        kf = copy.deepcopy(filt0.kalman_filter)
+        predict, update = kf.predict, kf.update
+        t0 = time.perf_counter_ns()
+        for z in zs:
+            predict()
+            update(z)
+        best = min(best, (time.perf_counter_ns() - t0) / len(zs) / 1e3)
+    return best
+
+
+def _drones_us(warmup: int, messages: int, repeats: int, seed: int) -> dict[str, float]:
+    """DRONES drones interleaved (after ``warmup`` messages each, so that every filter has
+    converged), per message: ``Pipeline.process`` one by one against
+    ``Pipeline.process_batch`` in batches of BATCH grouped by drone (the service's drain
+    with a backlog), on the same validated messages (CPU time, best repeat)."""
+    steps = warmup + messages // DRONES + 1  # ``warmup`` messages per drone first
+    rows = _telemetry_payloads(DRONES, steps / 250.0, seed)
+    keys = [f"tether/d{d}/telemetry" for d in range(DRONES)]
+    samples = [Sample(keys[d], row[d]) for row in rows for d in range(DRONES)]
+    warm = samples[: warmup * DRONES]
+    timed = samples[warmup * DRONES : warmup * DRONES + messages]
+    settings = settings_for()
+    best = {"drones_process_us": math.inf, "drones_batch_us": math.inf}
+    for _ in range(repeats):
+        for key in best:
+            pipe = Pipeline(settings)
+            for s in warm:
+                pipe.handle(s, 0.0)
+            parsed = [p for s in timed if (p := pipe.validate(s, 0.0)) is not None]
+            t0 = time.process_time()
+            if key == "drones_process_us":
+                for p in parsed:
+                    pipe.process(p, 0.0)
+            else:
+                for i in range(0, len(parsed), BATCH):
+                    pipe.process_batch(group_by_drone(parsed[i : i + BATCH]))
+            best[key] = min(best[key], (time.process_time() - t0) / len(parsed) * 1e6)
+    return best
+
+
 def _best(results: list[dict[str, Any]]) -> dict[str, Any]:
     """Value-by-value minimum of several results (a shared machine only adds time)."""
     out = dict(results[0])
     out["stages_us"] = {k: min(r["stages_us"][k] for r in results) for k in STAGES}
-    for key in ("stages_sum_us", "total_median_us", "total_p90_us", "total_best_mean_us"):
-        out[key] = min(r[key] for r in results)
+    out["extra_us"] = {
+        k: min(r.get("extra_us", {}).get(k, math.inf) for r in results) for k in EXTRA
+    }
+    keys = ("stages_sum_us", "total_median_us", "total_p90_us", "total_best_mean_us")
+    for key in (*keys, "drones_process_us", "drones_batch_us"):
+        out[key] = min(r.get(key, math.inf) for r in results)
     out["runs"] = len(results)
     return out
 
@@ -243,7 +341,7 @@ def _commit() -> str:
 
 
 def _fmt(v: float | None) -> str:
-    return "" if v is None else f"{v:.1f}"
+    return "" if v is None or not math.isfinite(v) else f"{v:.1f}"
 
 
 def render(result: dict[str, Any], before: dict[str, Any] | None, argv: list[str]) -> str:
@@ -253,8 +351,18 @@ def render(result: dict[str, Any], before: dict[str, Any] | None, argv: list[str
         ("total_median_us", "**Pipeline.handle, median**"),
         ("total_p90_us", "Pipeline.handle, p90"),
         ("total_best_mean_us", "Pipeline.handle, mean (best repeat)"),
+        ("drones_process_us", f"{DRONES} drones: Pipeline.process, one by one"),
+        ("drones_batch_us", f"**{DRONES} drones: Pipeline.process_batch, batches of {BATCH}**"),
     ):
-        rows.append((label, result[key], (before or {}).get(key)))
+        rows.append((label, result.get(key), (before or {}).get(key)))
+    extra_labels = {
+        "filterpy_bare": "(filterpy KalmanFilter predict + update alone)",
+        "localize_batch": f"(localize_batch, {BATCH} cases per call, per case)",
+        "follow_step_itself": "(follow_step itself, follow off: the pipeline skips it)",
+    }
+    for key, label in extra_labels.items():
+        was = (before or {}).get("extra_us", {}).get(key)
+        rows.append((label, result["extra_us"].get(key), was))
     head = "| stage | µs/msg |" + (" before µs/msg |" if before else "")
     sep = "| --- | --- |" + (" --- |" if before else "")
     lines = [
@@ -269,7 +377,9 @@ def render(result: dict[str, Any], before: dict[str, Any] | None, argv: list[str
         f"{result['messages']} messages x {result['repeats']} repeats, best of "
         f"{result['runs']} run(s); method in the module "
         "docstring of `benchmarks/bench_pipeline.py`. Stages are each timed alone (best "
-        "repeat); the handle rows time whole messages.",
+        "repeat); the handle rows time whole messages; the drone rows time validated "
+        f"messages of {DRONES} interleaved drones (CPU time, validation not included); rows "
+        "in parentheses are not in the sum.",
         "",
         head,
         sep,

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import gc
 import json
+import math
 import os
 import signal
 import socket
@@ -523,4 +524,34 @@ def offline_us_per_msg(n_drones: int, messages: int = 4000, seed: int = 0) -> di
     finally:
         gc.enable()
     n = len(timed)
-    return {"cpu_us_per_msg": (c1 - c0) / n * 1e6, "wall_us_per_msg": (t1 - t0) / n * 1e6}
+    out = {"cpu_us_per_msg": (c1 - c0) / n * 1e6, "wall_us_per_msg": (t1 - t0) / n * 1e6}
+    out["batched_cpu_us_per_msg"] = _offline_batched_us(samples, warm * n_drones)
+    return out
+
+
+def _offline_batched_us(samples: list[Sample], n_warm: int) -> float:
+    """The same messages validated, then stepped as the service's worker steps a backlog
+    (``Pipeline.process_batch`` in batches of ``service._MAX_BATCH``, grouped by drone): CPU
+    µs per message, validation included; NaN for a tree without ``process_batch``."""
+    from groundstation import service
+    from groundstation.evaluation import settings_for
+    from groundstation.pipeline import Pipeline
+
+    pipe = Pipeline(settings_for())
+    if not hasattr(pipe, "process_batch"):
+        return math.nan
+    for sample in samples[:n_warm]:
+        pipe.handle(sample, 0.0)
+    timed = samples[n_warm:]
+    size = service._MAX_BATCH
+    gc.collect()
+    gc.disable()
+    try:
+        c0 = time.thread_time()
+        parsed = [p for s in timed if (p := pipe.validate(s, 0.0)) is not None]
+        for i in range(0, len(parsed), size):
+            pipe.process_batch(service.group_by_drone(parsed[i : i + size]))
+        c1 = time.thread_time()
+    finally:
+        gc.enable()
+    return (c1 - c0) / len(timed) * 1e6

@@ -264,6 +264,11 @@ class CalibrationSection(_Section):
     """Change of the thrust scale per volt of ``vbat_v`` above ``thrust_vbat_ref_v``, 1/V."""
     thrust_vbat_ref_v: float = Field(3.9, gt=0.0)
     """Battery voltage at which ``thrust_scale`` holds, V."""
+    thrust_vbat_range_v: tuple[float, float] | None = None
+    """(added) Battery voltage range ``[lo, hi]`` the thrust map was calibrated over, V
+    (written by ``groundstation calibrate``: its hover samples' ``vbat_v``). Outside it the
+    thrust map is extrapolated, and Estimate and ``status`` say so
+    (``calibration_extrapolated``); none: not recorded, nothing is flagged."""
     rest: bool = True
     """Estimate the accelerometer's x/y offset while the drone sits disarmed and still on the
     floor, and apply it until the next disarm (real Crazyflies re-level at every power-on)."""
@@ -276,6 +281,16 @@ class CalibrationSection(_Section):
     def _small_axis(cls, value: tuple[float, float]) -> tuple[float, float]:
         if any(not math.isfinite(v) or abs(v) > 0.35 for v in value):
             raise ValueError(f"{value!r}: each angle must be finite and within ±0.35 rad (20°)")
+        return value
+
+    @field_validator("thrust_vbat_range_v")
+    @classmethod
+    def _vbat_range(cls, value: tuple[float, float] | None) -> tuple[float, float] | None:
+        if value is None:
+            return None
+        lo, hi = value
+        if not (0.0 < lo <= hi < 60.0):
+            raise ValueError(f"{list(value)!r}: must be [lo, hi] volts with 0 < lo <= hi < 60")
         return value
 
 

@@ -263,7 +263,8 @@ def contact_step(
             )
 
     if not state.on_ground:
-        return replace(state, reason="air")
+        # In the air and staying there: the same state (frozen), not a copy per sample.
+        return state if state.reason == "air" else replace(state, reason="air")
 
     # On the ground with the propellers carrying part of the weight: look for lift-off.
     speed = state.climb_speed_mps

@@ -43,7 +43,9 @@ Cost: :func:`try_localize` runs once per telemetry message. Its 3-vector and 3x3
 arithmetic is done in Python floats, and the one catenary call on 8 points goes to
 ``catenary.locate_free``, the body of :func:`catenary.locate` without its input checks,
 which this module has already made (see :func:`_locate_points`); the elevation's fusion
-adds a 2x2 Gauss-Newton and a 5-point call.
+adds a 2x2 Gauss-Newton and a 5-point call. :func:`try_localize_batch` does the common case
+of many messages at once over arrays (the service's batched drain), with the same results
+to the bit; numpy's per-call overhead is then paid once per batch instead of per message.
 """
 
 from __future__ import annotations
@@ -65,7 +67,9 @@ __all__ = [
     "LocalizationFailure",
     "PositionEstimate",
     "localize",
+    "localize_batch",
     "try_localize",
+    "try_localize_batch",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -783,3 +787,328 @@ def localize(
         mocap_std_m=mocap_std_m,
     )
     return out if isinstance(out, PositionEstimate) else None
+
+
+def try_localize_batch(
+    tension_world_n: ArrayLike,
+    tension_cov_n2: ArrayLike,
+    weight_n_per_m: ArrayLike,
+    length_m: ArrayLike,
+    base_world_m: ArrayLike,
+    floor_z_m: ArrayLike = -math.inf,
+    plumb_k: float = PLUMB_K,
+    *,
+    azimuth: AzimuthMode = "auto",
+    exit_azimuth: list[AngleObservation | None] | None = None,
+    exit_elevation: list[AngleObservation | None] | None = None,
+    mocap_world_m: list[ArrayLike | None] | None = None,
+    mocap_std_m: float = 0.002,
+) -> list[PositionEstimate | LocalizationFailure]:
+    """:func:`try_localize` of N independent cases at once, with the same results.
+
+    Localization holds no state: each case depends only on its own inputs, so the cases of
+    a batch (many drones, consecutive messages of one drone) are computed together, the
+    arithmetic of :func:`try_localize` over arrays of N and the catenary in one call on
+    8 N points. The common case is done so (a freely hanging tether, the azimuth from the
+    tension alone); any other case (an azimuth from the reel or motion capture, an exit
+    elevation, a point within 1 um of the floor, a singular covariance, H at or below
+    :data:`MIN_HORIZONTAL_N`, anything not finite) goes through :func:`try_localize`
+    itself. The operations are those of :func:`try_localize`, in its order, with the
+    same functions where numpy's differ from Python's by an ulp (``atan2``, ``hypot``),
+    so the results are the same floats; ``tests/test_localization.py`` checks it.
+
+    Args:
+        tension_world_n: Tensions, world, N, shape (N, 3).
+        tension_cov_n2: Their covariances, N^2, shape (N, 3, 3).
+        weight_n_per_m: omega per case, N/m, shape (N,) or a scalar.
+        length_m: Tether length per case, m, shape (N,) or a scalar.
+        base_world_m: Base exit per case, world, m, shape (N, 3) or (3,).
+        floor_z_m: Floor height per case, m, shape (N,) or a scalar (``-inf``: none).
+        plumb_k: See :data:`PLUMB_K`.
+        azimuth: See :func:`try_localize` (one mode for the batch).
+        exit_azimuth: Per case, or None for none in any.
+        exit_elevation: Per case, or None for none in any.
+        mocap_world_m: Per case, or None for none in any.
+        mocap_std_m: See :func:`try_localize`.
+
+    Returns:
+        One :class:`PositionEstimate` or :class:`LocalizationFailure` per case, in order.
+    """
+    T = np.asarray(tension_world_n, dtype=np.float64)
+    n = T.shape[0] if T.ndim == 2 else 0
+    cov_in = np.asarray(tension_cov_n2, dtype=np.float64)
+    if T.shape != (n, 3) or cov_in.shape != (n, 3, 3):
+        raise ValueError(
+            f"tension_world_n must be (N, 3) and tension_cov_n2 (N, 3, 3), got {T.shape} "
+            f"and {cov_in.shape}"
+        )
+    omega = np.broadcast_to(np.asarray(weight_n_per_m, dtype=np.float64), (n,))
+    big_l = np.broadcast_to(np.asarray(length_m, dtype=np.float64), (n,))
+    base = np.broadcast_to(np.asarray(base_world_m, dtype=np.float64), (n, 3))
+    floor = np.broadcast_to(np.asarray(floor_z_m, dtype=np.float64), (n,))
+
+    def case(i: int) -> PositionEstimate | LocalizationFailure:
+        return try_localize(
+            T[i],
+            cov_in[i],
+            float(omega[i]),
+            float(big_l[i]),
+            base[i],
+            float(floor[i]),
+            plumb_k,
+            azimuth=azimuth,
+            exit_azimuth=exit_azimuth[i] if exit_azimuth is not None else None,
+            exit_elevation=exit_elevation[i] if exit_elevation is not None else None,
+            mocap_world_m=mocap_world_m[i] if mocap_world_m is not None else None,
+            mocap_std_m=mocap_std_m,
+        )
+
+    out: list[PositionEstimate | LocalizationFailure | None] = [None] * n
+    # Cases for the arrays: the tension's azimuth alone, no elevation, valid scalars (the
+    # per-case numbers in Python: in a batch they are a drone's few configured values).
+    fast = [azimuth in ("auto", "tension")] * n
+    for obs_list, used in ((exit_azimuth, azimuth == "auto"), (exit_elevation, True)):
+        if obs_list is not None and used:
+            for i, obs in enumerate(obs_list):
+                if _valid_angle(obs) is not None:
+                    fast[i] = False
+    for i, (w_i, l_i, bz_i, f_i) in enumerate(
+        zip(omega.tolist(), big_l.tolist(), base[:, 2].tolist(), floor.tolist(), strict=True)
+    ):
+        if not (
+            0.0 < w_i < math.inf
+            and 0.0 < l_i < math.inf
+            and (f_i == -math.inf or (math.isfinite(f_i) and bz_i >= f_i))
+        ):
+            fast[i] = False
+    idx = [i for i, f in enumerate(fast) if f]
+    if idx:
+        sel = idx if len(idx) < n else slice(None)
+        results = _localize_arrays(
+            T[sel], cov_in[sel], omega[sel], big_l[sel], base[sel], floor[sel], plumb_k
+        )
+        for i, pos in zip(idx, results, strict=True):
+            out[i] = pos
+    return [o if o is not None else case(i) for i, o in enumerate(out)]
+
+
+def _localize_arrays(
+    T: FloatArray,
+    c: FloatArray,
+    omega: FloatArray,
+    big_l: FloatArray,
+    base: FloatArray,
+    floor: FloatArray,
+    plumb_k: float,
+) -> list[PositionEstimate | None]:
+    """:func:`try_localize`'s free-hanging, tension-azimuth case over arrays of M cases.
+
+    The caller has checked omega, L, the base and the floor. None for a case outside this
+    path (a non-finite input, a singular covariance, H <= MIN_HORIZONTAL_N, a point near
+    the floor, a non-finite result): the caller computes it with :func:`try_localize`.
+    The operations are :func:`try_localize`'s, in its order, over arrays (numpy's call
+    overhead is paid once per batch, so the lines are few and wide).
+    """
+    m = T.shape[0]
+    with np.errstate(all="ignore"):
+        return _localize_arrays_body(m, T, c, omega, big_l, base, floor, plumb_k)
+
+
+def _localize_arrays_body(
+    m: int,
+    T: FloatArray,
+    c: FloatArray,
+    omega: FloatArray,
+    big_l: FloatArray,
+    base: FloatArray,
+    floor: FloatArray,
+    plumb_k: float,
+) -> list[PositionEstimate | None]:
+    # Non-finite inputs make their case's sum non-finite (an overflowing sum only sends a
+    # valid case to try_localize).
+    ok = np.isfinite(T.sum(axis=1) + c.sum(axis=(1, 2)) + base.sum(axis=1))
+    tx, ty, tz = T.T
+    bx, by, bz = base.T
+    # cov = (cov + cov') / 2
+    sym = 0.5 * (c + c.transpose(0, 2, 1))
+    cxx, cxy, cxz, _, cyy, cyz, _, _, czz = sym.reshape(m, 9).T
+    # math.hypot, as try_localize (numpy's hypot differs from it by an ulp at times).
+    horizontal_n = np.array(list(map(math.hypot, tx.tolist(), ty.tolist())))
+    vertical_n = -tz
+    lam_max = 0.5 * (cxx + cyy) + np.sqrt(np.maximum(0.25 * (cxx - cyy) ** 2 + cxy * cxy, 0.0))
+    sigma_h_n = np.sqrt(np.maximum(lam_max, 0.0))
+    # _cholesky3 (a failing pivot: the case goes to try_localize)
+    l00 = np.sqrt(cxx)
+    l10 = cxy / l00
+    l20 = cxz / l00
+    d1 = cyy - l10 * l10
+    l11 = np.sqrt(d1)
+    l21 = (cyz - l20 * l10) / l11
+    d2 = czz - l20 * l20 - l21 * l21
+    ok &= (cxx > 0.0) & (d1 > 0.0) & (d2 > 0.0) & (horizontal_n > MIN_HORIZONTAL_N)
+    # Sigma points T, T + sqrt(3) S[:, i], T - sqrt(3) S[:, i], as (M, 3 coordinates, 7).
+    zero = np.zeros(m)
+    S = _SIGMA_SCALE * np.stack([l00, zero, zero, l10, l11, zero, l20, l21, np.sqrt(d2)], axis=1)
+    S = S.reshape(m, 3, 3)
+    P = np.concatenate([T[:, :, None], T[:, :, None] + S, T[:, :, None] - S], axis=2)
+    px, py, pz = P[:, 0], P[:, 1], P[:, 2]
+    n_pts = 2 * _N + 1
+    h_pts = np.hypot(px, py)
+    h_all = np.concatenate([h_pts, np.maximum(plumb_k * sigma_h_n, horizontal_n)[:, None]], axis=1)
+    v_all = np.concatenate([-pz, vertical_n[:, None]], axis=1)
+    # _locate_points: the free-hanging solution of all 8 M points in one call ...
+    a = h_all / omega[:, None]  # eq:a_param
+    s2 = v_all / omega[:, None]  # eq:s2_param
+    big_l1, bz1 = big_l[:, None], bz[:, None]
+    r, z = catenary.locate_free(a, s2, big_l1, bz1)
+    # ... where no lowest point comes within 1 um of the floor (else: try_localize's).
+    lowest = np.where(s2 < 0.0, z, np.where(s2 > big_l1, bz1, z - (np.hypot(a, s2) - a)))
+    ok &= (floor == -math.inf) | (lowest > (floor + 1e-6)[:, None]).all(axis=1)
+    ok &= np.isfinite(h_all.sum(axis=1) + v_all.sum(axis=1) + r.sum(axis=1) + z.sum(axis=1))
+
+    # The azimuth from the tension alone (_fuse_angles of one source), math's atan2.
+    ux_t, uy_t = -tx / horizontal_n, -ty / horizontal_n
+    var_side = uy_t * uy_t * cxx - 2.0 * ux_t * uy_t * cxy + ux_t * ux_t * cyy
+    std_t = np.sqrt(np.maximum(var_side, 0.0)) / horizontal_n
+    ok &= (std_t > 0.0) & (std_t < math.inf)
+    beta_t = np.array(list(map(math.atan2, (uy_t + 0.0).tolist(), ux_t.tolist())))
+    # One source: w = 1, beta = beta_0 + 1 * wrap(0) / 1, then atan2(sin, cos).
+    beta = beta_t + (1.0 * _wrap_array(beta_t - beta_t)) / 1.0
+    beta = np.array(list(map(math.atan2, np.sin(beta).tolist(), np.cos(beta).tolist())))
+    std_beta = std_t / math.sqrt(1.0)
+    determined = std_beta <= 1.0 / plumb_k
+    rho = _blend_array(std_beta, 0.5 / plumb_k, 2.0 / plumb_k)
+    ux, uy = np.cos(beta), np.sin(beta)
+    vx, vy = -uy, ux
+    w_t = (std_beta / std_t) ** 2
+    var_other = np.maximum(std_beta * std_beta - w_t * w_t * std_t * std_t, 0.0)
+
+    # (r, z) by the unscented transform, and the horizontal offset of each sigma point
+    # along its own azimuth (through the tension's share w_t of the fused one).
+    r0, z0 = np.maximum(r[:, 0], 0.0), z[:, 0]
+    hx0, hy0 = r0 * ux, r0 * uy
+    xi, yi, hi = px[:, 1:], py[:, 1:], h_pts[:, 1:]
+    ang = np.array(list(map(math.atan2, (-yi + 0.0).ravel().tolist(), (-xi).ravel().tolist())))
+    wrapped = _wrap_array(ang.reshape(m, 2 * _N) - beta_t[:, None])
+    beta_i = np.where(hi > 0.0, beta[:, None] + w_t[:, None] * wrapped, beta[:, None])
+    ri, zi = r[:, 1:n_pts], z[:, 1:n_pts]
+    dr = ri - r0[:, None]
+    dz = zi - z0[:, None]
+    dx = ri * np.cos(beta_i) - hx0[:, None]
+    dy = ri * np.sin(beta_i) - hy0[:, None]
+    # The sums of products over the six points, left to right as try_localize adds them
+    # (cov_rz is not needed here: only the elevation's branch uses it).
+    left = np.stack([dr, dz, dx, dx, dy, dx, dy])
+    right = np.stack([dr, dz, dx, dy, dy, dz, dz])
+    w = _SIGMA_WEIGHT
+    var_r, var_z, dxx, dxy, dyy, dxz, dyz = w * _colsum(left * right)
+    k_vv = r0 * r0 * var_other
+    dxx = dxx + k_vv * vx * vx
+    dyy = dyy + k_vv * vy * vy
+    dxy = dxy + k_vv * vx * vy
+    # Covariance with the azimuth unknown (r_reach: r_max = r without floor contact),
+    # blended with rho as the mean.
+    r_reach = np.maximum(r[:, n_pts], r[:, n_pts])
+    undet = np.maximum(r_reach * r_reach, r0 * r0 + var_r)
+    mean_r = rho * r0
+    one_minus = (1.0 - rho) * undet
+    sxx = rho * dxx + one_minus
+    syy = rho * dyy + one_minus
+    sxy = rho * dxy
+    sxz, syz = rho * dxz, rho * dyz
+    position = np.stack([bx + mean_r * ux, by + mean_r * uy, z0], axis=1)
+    pos_cov = np.stack([sxx, sxy, sxz, sxy, syy, syz, sxz, syz, var_z], axis=1).reshape(m, 3, 3)
+    std = np.sqrt(np.maximum(np.stack([sxx, syy, var_z], axis=1), 0.0))
+    ok &= np.isfinite(position.sum(axis=1) + pos_cov.sum(axis=(1, 2)))
+    interval = r[:, 0]
+    hi_undet = np.maximum(r_reach, interval)
+    for arr in (position, std, pos_cov):
+        arr.setflags(write=False)
+
+    out: list[PositionEstimate | None] = []
+    rows = zip(
+        ok.tolist(),
+        determined.tolist(),
+        r0.tolist(),
+        interval.tolist(),
+        hi_undet.tolist(),
+        beta.tolist(),
+        std_beta.tolist(),
+        strict=True,
+    )
+    for i, (good, det, r0_i, r_i, hi_u, beta_k, std_k) in enumerate(rows):
+        if not good:
+            out.append(None)
+            continue
+        out.append(
+            PositionEstimate(
+                position_world_m=position[i],
+                std_world_m=std[i],
+                cov_world_m2=pos_cov[i],
+                radial_m=r0_i,
+                radial_interval_m=(r_i, r_i) if det else (0.0, hi_u),
+                azimuth_rad=beta_k if det else None,
+                azimuth_determined=det,
+                floor_contact=False,
+                floor_run_m=0.0,
+                case="free" if det else "plumb",
+                azimuth_std_rad=std_k,
+                azimuth_source="tension",
+                elevation_used=False,
+            )
+        )
+    return out
+
+
+def _wrap_array(angle_rad: FloatArray) -> FloatArray:
+    """:func:`_wrap` over an array (numpy's % is Python's on floats)."""
+    return (angle_rad + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def _colsum(v: FloatArray) -> FloatArray:
+    """Sums over the last axis, left to right from 0.0, as try_localize's ``+=`` loops add
+    (numpy's own sum adds in another order, so its last bits can differ)."""
+    total = 0.0 + v[..., 0]
+    for j in range(1, v.shape[-1]):
+        total = total + v[..., j]
+    return total
+
+
+def _blend_array(x: FloatArray, full: float, none: float) -> FloatArray:
+    """:func:`_blend` over an array."""
+    t = (none - x) / (none - full)
+    mid = t * t * (3.0 - 2.0 * t)
+    return np.where(x <= full, 1.0, np.where(~(x < none), 0.0, mid))
+
+
+def localize_batch(
+    tension_world_n: ArrayLike,
+    tension_cov_n2: ArrayLike,
+    weight_n_per_m: ArrayLike,
+    length_m: ArrayLike,
+    base_world_m: ArrayLike,
+    floor_z_m: ArrayLike = -math.inf,
+    plumb_k: float = PLUMB_K,
+    *,
+    azimuth: AzimuthMode = "auto",
+    exit_azimuth: list[AngleObservation | None] | None = None,
+    exit_elevation: list[AngleObservation | None] | None = None,
+    mocap_world_m: list[ArrayLike | None] | None = None,
+    mocap_std_m: float = 0.002,
+) -> list[PositionEstimate | None]:
+    """:func:`try_localize_batch` with None in place of a failure (as :func:`localize`)."""
+    outs = try_localize_batch(
+        tension_world_n,
+        tension_cov_n2,
+        weight_n_per_m,
+        length_m,
+        base_world_m,
+        floor_z_m,
+        plumb_k,
+        azimuth=azimuth,
+        exit_azimuth=exit_azimuth,
+        exit_elevation=exit_elevation,
+        mocap_world_m=mocap_world_m,
+        mocap_std_m=mocap_std_m,
+    )
+    return [o if isinstance(o, PositionEstimate) else None for o in outs]

@@ -315,6 +315,12 @@ class Estimate(_Out):
     calibration: str = "none"
     """(added) Which sensor calibration the observation applied (``[calibration] source``,
     ``config`` for unlabelled values), or ``none``."""
+    calibration_extrapolated: bool | None = None
+    """(added) True when this Telemetry's ``vbat_v`` lies outside the battery range the
+    thrust map was calibrated over (``[calibration] thrust_vbat_range_v``): the thrust, and
+    with it the tension and position, rest on an extrapolation; null when no range is
+    recorded, the Telemetry carries no ``vbat_v``, or the drone is on the ground (no thrust
+    in use; an unloaded battery reads higher)."""
 
 
 class Setpoint(_Out):
@@ -473,6 +479,12 @@ class Status(_Out):
     calibration: str | None = None
     """(added) Which ``[calibration]`` the observation applies (its ``source``, ``config`` for
     unlabelled values) or ``none``, as in the Estimate."""
+    calibration_extrapolated: bool | None = None
+    """(added) As in the Estimate, for the last Telemetry."""
+    calibration_vbat_range_v: tuple[float, float] | None = None
+    """(added) ``[calibration] thrust_vbat_range_v`` in force, V, or null."""
+    vbat_v: float | None = None
+    """(added) The last Telemetry's ``vbat_v``, V, or null."""
     service: str | None = None
     """The answering service instance (liveliness token ``groundstation/service/{instance}``)."""
     peers: int | None = None
@@ -566,6 +578,31 @@ def encode_estimate(**given: Any) -> bytes:
     out = _ANY_JSON.dump_json(fields)
     # pydantic writes NaN and Infinity as bare words; look closer only if one appears
     # (a follow reason may contain the word).
+    if (b"NaN" in out or b"Infinity" in out) and _non_finite(fields):
+        bad = [k for k, v in fields.items() if _non_finite(v)]
+        raise ValueError(f"non-finite value in Estimate field(s) {', '.join(bad)}")
+    return out
+
+
+ESTIMATE_FIELD_ORDER: tuple[str, ...] = tuple(_ESTIMATE_FIELDS)
+"""Estimate's fields in the model's order (the order :func:`encode_estimate_ordered` takes)."""
+
+
+def encode_estimate_ordered(fields: dict[str, Any]) -> bytes:
+    """:func:`encode_estimate` of a dict that holds every field in the model's order.
+
+    The per-message path builds its fields in :data:`ESTIMATE_FIELD_ORDER` (``follow`` as
+    the FollowInfo's ``model_dump()``), so they go to pydantic's serializer as they are,
+    without :func:`encode_estimate`'s pass over the keywords (which cost as much as the
+    serialisation itself). A dict in another order or with other keys takes that pass.
+    The same bytes as ``Estimate(**fields).to_json()``.
+
+    Raises:
+        TypeError, ValueError: as :func:`encode_estimate`.
+    """
+    if tuple(fields) != ESTIMATE_FIELD_ORDER:
+        return encode_estimate(**fields)
+    out = _ANY_JSON.dump_json(fields)
     if (b"NaN" in out or b"Infinity" in out) and _non_finite(fields):
         bad = [k for k, v in fields.items() if _non_finite(v)]
         raise ValueError(f"non-finite value in Estimate field(s) {', '.join(bad)}")

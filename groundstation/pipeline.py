@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 import threading
 from collections import Counter, deque
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -27,7 +27,12 @@ from groundstation import follow as follow_mod
 from groundstation.bus import Sample
 from groundstation.calibration import RestCalibrator
 from groundstation.config import CalibrationSection, DroneParams, Settings
-from groundstation.localization import AngleObservation, PositionEstimate, localize
+from groundstation.localization import (
+    AngleObservation,
+    PositionEstimate,
+    localize,
+    localize_batch,
+)
 from groundstation.messages import (
     Estimate,
     Event,
@@ -40,7 +45,7 @@ from groundstation.messages import (
     StopIn,
     Telemetry,
     TetherParams,
-    encode_estimate,
+    encode_estimate_ordered,
     parse_key,
 )
 from groundstation.tension import (
@@ -71,6 +76,11 @@ _MAX_GAP_S = 1.0
 """A telemetry gap longer than this restarts the filter (the tension may have changed)."""
 _COMMAND_KINDS = frozenset({"follow", "params"})
 """Inputs from operators: every rejection of one is told on ``tether/{drone}/events``."""
+BATCH_LOCALIZE_MIN = 12
+"""Localizations in a batch from which :meth:`Pipeline.process_batch` computes them in one
+vectorised call (:func:`localization.localize_batch`: numpy's per-call overhead is paid
+once, ~300 us on the shared 2-core machine, then ~5 us per case, against ~45 us per case
+one by one; docs/service_profile.md)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -146,7 +156,8 @@ class DroneRuntime:
     telemetry_rate: _Rate = field(default_factory=_Rate)
     estimate_rate: _Rate = field(default_factory=_Rate)
     last_estimate_fields: dict[str, Any] | None = None
-    """The last Estimate's fields but ``follow`` (see :attr:`last_estimate`)."""
+    """The last Estimate's fields, ``follow`` as its ``model_dump()`` (see
+    :attr:`last_estimate`)."""
     follow_json_cache: tuple[FollowInfo, dict[str, Any]] | None = None
     """The last FollowInfo and its ``model_dump()`` (FollowInfo is frozen and reused)."""
     land_below_m_memory: float | None = None
@@ -157,17 +168,34 @@ class DroneRuntime:
     """Sensor corrections applied in the observation (None: none in force)."""
     calibration_source: str = "none"
     """Which calibration is in force (Estimate and status ``calibration``)."""
+    vbat_range_v: tuple[float, float] | None = None
+    """``[calibration] thrust_vbat_range_v``: the battery range the thrust map was calibrated
+    over (None: not recorded)."""
+    last_vbat_v: float | None = None
+    """The last accepted Telemetry's ``vbat_v`` (None: absent)."""
+    calibration_extrapolated: bool | None = None
+    """The last Telemetry's ``vbat_v`` outside :attr:`vbat_range_v` (None: unknown)."""
+    extrapolation_told: bool = False
+    """The one ``warning`` Event for flying outside the calibrated battery range was sent."""
     rest: RestCalibrator | None = None
     """The rest calibration (``[calibration] rest``): the accelerometer's x/y offset found
     while the drone sat still and disarmed, added to the configured bias until the next
     disarm."""
+    estimate_key: str = field(init=False, default="")
+    """``tether/{drone}/estimate`` (made once, not per message)."""
+    base_cache: tuple[np.ndarray, tuple[float, float, float]] | None = None
+    """``base_world_m`` and its floats, for the Estimate (the array is replaced, never
+    written, when the base moves)."""
+
+    def __post_init__(self) -> None:
+        self.estimate_key = f"tether/{self.drone}/estimate"
 
     @property
     def last_estimate(self) -> Estimate | None:
         """The last published Estimate as a model (built on demand, not per message)."""
         if self.last_estimate_fields is None or self.follow_json_cache is None:
             return None
-        return Estimate(follow=self.follow_json_cache[0], **self.last_estimate_fields)
+        return Estimate(**{**self.last_estimate_fields, "follow": self.follow_json_cache[0]})
 
 
 def calibration_from_config(
@@ -399,6 +427,68 @@ class Pipeline:
         self._follow_command(runtime, msg, parsed, now_s)
         return []
 
+    def process_batch(
+        self, batch: Sequence[Parsed], on_error: Callable[[Parsed], None] | None = None
+    ) -> list[Sample]:
+        """:meth:`process` of each input in order (at its ``received_s``), the outputs
+        concatenated: the same outputs, with the localizations of a run of telemetry
+        (any drones) computed in one vectorised call.
+
+        Localization holds no state and reads nothing a later telemetry message changes,
+        so a run is stepped in three passes: every message up to its localization
+        (:meth:`_telemetry_front`: checks, observation, contact, filter), the
+        localizations together (:meth:`_localize_many`), then every message's follow step
+        and Estimate in order (:meth:`_telemetry_back`). Any other input (reel, params,
+        follow, stop) changes what localization or follow read, so it ends the run: the
+        run is finished first, then that input is processed. What the front pass sets for
+        the back pass of the same message (``calibration_extrapolated``) travels with it.
+        The published samples are those of :meth:`process`, in its order; only the
+        operator-log Events told from the front pass (the battery warning) may come before
+        those of an earlier message's back pass (a Stop) in the same batch.
+
+        Args:
+            batch: Validated inputs, each drone's in their order.
+            on_error: Called inside the ``except`` of an input whose processing raised
+                (its outputs are lost, the rest go on); None re-raises.
+        """
+        out: list[Sample] = []
+        run: list[tuple[_Front, Parsed]] = []
+
+        def finish_run() -> None:
+            inputs = [f[8] for f, _ in run if f[8] is not None]
+            try:
+                located = iter(self._localize_many(inputs))
+            except Exception:  # never expected (localize returns failures): one by one
+                located = iter([self._localize_one(x) for x in inputs])
+            for front, parsed in run:
+                position = next(located) if front[8] is not None else None
+                try:
+                    out.extend(self._telemetry_back(front, position))
+                except Exception:
+                    if on_error is None:
+                        raise
+                    on_error(parsed)
+            run.clear()
+
+        for parsed in batch:
+            try:
+                runtime = self.drones.get(parsed.drone)
+                if runtime is not None and isinstance(parsed.message, Telemetry):
+                    front = self._telemetry_front(runtime, parsed.message, parsed.received_s)
+                    if front is not None:
+                        run.append((front, parsed))
+                    continue
+                if run:
+                    finish_run()
+                out.extend(self.process(parsed, parsed.received_s))
+            except Exception:
+                if on_error is None:
+                    raise
+                on_error(parsed)
+        if run:
+            finish_run()
+        return out
+
     def _seen_stop(self, runtime: DroneRuntime, stop: StopIn, parsed: Parsed, now_s: float) -> None:
         """Someone else's Stop on ``cmd/stop``: switch follow off, log who stopped the drone.
 
@@ -512,6 +602,7 @@ class Pipeline:
             weight_n_per_m=params.tether.weight_n_per_m,
             calibration=calibration,
             calibration_source=calibration_source,
+            vbat_range_v=params.calibration.thrust_vbat_range_v,
             rest=(
                 RestCalibrator(bias_body_mps2=params.calibration.accel_bias_mps2)
                 if params.calibration.rest
@@ -566,6 +657,21 @@ class Pipeline:
         runtime.follow_state = follow_mod.set_enabled(runtime.follow_state, cmd.enabled)
 
     def _telemetry(self, runtime: DroneRuntime, msg: Telemetry, now_s: float) -> list[Sample]:
+        front = self._telemetry_front(runtime, msg, now_s)
+        if front is None:
+            return []
+        loc_in = front[8]
+        position = self._localize_one(loc_in) if loc_in is not None else None
+        return self._telemetry_back(front, position)
+
+    def _telemetry_front(
+        self, runtime: DroneRuntime, msg: Telemetry, now_s: float
+    ) -> _Front | None:
+        """A telemetry message up to its localization: checks, observation, contact, filter.
+
+        Returns None for a dropped message, else what :meth:`_telemetry_back` needs, with
+        the localization's inputs (None when there is nothing to localize).
+        """
         runtime.received += 1
         accel = msg.accel_mps2
         if runtime.rest is not None:
@@ -588,10 +694,10 @@ class Pipeline:
             )
         except DegenerateQuaternionError as exc:
             self.count_drop(runtime.drone, "bad_quaternion", str(exc))
-            return []
+            return None
         except TensionError as exc:
             self.count_drop(runtime.drone, "bad_observation", str(exc))
-            return []
+            return None
         resumed = runtime.stale or (
             runtime.last_seen_s is not None and now_s - runtime.last_seen_s > _MAX_GAP_S
         )
@@ -600,14 +706,14 @@ class Pipeline:
             self.count_drop(
                 runtime.drone, kind, f"seq {msg.seq} after {runtime.last_seq} on {runtime.drone}"
             )
-            return []
+            return None
         if runtime.last_stamp_s is not None and msg.stamp_s <= runtime.last_stamp_s and not resumed:
             self.count_drop(
                 runtime.drone,
                 "stamp_backwards",
                 f"stamp_s {msg.stamp_s} after {runtime.last_stamp_s} on {runtime.drone}",
             )
-            return []
+            return None
 
         if runtime.last_seq is not None and msg.seq > runtime.last_seq + 1 and not resumed:
             runtime.seq_gaps += msg.seq - runtime.last_seq - 1
@@ -640,8 +746,9 @@ class Pipeline:
             floor_z_m=runtime.params.base.floor_z_m,
         )
         on_ground = runtime.contact.on_ground or obs.tension_world_n is None
+        self._check_vbat_range(runtime, msg.vbat_v, on_ground, now_s)
+        ext = runtime.calibration_extrapolated  # this sample's (a later front moves it)
 
-        position: PositionEstimate | None = None
         tension: Sequence[float] = _ZEROS3
         std: Sequence[float] = _ZEROS3
         converged = False
@@ -670,54 +777,116 @@ class Pipeline:
             tension = est.tension_world_n.tolist()
             std = est.std_n.tolist()
             converged = est.converged
+            if not (_finite(tension) and _finite(std)):
+                # Checked here, not with the Estimate: the reset must come before the
+                # drone's next message is filtered (in a batch, before its localization).
+                self.count_drop(runtime.drone, "non_finite_estimate", "filter produced NaN/inf")
+                runtime.filter.reset()
+                return (runtime, msg, now_s, tension, std, on_ground, converged, False, None, ext)
             if converged:
                 # Exit angles only while fresh: the reel reports at its own rate.
                 loc = self.settings.localization
                 fresh_s = now_s - loc.reel_stale_after_s
-                position = localize(
+                loc_in = (
                     est.tension_world_n,
                     est.cov_n2,
                     runtime.weight_n_per_m,
                     runtime.length_m,
                     runtime.base_world_m,
                     runtime.params.base.floor_z_m,
-                    azimuth=loc.azimuth,
-                    exit_azimuth=runtime.exit_azimuth
-                    if runtime.exit_azimuth_received_s >= fresh_s
-                    else None,
-                    exit_elevation=runtime.exit_elevation
+                    runtime.exit_azimuth if runtime.exit_azimuth_received_s >= fresh_s else None,
+                    runtime.exit_elevation
                     if loc.elevation and runtime.exit_elevation_received_s >= fresh_s
                     else None,
-                    mocap_world_m=msg.position_m,
-                    mocap_std_m=loc.mocap_std_m,
+                    msg.position_m,
                 )
+                return (runtime, msg, now_s, tension, std, on_ground, converged, True, loc_in, ext)
+        return (runtime, msg, now_s, tension, std, on_ground, converged, True, None, ext)
 
-        follow_position = (
-            np.array(msg.position_m, dtype=float)
-            if msg.position_m is not None
-            else (position.position_world_m if position is not None else None)
+    def _localize_one(self, loc_in: _LocalizeIn) -> PositionEstimate | None:
+        loc = self.settings.localization
+        tension_n, cov_n2, weight, length, base, floor, exit_az, exit_el, mocap = loc_in
+        return localize(
+            tension_n,
+            cov_n2,
+            weight,
+            length,
+            base,
+            floor,
+            azimuth=loc.azimuth,
+            exit_azimuth=exit_az,
+            exit_elevation=exit_el,
+            mocap_world_m=mocap,
+            mocap_std_m=loc.mocap_std_m,
         )
-        decision = follow_mod.follow_step(
-            runtime.follow_state,
-            runtime.follow_params,
-            stamp_s=msg.stamp_s,
-            tension_norm_n=_norm3(tension) if converged else None,
-            position_world_m=follow_position,
-            base_world_m=runtime.base_world_m,
-            length_m=runtime.length_m,
-            floor_z_m=runtime.params.base.floor_z_m,
-            tension_world_n=tension if converged else None,
-            position_is_external=msg.position_m is not None,
-            weight_n_per_m=runtime.weight_n_per_m,
-            on_ground=on_ground,
+
+    def _localize_many(self, inputs: list[_LocalizeIn]) -> list[PositionEstimate | None]:
+        """:meth:`_localize_one` of each: computed together once there are enough to pay
+        for it (:func:`localization.localize_batch`, which gives the same floats)."""
+        if len(inputs) < BATCH_LOCALIZE_MIN:
+            return [self._localize_one(x) for x in inputs]
+        loc = self.settings.localization
+        cols = list(zip(*inputs, strict=True))
+        exit_az, exit_el = list(cols[6]), list(cols[7])
+        return localize_batch(
+            np.array(cols[0]),
+            np.array(cols[1]),
+            np.array(cols[2], dtype=float),
+            np.array(cols[3], dtype=float),
+            np.array(cols[4]),
+            np.array(cols[5], dtype=float),
+            azimuth=loc.azimuth,
+            exit_azimuth=exit_az if any(v is not None for v in exit_az) else None,
+            exit_elevation=exit_el if any(v is not None for v in exit_el) else None,
+            mocap_world_m=list(cols[8]) if loc.azimuth == "mocap" else None,
+            mocap_std_m=loc.mocap_std_m,
         )
-        runtime.follow_state = decision.state
+
+    def _telemetry_back(self, front: _Front, position: PositionEstimate | None) -> list[Sample]:
+        """A telemetry message from its localization on: follow, the Estimate, commands."""
+        runtime, msg, now_s, tension, std, on_ground, converged, finite, _, ext = front
+        # This sample's flag, as the front pass left it (in a batch, later messages' front
+        # passes have moved it since).
+        runtime.calibration_extrapolated = ext
+        fs = runtime.follow_state
+        if not (fs.enabled or fs.active) and math.isfinite(msg.stamp_s):
+            # Follow off: follow_step's steps 1 and 2 would only move the stamp (no
+            # setpoint, no stop), at the cost of two dataclasses.replace (~10 us).
+            runtime.follow_state = _follow_stamped(fs, msg.stamp_s)
+            decision = None
+        else:
+            follow_position = (
+                np.array(msg.position_m, dtype=float)
+                if msg.position_m is not None
+                else (position.position_world_m if position is not None else None)
+            )
+            decision = follow_mod.follow_step(
+                fs,
+                runtime.follow_params,
+                stamp_s=msg.stamp_s,
+                tension_norm_n=_norm3(tension) if converged else None,
+                position_world_m=follow_position,
+                base_world_m=runtime.base_world_m,
+                length_m=runtime.length_m,
+                floor_z_m=runtime.params.base.floor_z_m,
+                tension_world_n=tension if converged else None,
+                position_is_external=msg.position_m is not None,
+                weight_n_per_m=runtime.weight_n_per_m,
+                on_ground=on_ground,
+            )
+            runtime.follow_state = decision.state
         out: list[Sample] = []
-        estimate = self._estimate(runtime, msg, tension, std, position, on_ground, converged)
+        estimate = (
+            self._estimate(runtime, msg, tension, std, position, on_ground, converged)
+            if finite
+            else None
+        )
         if estimate is not None:
             runtime.estimates += 1
             runtime.estimate_rate.add(now_s)
-            out.append(Sample(f"tether/{runtime.drone}/estimate", estimate))
+            out.append(Sample(runtime.estimate_key, estimate))
+        if decision is None:
+            return out
         if decision.setpoint_world_m is not None and _finite(decision.setpoint_world_m):
             sp = Setpoint(stamp_s=msg.stamp_s, position_m=_vec3(decision.setpoint_world_m))
             runtime.setpoints += 1
@@ -729,6 +898,41 @@ class Pipeline:
             self._emit(runtime.drone, "stop", "service", now_s, self.self_id, decision.stop_reason)
         return out
 
+    def _check_vbat_range(
+        self, runtime: DroneRuntime, vbat_v: float | None, on_ground: bool, now_s: float
+    ) -> None:
+        """Flag a battery voltage outside the calibrated range; tell it once per drone.
+
+        The thrust map (``thrust_scale``, ``thrust_vbat_slope_per_v``) holds where it was
+        fitted; outside ``[calibration] thrust_vbat_range_v`` it is an extrapolation, which a
+        battery effect on thrust turns into a position error of tens of cm (docs/calibration.md).
+        The flag follows every sample; the ``warning`` Event (logged by the service) is sent
+        the first time only. On the ground no tension is estimated from the thrust, and an
+        unloaded battery reads well above its voltage in flight (0.5–0.6 V on the NanoBench
+        Crazyflie 2.1 flights), so there the flag is None rather than a false alarm.
+        """
+        runtime.last_vbat_v = vbat_v
+        rng = runtime.vbat_range_v
+        if rng is None or vbat_v is None or on_ground:
+            runtime.calibration_extrapolated = None
+            return
+        outside = not (rng[0] <= vbat_v <= rng[1])
+        runtime.calibration_extrapolated = outside
+        if outside and not runtime.extrapolation_told:
+            runtime.extrapolation_told = True
+            self._emit(
+                runtime.drone,
+                "warning",
+                "telemetry",
+                now_s,
+                self.self_id,
+                f"{runtime.drone}: battery {vbat_v:.3f} V outside the range the thrust map was "
+                f"calibrated over ({rng[0]:.3f}–{rng[1]:.3f} V, [calibration] "
+                "thrust_vbat_range_v): thrust, tension and position are extrapolated "
+                "(calibration_extrapolated in Estimate and status; told once)",
+                field="vbat_v",
+            )
+
     def _estimate(
         self,
         runtime: DroneRuntime,
@@ -739,47 +943,76 @@ class Pipeline:
         on_ground: bool,
         converged: bool,
     ) -> bytes | None:
-        """The Estimate's JSON (:func:`encode_estimate`: no model per message), or None."""
-        if not (_finite(tension) and _finite(std)):
-            self.count_drop(runtime.drone, "non_finite_estimate", "filter produced NaN/inf")
-            runtime.filter.reset()
-            return None
+        """The Estimate's JSON (:func:`encode_estimate`: no model per message), or None.
+
+        ``tension`` and ``std`` are finite (:meth:`_telemetry_front` has checked them).
+        """
         tension = _vec3(tension)
         std = _vec3(std)
-        position_m = position_std_m = None
-        if position is not None:
-            if _finite(position.position_world_m) and _finite(position.std_world_m):
-                position_m = _vec3(position.position_world_m)
-                position_std_m = _vec3(position.std_world_m)
-            else:
-                position = None
         follow = self._follow_info(runtime)
         cached = runtime.follow_json_cache
         if cached is None or cached[0] is not follow:
             cached = runtime.follow_json_cache = (follow, follow.model_dump())
-        lo_hi = position.radial_interval_m if position is not None else None
-        fields: dict[str, Any] = dict(
-            seq=msg.seq,
-            stamp_s=msg.stamp_s,
-            tension_n=tension,
-            tension_std_n=std,
-            horizontal_n=math.hypot(tension[0], tension[1]),
-            vertical_n=-tension[2],
-            position_m=position_m,
-            position_std_m=position_std_m,
-            radial_m=float(position.radial_m) if position is not None else None,
-            radial_interval_m=(float(lo_hi[0]), float(lo_hi[1])) if lo_hi is not None else None,
-            azimuth_determined=position.azimuth_determined if position is not None else None,
-            azimuth_source=position.azimuth_source if position is not None else None,
-            floor_contact=bool(position.floor_contact) if position is not None else None,
-            on_ground=on_ground,
-            converged=converged,
-            length_m=runtime.length_m,
-            base_m=_vec3(runtime.base_world_m),
-            calibration=runtime.calibration_source,
-        )
+        base = runtime.base_cache
+        if base is None or base[0] is not runtime.base_world_m:
+            base = runtime.base_cache = (runtime.base_world_m, _vec3(runtime.base_world_m))
+        position_m = position_std_m = None
+        if position is not None:
+            position_m = _vec3(position.position_world_m)
+            position_std_m = _vec3(position.std_world_m)
+            if not (_finite(position_m) and _finite(position_std_m)):
+                position = position_m = position_std_m = None
+        # In the model's order (ESTIMATE_FIELD_ORDER): encode_estimate_ordered takes it as is.
+        fields: dict[str, Any]
+        if position is None:
+            fields = {
+                "seq": msg.seq,
+                "stamp_s": msg.stamp_s,
+                "tension_n": tension,
+                "tension_std_n": std,
+                "horizontal_n": math.hypot(tension[0], tension[1]),
+                "vertical_n": -tension[2],
+                "position_m": None,
+                "follow": cached[1],
+                "position_std_m": None,
+                "radial_m": None,
+                "radial_interval_m": None,
+                "azimuth_determined": None,
+                "azimuth_source": None,
+                "floor_contact": None,
+                "on_ground": on_ground,
+                "converged": converged,
+                "length_m": runtime.length_m,
+                "base_m": base[1],
+                "calibration": runtime.calibration_source,
+                "calibration_extrapolated": runtime.calibration_extrapolated,
+            }
+        else:
+            lo, hi = position.radial_interval_m
+            fields = {
+                "seq": msg.seq,
+                "stamp_s": msg.stamp_s,
+                "tension_n": tension,
+                "tension_std_n": std,
+                "horizontal_n": math.hypot(tension[0], tension[1]),
+                "vertical_n": -tension[2],
+                "position_m": position_m,
+                "follow": cached[1],
+                "position_std_m": position_std_m,
+                "radial_m": float(position.radial_m),
+                "radial_interval_m": (float(lo), float(hi)),
+                "azimuth_determined": position.azimuth_determined,
+                "azimuth_source": position.azimuth_source,
+                "floor_contact": bool(position.floor_contact),
+                "on_ground": on_ground,
+                "converged": converged,
+                "length_m": runtime.length_m,
+                "base_m": base[1],
+                "calibration": runtime.calibration_source,
+                "calibration_extrapolated": runtime.calibration_extrapolated,
+            }
         try:
-            payload = encode_estimate(follow=cached[1], **fields)
+            payload = encode_estimate_ordered(fields)
         except ValueError as exc:  # a non-finite field the checks above did not cover
             self.count_drop(runtime.drone, "non_finite_estimate", str(exc))
             return None
@@ -847,6 +1080,11 @@ class Pipeline:
             "base_m": list(map(float, runtime.base_world_m)),
             "weight_n_per_m": runtime.weight_n_per_m,
             "calibration": runtime.calibration_source,
+            "calibration_extrapolated": runtime.calibration_extrapolated,
+            "calibration_vbat_range_v": (
+                None if runtime.vbat_range_v is None else list(runtime.vbat_range_v)
+            ),
+            "vbat_v": runtime.last_vbat_v,
             "rest_calibration": _rest_status(runtime.rest),
         }
 
@@ -856,6 +1094,48 @@ class Pipeline:
 
 
 _ZEROS3 = (0.0, 0.0, 0.0)
+
+_LocalizeIn = tuple[
+    np.ndarray,
+    np.ndarray,
+    float,
+    float,
+    np.ndarray,
+    float,
+    AngleObservation | None,
+    AngleObservation | None,
+    "tuple[float, float, float] | None",
+]
+"""localize()'s inputs for one message: tension, its covariance, weight, length, base,
+floor, exit azimuth, exit elevation, motion-capture position."""
+_Front = tuple[
+    DroneRuntime,
+    Telemetry,
+    float,
+    Sequence[float],
+    Sequence[float],
+    bool,
+    bool,
+    bool,
+    "_LocalizeIn | None",
+    "bool | None",
+]
+"""A telemetry message stepped up to its localization (:meth:`Pipeline._telemetry_front`):
+runtime, message, receive time, tension, its std, on the ground, converged, finite, the
+localization's inputs (None: nothing to localize), calibration_extrapolated."""
+
+
+def _follow_stamped(state: follow_mod.FollowState, stamp_s: float) -> follow_mod.FollowState:
+    """``dataclasses.replace(state, last_stamp_s=stamp_s)`` in a fifth of its time.
+
+    The per-message step while follow is off; FollowState is frozen, so the new one is
+    filled the way a frozen dataclass fills itself, through its ``__dict__``.
+    """
+    new = object.__new__(follow_mod.FollowState)
+    fields = new.__dict__
+    fields.update(state.__dict__)
+    fields["last_stamp_s"] = stamp_s
+    return new
 
 
 def _rest_status(rest: RestCalibrator | None) -> dict[str, Any] | None:

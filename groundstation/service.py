@@ -287,15 +287,15 @@ class Service:
                 return
 
     def _step_batch(self, batch: list[Parsed]) -> None:
-        outputs: list[Sample] = []
         with self._lock:
-            for parsed in group_by_drone(batch):
-                try:
-                    outputs += self.pipeline.process(parsed, parsed.received_s)
-                except Exception:  # the service must outlive any single bad step
-                    _log.exception("processing a %s from %s failed", parsed.kind, parsed.drone)
-                    self.pipeline.count_drop(parsed.drone, "internal_error", "see log")
+            outputs = self.pipeline.process_batch(group_by_drone(batch), self._on_error)
         self._publish(outputs)
+
+    def _on_error(self, parsed: Parsed) -> None:
+        # Called inside the except of one input's processing: the service must outlive any
+        # single bad step.
+        _log.exception("processing a %s from %s failed", parsed.kind, parsed.drone)
+        self.pipeline.count_drop(parsed.drone, "internal_error", "see log")
 
     def _step(self, parsed: Parsed) -> None:
         """One message, as :meth:`_step_batch` does it (the plain per-message path)."""
@@ -311,7 +311,7 @@ class Service:
         self.published += len(outputs)
 
 
-_MAX_BATCH = 16
+_MAX_BATCH = 32
 """Messages stepped before their outputs are published (bounds the first one's wait)."""
 
 

@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
+import dataclasses
+import json
 import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
+from groundstation.bus import Sample
 from groundstation.cli import main
 from groundstation.config import load_settings
 from groundstation.pipeline import Pipeline
@@ -112,3 +116,49 @@ def test_bad_input_one_line_exit_2_nothing_written(
     assert str(bad) in err and expect in err, err
     assert not out.exists()
     assert not list(tmp_path.glob(".calibrate-*"))
+
+
+def test_the_calibrated_battery_range_is_written_and_flagged_at_run_time(
+    recordings: tuple[Path, Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """calibrate writes thrust_vbat_range_v (the hovers' vbat_v, rounded outward); serve's
+    pipeline flags Telemetry outside it; recordings without vbat_v write none and drop a
+    stale per-drone range from the input."""
+    a, b, _ = recordings
+    sag = dataclasses.replace(TRUTH, vbat_slope_per_v=0.3)
+    rec = tmp_path / "sag.mcap"
+    data = flight(list(PAPER_HOVER_SPOTS_M[:4]), sag, seed=3, vbat_v=(4.05, 3.85))
+    write_mcap(str(rec), data)
+    out = tmp_path / "cal.toml"
+    assert main(["calibrate", str(rec), "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "thrust_vbat_range_v      [" in printed
+    cal = load_settings(out, use_env=False).for_drone("cf1").calibration
+    assert cal.thrust_vbat_range_v is not None
+    lo, hi = cal.thrust_vbat_range_v
+    # the hovers' range: within the flight's 3.85-4.05 V, most of it (moves are excluded)
+    assert 3.85 <= lo < 3.9 and 4.0 < hi <= 4.05
+    hover = data.vbat_v[np.isfinite(data.vbat_v)]
+    assert lo <= hover.min() + 0.05 and hi >= hover.max() - 0.05
+    assert round(lo, 3) == lo and round(hi, 3) == hi
+    assert abs(cal.thrust_vbat_slope_per_v - 0.3) < 0.05  # the spread determines the slope
+
+    pipe = Pipeline(load_settings(out, use_env=False))
+    flags = []
+    for k, v in enumerate([4.0] * 250 + [lo - 0.05]):
+        body = (
+            f'{{"seq":{k},"stamp_s":{k * 0.004},"accel_mps2":[0,0,9.81],'
+            f'"quat_wxyz":[1,0,0,0],"thrust_n":0.3,"vbat_v":{v},"position_m":[1,0,1]}}'
+        )
+        (o,) = pipe.handle(Sample("tether/cf1/telemetry", body.encode()), k * 0.004)
+        flags.append(json.loads(o.payload)["calibration_extrapolated"])
+    assert flags[249] is False and flags[-1] is True
+
+    # no vbat_v in the recordings: no range, and an earlier one for this drone is dropped
+    cfg = tmp_path / "old.toml"
+    cfg.write_text("[drones.cf1.calibration]\nthrust_vbat_range_v = [3.9, 4.0]\n")
+    out2 = tmp_path / "cal2.toml"
+    assert main(["calibrate", str(a), str(b), "--config", str(cfg), "--out", str(out2)]) == 0
+    assert "thrust_vbat_range_v      none" in capsys.readouterr().out
+    cal2 = load_settings(out2, use_env=False).for_drone("cf1").calibration
+    assert cal2.thrust_vbat_range_v is None

@@ -108,3 +108,27 @@ def test_localization_section() -> None:
     assert s.localization.azimuth == "mocap" and s.localization.elevation is True
     with pytest.raises(ConfigError, match=r"localization\.azimuth = 'compass'"):
         load_settings(None, {"localization": {"azimuth": "compass"}}, use_env=False)
+
+
+def test_calibration_vbat_range(tmp_path: Path) -> None:
+    """[calibration] thrust_vbat_range_v: optional, [lo, hi] volts, per drone like the rest."""
+    assert load_settings(None, use_env=False).calibration.thrust_vbat_range_v is None
+    path = tmp_path / "cal.toml"
+    path.write_text(
+        "[calibration]\nthrust_vbat_range_v = [3.95, 4.02]\n"
+        "[drones.cf2.calibration]\nthrust_vbat_range_v = [3.6, 4.1]\n"
+    )
+    settings = load_settings(path, use_env=False)
+    assert settings.for_drone("cf1").calibration.thrust_vbat_range_v == (3.95, 4.02)
+    assert settings.for_drone("cf2").calibration.thrust_vbat_range_v == (3.6, 4.1)
+    for bad, needle in (
+        ("[4.1, 3.9]", r"calibration\.thrust_vbat_range_v = \[4\.1, 3\.9\].*lo <= hi"),
+        ("[0, 4.0]", r"calibration\.thrust_vbat_range_v = \[0, 4\.0\]"),
+        ("[3.9]", r"calibration\.thrust_vbat_range_v"),
+        ("[3.9, 4.0, 4.1]", r"calibration\.thrust_vbat_range_v"),
+        ('"3.9-4.1"', r"calibration\.thrust_vbat_range_v = '3\.9-4\.1'"),
+    ):
+        path.write_text(f"[calibration]\nthrust_vbat_range_v = {bad}\n")
+        with pytest.raises(ConfigError, match=needle) as info:
+            load_settings(path, use_env=False)
+        assert "\n" not in str(info.value)

@@ -417,6 +417,19 @@ def test_readouts_escape_text_from_the_bus() -> None:
     assert "<img" not in stop and "Stop sent" in stop
 
 
+def test_readouts_say_which_calibration_and_when_the_battery_leaves_it() -> None:
+    plain = tension_html(_estimate())
+    assert "uncalibrated" in plain and "battery outside calibration" not in plain
+    inside = tension_html(_estimate(calibration="cal.toml", calibration_extrapolated=False))
+    assert "cal.toml" in inside and "uncalibrated" not in inside
+    assert "battery outside calibration" not in inside
+    outside = tension_html(
+        _estimate(calibration="<b>cal</b>", calibration_extrapolated=True, azimuth_source="reel")
+    )
+    assert "battery outside calibration" in outside and "<b>cal</b>" not in outside
+    assert "azimuth from" in outside and "reel" in outside
+
+
 def test_readouts_compare_with_simulator_truth() -> None:
     text = tension_html(_estimate(position_m=(0.8, 0.1, 1.0)), _truth())
     assert "0.300 N" in text and "5.0 cm" in text and "tether on floor (sim)" in text

@@ -19,7 +19,9 @@ from groundstation.localization import (
     LocalizationFailure,
     PositionEstimate,
     localize,
+    localize_batch,
     try_localize,
+    try_localize_batch,
 )
 
 OMEGA_N_PER_M = 0.05
@@ -327,3 +329,122 @@ def test_reel_azimuth_keeps_a_plumb_tether_determined_and_continuous() -> None:
         xs.append(e.position_world_m[:2])
     steps = np.linalg.norm(np.diff(np.array(xs), axis=0), axis=1)
     assert steps.max() < 0.02
+
+
+# ---------------------------------------------------------------- the batch
+
+
+def _batch_cases(seed: int, n: int) -> dict[str, object]:
+    """n cases of every kind: free, near plumb, plumb, exactly plumb, on the floor, near taut,
+    singular and anisotropic covariances, reel azimuths and elevations, non-finite input."""
+    rng = np.random.default_rng(seed)
+    T = np.empty((n, 3))
+    C = np.empty((n, 3, 3))
+    for i in range(n):
+        kind = i % 6
+        h = {0: 0.03, 1: 0.002, 2: 1e-4, 3: 0.0, 4: 0.01, 5: 0.3}[kind] * rng.uniform(0.2, 1.5)
+        ang = rng.uniform(-math.pi, math.pi)
+        tv = {4: rng.uniform(-0.01, 0.01), 5: rng.uniform(0.05, 0.2)}.get(
+            kind, rng.uniform(-0.02, 0.12)
+        )
+        T[i] = [h * math.cos(ang), h * math.sin(ang), -tv]
+        A = rng.normal(0.0, 1e-3 * rng.uniform(0.1, 3.0), (3, 3))
+        C[i] = A @ A.T + np.diag(rng.uniform(1e-8, 1e-6, 3))
+        if i % 17 == 0:
+            C[i] = np.zeros((3, 3))  # singular: the eigen square root
+        if i % 29 == 0:
+            T[i, int(rng.integers(3))] = math.nan  # a failure, named
+    lengths = rng.uniform(0.5, 2.5, n)
+    weights = rng.choice([0.05, 0.055], n)
+    base = np.column_stack(
+        [rng.uniform(-0.2, 0.2, n), rng.uniform(-0.2, 0.2, n), np.full(n, 0.754)]
+    )
+    floor = np.where(rng.random(n) < 0.6, 0.0, -math.inf)
+    exit_azimuth = [AngleObservation(0.3, 0.05) if i % 13 == 0 else None for i in range(n)]
+    exit_elevation = [AngleObservation(0.5, 0.05) if i % 19 == 0 else None for i in range(n)]
+    return dict(
+        tension_world_n=T,
+        tension_cov_n2=C,
+        weight_n_per_m=weights,
+        length_m=lengths,
+        base_world_m=base,
+        floor_z_m=floor,
+        exit_azimuth=exit_azimuth,
+        exit_elevation=exit_elevation,
+    )
+
+
+def _same(got: PositionEstimate | LocalizationFailure, want: object) -> bool:
+    if type(got) is not type(want):
+        return False
+    if isinstance(got, LocalizationFailure):
+        return got == want
+    for name in PositionEstimate.__dataclass_fields__:
+        a, b = getattr(got, name), getattr(want, name)
+        if isinstance(a, np.ndarray):
+            if not (a.shape == b.shape and np.array_equal(a, b) and not a.flags.writeable):
+                return False
+        elif a != b or type(a) is not type(b):
+            return False
+    return True
+
+
+@pytest.mark.parametrize("azimuth", ["auto", "tension", "reel"])
+@pytest.mark.parametrize("seed", [0, 1])
+def test_batch_gives_the_very_floats_of_one_by_one(
+    azimuth: str, seed: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """try_localize_batch is try_localize per case, to the bit, whichever path a case takes
+    (the arrays for the free and plumb cases with the tension's azimuth, try_localize for
+    the rest): every kind of case, mixed in one batch."""
+    import groundstation.localization as loc
+
+    n = 600
+    kw = _batch_cases(seed, n)
+    one_by_one = []
+
+    def counted(*args: object, **kwargs: object) -> object:
+        one_by_one.append(1)
+        return try_localize(*args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(loc, "try_localize", counted)
+    got = try_localize_batch(**kw, azimuth=azimuth)  # type: ignore[arg-type]
+    monkeypatch.undo()
+    # the arrays took most cases (all of them with the reel's azimuth went one by one)
+    assert len(one_by_one) == n if azimuth == "reel" else len(one_by_one) < n // 2
+    cases: dict[str, int] = {}
+    for i, g in enumerate(got):
+        want = try_localize(
+            kw["tension_world_n"][i],  # type: ignore[index]
+            kw["tension_cov_n2"][i],  # type: ignore[index]
+            float(kw["weight_n_per_m"][i]),  # type: ignore[index]
+            float(kw["length_m"][i]),  # type: ignore[index]
+            kw["base_world_m"][i],  # type: ignore[index]
+            float(kw["floor_z_m"][i]),  # type: ignore[index]
+            azimuth=azimuth,  # type: ignore[arg-type]
+            exit_azimuth=kw["exit_azimuth"][i],  # type: ignore[index]
+            exit_elevation=kw["exit_elevation"][i],  # type: ignore[index]
+        )
+        assert _same(g, want), (i, g, want)
+        key = want.case if isinstance(want, PositionEstimate) else "failure"
+        if isinstance(want, PositionEstimate) and want.elevation_used:
+            key += "+elevation"
+        cases[key] = cases.get(key, 0) + 1
+    # every kind of case was in the batch
+    assert {"free", "plumb", "floor", "failure"} <= set(cases), cases
+    if azimuth != "reel":
+        assert any(k.endswith("+elevation") for k in cases), cases
+    nones = localize_batch(**kw, azimuth=azimuth)  # type: ignore[arg-type]
+    assert [o is None for o in nones] == [isinstance(o, LocalizationFailure) for o in got]
+
+
+def test_batch_of_none_and_bad_shapes() -> None:
+    assert try_localize_batch(np.zeros((0, 3)), np.zeros((0, 3, 3)), 0.05, 1.6, BASE_M) == []
+    with pytest.raises(ValueError, match="tension_world_n must be"):
+        try_localize_batch(np.zeros((2, 3)), np.zeros((3, 3, 3)), 0.05, 1.6, BASE_M)
+    # scalars broadcast; an invalid scalar is try_localize's failure, per case
+    T = np.array([[-0.02, 0.005, -0.06]] * 2)
+    C = np.array([FILTER_COV_N2] * 2)
+    out = try_localize_batch(T, C, [0.05, -1.0], 1.6, BASE_M, FLOOR_M)
+    assert isinstance(out[0], PositionEstimate) and isinstance(out[1], LocalizationFailure)
+    assert _same(out[0], try_localize(T[0], C[0], 0.05, 1.6, BASE_M, FLOOR_M))

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from groundstation.messages import (
+    ESTIMATE_FIELD_ORDER,
     Estimate,
     FollowCommand,
     FollowInfo,
@@ -15,6 +16,7 @@ from groundstation.messages import (
     Reel,
     Telemetry,
     encode_estimate,
+    encode_estimate_ordered,
     parse_key,
 )
 
@@ -174,6 +176,7 @@ def _random_estimate_fields(rng: np.random.Generator) -> dict[str, Any]:
         "converged": bool(rng.integers(2)),
         "length_m": maybe(abs(f())),
         "base_m": maybe(v3()),
+        "calibration_extrapolated": maybe_bool(),
     }
 
 
@@ -232,3 +235,26 @@ def test_fast_encoder_refuses_unknown_and_missing_fields() -> None:
     del fields["seq"]
     with pytest.raises(TypeError, match="'seq' missing"):
         encode_estimate(follow=follow, **fields)
+
+
+def test_ordered_encoder_writes_the_models_bytes() -> None:
+    """encode_estimate_ordered: a dict of every field in the model's order goes to the
+    serializer as it is; in another order (or with a field missing) it takes
+    encode_estimate's pass; NaN is refused either way."""
+    rng = np.random.default_rng(7)
+    assert tuple(Estimate.model_fields) == ESTIMATE_FIELD_ORDER
+    for _ in range(1000):
+        fields = _random_estimate_fields(rng)
+        follow = _random_follow(rng)
+        want = Estimate(follow=follow, **fields).to_json()
+        ordered = {k: fields.get(k, Estimate.model_fields[k].default) for k in ESTIMATE_FIELD_ORDER}
+        ordered["follow"] = follow.model_dump()
+        assert encode_estimate_ordered(ordered) == want
+        shuffled = dict(reversed(list(ordered.items())))
+        assert encode_estimate_ordered(shuffled) == want
+    ordered["tension_n"] = (math.nan, 0.0, 0.0)
+    with pytest.raises(ValueError, match="non-finite value in Estimate field"):
+        encode_estimate_ordered(ordered)
+    del ordered["seq"]
+    with pytest.raises(TypeError, match="'seq' missing"):
+        encode_estimate_ordered(ordered)

@@ -359,3 +359,55 @@ def test_service_started_mid_hover_finds_the_drone_in_the_air() -> None:
     assert float(np.median(err)) < 0.05
     status = pipe.status("cf1", 2.0)
     assert status is not None and status["contact"]["reason"] == "air"
+
+
+def test_flight_outside_the_calibrated_battery_range_is_flagged_and_told_once() -> None:
+    """calibration_extrapolated: null without a range, without vbat_v or on the ground; else
+    whether vbat_v lies outside [calibration] thrust_vbat_range_v; one warning Event."""
+    events: list[tuple[str, object]] = []
+
+    def run(settings: object, vbats: list[float | None], armed: bool = True) -> list[dict]:
+        pipe = Pipeline(settings, on_event=lambda d, e: events.append((d, e)))  # type: ignore[arg-type]
+        level = GOOD | {"accel_mps2": [0.0, 0.0, 9.81], "thrust_n": 0.30, "armed": armed}
+        level |= {"position_m": [1.0, 0.0, 1.0]}
+        out = []
+        for k, v in enumerate(vbats):
+            body = level | {"seq": k, "stamp_s": k * 0.004}
+            if v is not None:
+                body["vbat_v"] = v
+            (o,) = pipe.handle(Sample("tether/cf1/telemetry", json.dumps(body).encode()), k * 0.004)
+            out.append(json.loads(o.payload))
+        status = pipe.status("cf1", len(vbats) * 0.004)
+        assert status is not None
+        out.append(status)
+        return out
+
+    ranged = load_settings(
+        None, {"calibration": {"thrust_vbat_range_v": [3.9, 4.0]}}, use_env=False
+    )
+    # 1 s in range (the contact rules find the drone in the air), then below, back, above
+    vbats: list[float | None] = [3.95] * 250 + [3.85] * 10 + [3.95] * 10 + [4.05] * 10
+    *est, status = run(ranged, vbats)
+    air = [e for e in est if not e["on_ground"]]
+    assert air, "the drone must be found in the air"
+    assert all(e["calibration_extrapolated"] is None for e in est if e["on_ground"])
+    flags = [e["calibration_extrapolated"] for e in est[250:]]
+    assert flags == [True] * 10 + [False] * 10 + [True] * 10
+    assert est[249]["calibration_extrapolated"] is False
+    assert status["calibration_extrapolated"] is True
+    assert status["calibration_vbat_range_v"] == [3.9, 4.0] and status["vbat_v"] == 4.05
+    told = [e for d, e in events if e.kind == "warning" and e.field == "vbat_v"]  # type: ignore[attr-defined]
+    assert len(told) == 1, "told once, not per sample"
+    assert "3.850 V outside" in told[0].reason and "3.900–4.000 V" in told[0].reason  # type: ignore[attr-defined]
+
+    # no vbat_v: unknown; no range: unknown; disarmed on the floor: unknown, never told
+    events.clear()
+    *est, status = run(ranged, [None] * 300)
+    assert {e["calibration_extrapolated"] for e in est} == {None}
+    *est, status = run(load_settings(None, use_env=False), [3.5] * 300)
+    assert {e["calibration_extrapolated"] for e in est} == {None}
+    assert status["calibration_vbat_range_v"] is None and status["vbat_v"] == 3.5
+    *est, status = run(ranged, [4.2] * 300, armed=False)
+    assert all(e["on_ground"] for e in est)
+    assert {e["calibration_extrapolated"] for e in est} == {None}
+    assert not events

@@ -90,6 +90,9 @@ def tension_html(est: Estimate | None, truth: Truth | None = None) -> str:
         rows.append(("radial r", radial))
     if est.length_m is not None:
         rows.append(("tether length", _fmt(est.length_m, "m")))
+    if est.azimuth_source is not None:
+        rows.append(("azimuth from", html.escape(est.azimuth_source)))
+    rows.append(("calibration", html.escape(est.calibration)))
     if truth is not None:
         rows.append(("|T| truth (sim)", _fmt(math.hypot(*truth.tension_n), "N")))
         if est.position_m is not None:
@@ -105,6 +108,10 @@ def tension_html(est: Estimate | None, truth: Truth | None = None) -> str:
         badges.append(badge("tether on floor", "#96703c"))
     if est.azimuth_determined is False:
         badges.append(badge("azimuth undetermined", "#f08c00"))
+    if est.calibration == "none":
+        badges.append(badge("uncalibrated", "#f08c00"))
+    if est.calibration_extrapolated:
+        badges.append(badge("battery outside calibration", "#e03131"))
     return _table(rows) + (f'<div style="margin-top:3px">{"".join(badges)}</div>' if badges else "")
 
 

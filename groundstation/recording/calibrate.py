@@ -343,6 +343,17 @@ def format_fit(drone: str, fit: CalibrationFit, files: Sequence[str]) -> str:
         f"  thrust_vbat_slope_per_v  {_pm(fit, 'vbat_slope_per_v', '.4f')}"
         f"  (about thrust_vbat_ref_v = {fit.vbat_ref_v:g} V)",
     ]
+    vbat_range = _vbat_range(fit)
+    lines.append(
+        "  thrust_vbat_range_v      "
+        + (
+            "none (no vbat_v in the recordings: flight outside the calibrated battery "
+            "range cannot be flagged)"
+            if vbat_range is None
+            else f"[{vbat_range[0]:.3f}, {vbat_range[1]:.3f}] (the hovers' battery: the "
+            "service flags flight outside it as calibration_extrapolated)"
+        )
+    )
     if "weight_n_per_m" in fit.fitted:
         lines.append(f"  tether weight_n_per_m    {_pm(fit, 'weight_n_per_m', '.4f')}")
         lines.append(
@@ -378,8 +389,17 @@ def format_fit(drone: str, fit: CalibrationFit, files: Sequence[str]) -> str:
     return "\n".join(lines)
 
 
+def _vbat_range(fit: CalibrationFit) -> list[float] | None:
+    """The hover samples' battery range, rounded outward to the millivolt, or None."""
+    if fit.vbat_range_v is None:
+        return None
+    lo, hi = fit.vbat_range_v
+    return [math.floor(lo * 1e3) / 1e3, math.ceil(hi * 1e3) / 1e3]
+
+
 def _calibration_table(fit: CalibrationFit, rest: bool, source: str) -> dict[str, Any]:
     v = fit.values
+    vbat_range = _vbat_range(fit)
     return {
         "thrust_scale": round(v["thrust_scale"], 6),
         "thrust_axis_rad": [round(v["about_x_rad"], 6), round(v["about_y_rad"], 6)],
@@ -390,6 +410,8 @@ def _calibration_table(fit: CalibrationFit, rest: bool, source: str) -> dict[str
         ],
         "thrust_vbat_slope_per_v": round(v["vbat_slope_per_v"], 6),
         "thrust_vbat_ref_v": fit.vbat_ref_v,
+        # Where the thrust map holds: the service flags flight outside it (issue 10).
+        **({} if vbat_range is None else {"thrust_vbat_range_v": vbat_range}),
         "rest": rest,
         "source": source,
     }
@@ -538,6 +560,13 @@ def run_calibrate(
     if config_path is not None:
         input_text = Path(config_path).read_text(encoding="utf-8")
         input_data = tomllib.loads(input_text)
+    for d, tables in patch["drones"].items():
+        # A range from an earlier calibration does not describe this one: drop it (the
+        # document is then written afresh) when these recordings carry no vbat_v.
+        old = input_data.get("drones", {}).get(d, {}).get("calibration", {})
+        if "thrust_vbat_range_v" in old and "thrust_vbat_range_v" not in tables["calibration"]:
+            del old["thrust_vbat_range_v"]
+            input_text = toml_dumps(input_data)
     text = _compose(input_text, input_data, patch, comments)
 
     # Validate as serve would (load_settings resolves every [drones.<id>]), then move it in.

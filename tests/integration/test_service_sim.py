@@ -29,6 +29,12 @@ def _start(procs: Procs, make_probe: Any, scenario: str, *sim_args: str) -> tupl
         probe.collect(key)
     ep = f"tcp/127.0.0.1:{port}"
     service = procs.groundstation("serve", "serve", "--connect", ep, "--headless")
+    # The simulator starts once the service listens: on a loaded machine the service's
+    # start-up can take longer than the simulator's, and the first second of telemetry
+    # (which test_takeoff_reports_no_tension_on_the_ground reads) would go unheard.
+    probe.wait_for(
+        lambda: "serving drones" in service.output(), timeout_s=30, what="the service's start"
+    )
     procs.groundstation(
         "sim", "sim", "--connect", ep, "--scenario", scenario, "--drones", "cf1", *sim_args
     )
