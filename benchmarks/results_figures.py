@@ -6,6 +6,7 @@ file name (relative to the figures directory) for the page to link.
 
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 from typing import Any
 
@@ -19,7 +20,12 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
 from benchmarks import results_paper as rp
-from benchmarks.results_envelope import TRUST_P95_M, SweepResult
+from benchmarks.results_envelope import (
+    BASELINE_NOISE_MPS2,
+    TRUST_P95_M,
+    EnvelopeResult,
+    size_text,
+)
 from benchmarks.results_peers import (
     SERVICE_TARGET_P99_MS,
     CatenaryResult,
@@ -34,7 +40,16 @@ TRUTH: dict[str, Any] = {"color": "black", "linestyle": "--", "linewidth": 1.2}
 DPI = 100
 
 
-def _save(fig: Figure, out_dir: Path, name: str) -> str:
+IDEAL_PROFILE = (
+    "simulator profile: ideal (quasi-static catenary; error classes: white accelerometer noise "
+    "0.3 m/s², thrust noise 3 mN, both told to the service; no others)"
+)
+
+
+def _save(fig: Figure, out_dir: Path, name: str, profile: str | None = None) -> str:
+    """Write ``fig``; ``profile``: a line naming the simulator profile, under the figure."""
+    if profile is not None:
+        fig.text(0.5, -0.01, profile, ha="center", va="top", fontsize=8, color="0.3")
     out_dir.mkdir(parents=True, exist_ok=True)
     fig.savefig(out_dir / name, dpi=DPI, bbox_inches="tight")
     plt.close(fig)
@@ -103,7 +118,7 @@ def vertical_tension(traces: dict[str, Trace], out_dir: Path) -> str:
         ax.set_ylabel("H (mN)")
         ax.set_xlabel("time (s)")
         ax.legend(loc="upper right", fontsize=8)
-    return _save(fig, out_dir, "vertical_tension.png")
+    return _save(fig, out_dir, "vertical_tension.png", IDEAL_PROFILE)
 
 
 def coin(traces: dict[str, Trace], out_dir: Path) -> str:
@@ -120,7 +135,7 @@ def coin(traces: dict[str, Trace], out_dir: Path) -> str:
     ax.set_xlabel("time (s)")
     ax.set_ylabel("H (mN)")
     ax.legend(loc="upper right", fontsize=9)
-    return _save(fig, out_dir, "coin.png")
+    return _save(fig, out_dir, "coin.png", IDEAL_PROFILE)
 
 
 def position_spots(traces: dict[str, Trace], out_dir: Path) -> str:
@@ -153,7 +168,7 @@ def position_spots(traces: dict[str, Trace], out_dir: Path) -> str:
                 ax.set_xlabel("time (s)")
     fig.suptitle("Position from tension at the paper's six hover spots: estimate vs truth", y=1.0)
     fig.tight_layout()
-    return _save(fig, out_dir, "position_spots.png")
+    return _save(fig, out_dir, "position_spots.png", IDEAL_PROFILE)
 
 
 def position_start(traces: dict[str, Trace], out_dir: Path) -> str:
@@ -190,7 +205,7 @@ def position_start(traces: dict[str, Trace], out_dir: Path) -> str:
     ax2.set_xlabel("time (s)")
     ax2.set_ylabel("|estimate − truth| (cm)")
     ax2.legend(loc="upper right", fontsize=7, ncol=2)
-    return _save(fig, out_dir, "position_start.png")
+    return _save(fig, out_dir, "position_start.png", IDEAL_PROFILE)
 
 
 def tension(traces: dict[str, Trace], paper: rp.PaperResults, out_dir: Path) -> str:
@@ -240,7 +255,7 @@ def tension(traces: dict[str, Trace], paper: rp.PaperResults, out_dir: Path) -> 
         ax.set_xlabel("time (s)")
         ax.set_ylabel("T_x (mN)")
         ax.legend(loc="lower right" if t0 == pull.end_s else "upper right", fontsize=8)
-    return _save(fig, out_dir, "tension.png")
+    return _save(fig, out_dir, "tension.png", IDEAL_PROFILE)
 
 
 def follow(traces: dict[str, Trace], out_dir: Path) -> str:
@@ -322,7 +337,7 @@ def follow(traces: dict[str, Trace], out_dir: Path) -> str:
         ax.set_ylabel("|T| (mN)")
         ax.legend(fontsize=7, loc="upper left")
     fig.tight_layout()
-    return _save(fig, out_dir, "follow.png")
+    return _save(fig, out_dir, "follow.png", IDEAL_PROFILE)
 
 
 def tug_landing(traces: dict[str, Trace], out_dir: Path) -> str:
@@ -377,7 +392,7 @@ def tug_landing(traces: dict[str, Trace], out_dir: Path) -> str:
     ax.set_xlabel("time (s)")
     ax.set_ylabel("|T| (mN)")
     ax.legend(fontsize=7, loc="upper right")
-    return _save(fig, out_dir, "tug_landing.png")
+    return _save(fig, out_dir, "tug_landing.png", IDEAL_PROFILE)
 
 
 def catenary(cat: CatenaryResult, out_dir: Path) -> str:
@@ -468,51 +483,122 @@ def service(svc: ServiceResult, dash: DashboardResult, out_dir: Path) -> str:
     return _save(fig, out_dir, "service.png")
 
 
-def envelope(sweeps: tuple[SweepResult, ...], out_dir: Path) -> str:
-    ncols = 3
-    nrows = (len(sweeps) + 1 + ncols - 1) // ncols
-    fig, axes = plt.subplots(nrows, ncols, figsize=(15, 4.3 * nrows))
-    flat = list(np.atleast_1d(axes).ravel())
-    for ax, sw in zip(flat, sweeps, strict=False):
+def envelope(env: EnvelopeResult, out_dir: Path) -> str:
+    """Realistic profile: cm per error class at its real size, uncalibrated vs calibration =
+    truth (left), and each class over its range, relative to its real size (right)."""
+    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(16, 6.2), gridspec_kw={"width_ratios": [1.5, 1.0]})
+    base = env.cls("vibration").at(BASELINE_NOISE_MPS2).raw
+    classes = [c for c in env.classes if c.cls.name != "vibration"]
+    names = ["baseline\n(vibration\nonly)"] + [
+        c.cls.name.replace("_", " ") + "\n" + textwrap.fill(size_text(c.cls, c.real.value), 12)
+        for c in classes
+    ]
+    x = np.arange(len(names))
+    raw_med = [base.median_m] + [c.real.raw.median_m for c in classes]
+    raw_p95 = [base.p95_m] + [c.real.raw.p95_m for c in classes]
+    cal = [c.real.cal for c in classes]
+    w = 0.38
+    ax.bar(x - w / 2, [100 * v for v in raw_med], w, color="tab:red", label="uncalibrated, median")
+    ax.plot(x - w / 2, [100 * v for v in raw_p95], "v", color="darkred", label="uncalibrated, p95")
+    xc = [i + 1 for i, c in enumerate(cal) if c is not None]
+    ax.bar(
+        [v + w / 2 for v in xc],
+        [100 * c.median_m for c in cal if c is not None],
+        w,
+        color="tab:green",
+        label="calibration = truth, median",
+    )
+    ax.plot(
+        [v + w / 2 for v in xc],
+        [100 * c.p95_m for c in cal if c is not None],
+        "v",
+        color="darkgreen",
+        label="calibration = truth, p95",
+    )
+    for i, c in enumerate(cal):
+        if c is None:
+            ax.text(
+                i + 1 + w / 2, 1.2, "nothing to calibrate", fontsize=6.5, ha="center", rotation=90
+            )
+    ax.axhline(100 * base.median_m, color="0.4", ls="--", lw=0.8, label="baseline median")
+    ax.set_xticks(x)
+    ax.set_xticklabels(names, fontsize=7.5)
+    ax.set_yscale("log")
+    ax.set_ylim(1, 500)
+    ax.set_ylabel("3D position error (cm, log)")
+    ax.set_title("Each error class at its real size, on top of the baseline")
+    ax.legend(fontsize=8, loc="upper left")
+    ax.grid(alpha=0.3, axis="y", which="both")
+    for c in env.classes:
+        if c.cls.real == c.cls.baseline or c.cls.name in ("all", "battery"):
+            continue  # no size to scale (battery: a state of charge; its table has it)
+        pts = [p for p in c.points if p.value * c.cls.real >= 0 or p.value == 0]
+        rel = [abs(p.value / c.cls.real) if c.cls.real else 0.0 for p in pts]
+        order = np.argsort(rel)
+        ax2.plot(
+            np.array(rel)[order],
+            [100 * pts[k].raw.median_m for k in order],
+            "o-",
+            ms=4,
+            label=c.cls.name.replace("_", " "),
+        )
+    ax2.axhline(100 * base.median_m, color="0.4", ls="--", lw=0.8)
+    ax2.set_yscale("log")
+    ax2.set_ylim(1, 500)
+    ax2.set_xlabel("size / its real size (0: off; 1: the real flights of issue 9)")
+    ax2.set_ylabel("median 3D position error, uncalibrated (cm, log)")
+    ax2.set_title("Over the range (same sign as the real size)")
+    ax2.legend(fontsize=7.5, ncol=2)
+    ax2.grid(alpha=0.3, which="both")
+    p = env.plan
+    fig.suptitle(
+        "Envelope, realistic profile (error classes one at a time on a baseline of vibration "
+        f"{BASELINE_NOISE_MPS2:g} m/s², every other class off), no motion capture; "
+        f"{len(p.spots)} of the paper's spots, errors from {p.steady_from_s:g} s",
+        y=1.01,
+    )
+    fig.tight_layout()
+    return _save(fig, out_dir, "envelope.png")
+
+
+def envelope_model(env: EnvelopeResult, out_dir: Path) -> str:
+    """Realistic profile, baseline: ω error, tether length, distance from the base."""
+    sweeps = env.sweeps
+    fig, axes = plt.subplots(1, len(sweeps), figsize=(5 * len(sweeps), 4.3))
+    for ax, sw in zip(np.atleast_1d(axes), sweeps, strict=True):
         v = [pt.value for pt in sw.points]
-        ax.plot(v, [100 * pt.median_m for pt in sw.points], "o-", label="median 3D error")
-        ax.plot(v, [100 * pt.p95_m for pt in sw.points], "s-", label="p95 3D error")
+        ax.plot(v, [100 * pt.stats.median_m for pt in sw.points], "o-", label="median 3D error")
+        ax.plot(v, [100 * pt.stats.p95_m for pt in sw.points], "s-", label="p95 3D error")
         ax.plot(
-            v, [100 * pt.vertical_median_m for pt in sw.points], "^:", lw=0.9, label="median |Δz|"
+            v,
+            [100 * pt.stats.vertical_median_m for pt in sw.points],
+            "^:",
+            lw=0.9,
+            label="median |Δz|",
         )
         ax.plot(
             v,
-            [100 * pt.horizontal_median_m for pt in sw.points],
+            [100 * pt.stats.horizontal_median_m for pt in sw.points],
             "v:",
             lw=0.9,
             label="median horizontal error",
         )
-        ax.axhline(
-            100 * TRUST_P95_M,
-            color="tab:red",
-            ls=":",
-            lw=1.2,
-            label="10 cm: p95 below it = trusted",
-        )
+        ax.axhline(100 * TRUST_P95_M, color="tab:red", ls=":", lw=1.0, label="10 cm")
         ax.axvline(sw.sweep.nominal, color="0.5", lw=0.8, ls="--", label="nominal")
         ax.set_yscale("log")
-        ax.set_ylim(0.3, 300)
+        ax.set_ylim(0.5, 500)
         ax.set_xlabel(sw.sweep.label)
         ax.set_ylabel("position error (cm, log)")
         ax.set_title(sw.sweep.label.split(" (")[0])
         ax.grid(alpha=0.3, which="both")
-    legend_ax = flat[len(sweeps)]
-    handles, labels = flat[0].get_legend_handles_labels()
-    legend_ax.legend(handles, labels, loc="center", fontsize=10)
-    legend_ax.axis("off")
-    for ax in flat[len(sweeps) + 1 :]:
-        ax.axis("off")
+    np.atleast_1d(axes)[0].legend(fontsize=8)
     fig.suptitle(
-        "Envelope: position error without motion capture, one factor at a time (others nominal)",
-        y=1.0,
+        "The model's factors, realistic profile, baseline (vibration "
+        f"{BASELINE_NOISE_MPS2:g} m/s², every other error class off), no motion capture",
+        y=1.02,
     )
     fig.tight_layout()
-    return _save(fig, out_dir, "envelope.png")
+    return _save(fig, out_dir, "envelope_model.png")
 
 
 def all_figures(
@@ -521,7 +607,7 @@ def all_figures(
     cat: CatenaryResult,
     svc: ServiceResult,
     dash: DashboardResult,
-    sweeps: tuple[SweepResult, ...],
+    env: EnvelopeResult,
     out_dir: Path,
 ) -> dict[str, str]:
     return {
@@ -534,5 +620,6 @@ def all_figures(
         "tug_landing": tug_landing(traces, out_dir),
         "catenary": catenary(cat, out_dir),
         "service": service(svc, dash, out_dir),
-        "envelope": envelope(sweeps, out_dir),
+        "envelope": envelope(env, out_dir),
+        "envelope_model": envelope_model(env, out_dir),
     }

@@ -22,7 +22,7 @@ import math
 import multiprocessing
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -230,9 +230,25 @@ class ErrorTrace:
     airborne: BoolArray
     azimuth_determined: BoolArray
     floor_contact: BoolArray
+    tension_error_n: FloatArray  # |T_est − T_true|
 
 
-def _run_reduced(job: SimJob) -> Trace | ErrorTrace:
+class RunnableJob(Protocol):
+    """A job of another kind (e.g. a realistic-profile flight of the envelope): a key, a
+    simulated duration for the ordering, and its own ``run`` in the worker."""
+
+    @property
+    def key(self) -> str: ...
+
+    @property
+    def seconds(self) -> float: ...
+
+    def run(self) -> Any: ...
+
+
+def _run_reduced(job: SimJob | RunnableJob) -> Any:
+    if not isinstance(job, SimJob):
+        return job.run()
     trace = run_job(job)
     if job.reduce != "error":
         return trace
@@ -245,11 +261,12 @@ def _run_reduced(job: SimJob) -> Trace | ErrorTrace:
         airborne=~trace.est_on_ground,
         azimuth_determined=trace.azimuth_determined,
         floor_contact=trace.true_floor_contact,
+        tension_error_n=np.linalg.norm(trace.est_tension_n - trace.true_tension_n, axis=1),
     )
 
 
 def run_jobs(
-    jobs: Iterable[SimJob],
+    jobs: Iterable[SimJob | RunnableJob],
     workers: int,
     progress: Callable[[str], None] | None = None,
 ) -> dict[str, Any]:
