@@ -963,54 +963,37 @@ class Pipeline:
             if not (_finite(position_m) and _finite(position_std_m)):
                 position = position_m = position_std_m = None
         # In the model's order (ESTIMATE_FIELD_ORDER): encode_estimate_ordered takes it as is.
-        fields: dict[str, Any]
-        if position is None:
-            fields = {
-                "seq": msg.seq,
-                "stamp_s": msg.stamp_s,
-                "tension_n": tension,
-                "tension_std_n": std,
-                "horizontal_n": math.hypot(tension[0], tension[1]),
-                "vertical_n": -tension[2],
-                "position_m": None,
-                "follow": cached[1],
-                "position_std_m": None,
-                "radial_m": None,
-                "radial_interval_m": None,
-                "azimuth_determined": None,
-                "azimuth_source": None,
-                "floor_contact": None,
-                "on_ground": on_ground,
-                "converged": converged,
-                "length_m": runtime.length_m,
-                "base_m": base[1],
-                "calibration": runtime.calibration_source,
-                "calibration_extrapolated": runtime.calibration_extrapolated,
-            }
-        else:
+        radial_m = radial_interval_m = azimuth_determined = azimuth_source = None
+        floor_contact = None
+        if position is not None:
             lo, hi = position.radial_interval_m
-            fields = {
-                "seq": msg.seq,
-                "stamp_s": msg.stamp_s,
-                "tension_n": tension,
-                "tension_std_n": std,
-                "horizontal_n": math.hypot(tension[0], tension[1]),
-                "vertical_n": -tension[2],
-                "position_m": position_m,
-                "follow": cached[1],
-                "position_std_m": position_std_m,
-                "radial_m": float(position.radial_m),
-                "radial_interval_m": (float(lo), float(hi)),
-                "azimuth_determined": position.azimuth_determined,
-                "azimuth_source": position.azimuth_source,
-                "floor_contact": bool(position.floor_contact),
-                "on_ground": on_ground,
-                "converged": converged,
-                "length_m": runtime.length_m,
-                "base_m": base[1],
-                "calibration": runtime.calibration_source,
-                "calibration_extrapolated": runtime.calibration_extrapolated,
-            }
+            radial_m = float(position.radial_m)
+            radial_interval_m = (float(lo), float(hi))
+            azimuth_determined = position.azimuth_determined
+            azimuth_source = position.azimuth_source
+            floor_contact = bool(position.floor_contact)
+        fields: dict[str, Any] = {
+            "seq": msg.seq,
+            "stamp_s": msg.stamp_s,
+            "tension_n": tension,
+            "tension_std_n": std,
+            "horizontal_n": math.hypot(tension[0], tension[1]),
+            "vertical_n": -tension[2],
+            "position_m": position_m,
+            "follow": cached[1],
+            "position_std_m": position_std_m,
+            "radial_m": radial_m,
+            "radial_interval_m": radial_interval_m,
+            "azimuth_determined": azimuth_determined,
+            "azimuth_source": azimuth_source,
+            "floor_contact": floor_contact,
+            "on_ground": on_ground,
+            "converged": converged,
+            "length_m": runtime.length_m,
+            "base_m": base[1],
+            "calibration": runtime.calibration_source,
+            "calibration_extrapolated": runtime.calibration_extrapolated,
+        }
         try:
             payload = encode_estimate_ordered(fields)
         except ValueError as exc:  # a non-finite field the checks above did not cover
