@@ -36,13 +36,12 @@ from groundstation.config import Settings, load_settings
 from groundstation.messages import Estimate
 from groundstation.pipeline import Parsed, Pipeline
 from groundstation.service import Service, group_by_drone
+from tests.hover_synth import hover_body
 
 MASS_KG = 0.030
-GRAVITY_MPS2 = 9.81
 DT_S = 0.004
 DRONE = "cf1"
 HOVER_N = np.array([-0.020, 0.005, -0.060])
-E3 = np.array([0.0, 0.0, 1.0])
 # Every setting the per-message path reads, pinned: a later change of a default must not
 # pass for a change of behaviour (or fail this test).
 PINNED: dict[str, Any] = {
@@ -67,28 +66,6 @@ def pinned_settings() -> Settings:
 # ---------------------------------------------------------------- the sequence
 
 
-def _quat_aligning_e3(direction: np.ndarray) -> np.ndarray:
-    """Scalar-first quaternion whose body +z points along ``direction`` (world)."""
-    d = direction / np.linalg.norm(direction)
-    axis = np.cross(E3, d)
-    s = float(np.linalg.norm(axis))
-    if s < 1e-12:
-        return np.array([1.0, 0.0, 0.0, 0.0])
-    angle = math.atan2(s, float(d[2]))
-    return np.concatenate([[math.cos(angle / 2)], math.sin(angle / 2) * axis / s])
-
-
-def _rotation(q: np.ndarray) -> np.ndarray:
-    w, x, y, z = q / np.linalg.norm(q)
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ]
-    )
-
-
 def _telemetry(
     seq: int,
     tension_n: np.ndarray,
@@ -100,20 +77,16 @@ def _telemetry(
     drone: str = DRONE,
 ) -> Sample:
     """A drone holding still against ``tension_n`` (world, N), with the simulator's noise."""
-    thrust_vec = -(tension_n + MASS_KG * np.array([0.0, 0.0, -GRAVITY_MPS2]))
-    quat = _quat_aligning_e3(thrust_vec)
-    accel = _rotation(quat).T @ np.array([0.0, 0.0, GRAVITY_MPS2]) + rng.normal(0.0, 0.3, 3)
-    thrust = thrust_scale * float(np.linalg.norm(thrust_vec)) + float(rng.normal(0.0, 0.003))
-    body: dict[str, Any] = {
-        "seq": seq,
-        "stamp_s": seq * DT_S,
-        "accel_mps2": accel.tolist(),
-        "quat_wxyz": quat.tolist(),
-        "thrust_n": max(thrust, 0.0),
-        "armed": armed,
-    }
-    if position_m is not None:
-        body["position_m"] = position_m
+    body = hover_body(
+        seq,
+        tension_n,
+        rng,
+        mass_kg=MASS_KG,
+        dt_s=DT_S,
+        armed=armed,
+        thrust_scale=thrust_scale,
+        position_m=position_m,
+    )
     return Sample(f"tether/{drone}/telemetry", json.dumps(body).encode())
 
 

@@ -16,7 +16,6 @@ once with the service's own threshold.
 from __future__ import annotations
 
 import json
-import math
 from collections import Counter
 from collections.abc import Callable
 from typing import Any
@@ -29,12 +28,11 @@ from groundstation.bus import Sample
 from groundstation.config import Settings, load_settings
 from groundstation.pipeline import Parsed, Pipeline
 from groundstation.service import Service
+from tests.hover_synth import hover_body
 
 MASS_KG = 0.030
-GRAVITY_MPS2 = 9.81
 DT_S = 0.004
 HOVER_N = np.array([-0.020, 0.005, -0.060])
-E3 = np.array([0.0, 0.0, 1.0])
 STEPS = 320
 
 
@@ -51,55 +49,14 @@ def settings() -> Settings:
     )
 
 
-def _quat_aligning_e3(direction: np.ndarray) -> np.ndarray:
-    d = direction / np.linalg.norm(direction)
-    axis = np.cross(E3, d)
-    s = float(np.linalg.norm(axis))
-    if s < 1e-12:
-        return np.array([1.0, 0.0, 0.0, 0.0])
-    angle = math.atan2(s, float(d[2]))
-    return np.concatenate([[math.cos(angle / 2)], math.sin(angle / 2) * axis / s])
-
-
-def _rotation(q: np.ndarray) -> np.ndarray:
-    w, x, y, z = q / np.linalg.norm(q)
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ]
-    )
-
-
 def _telemetry(
     drone: str,
     seq: int,
     tension_n: np.ndarray,
     rng: np.random.Generator,
-    *,
-    armed: bool = True,
-    thrust_scale: float = 1.0,
-    position_m: list[float] | None = None,
-    quat: list[float] | None = None,
-    vbat_v: float | None = None,
+    **kwargs: Any,
 ) -> bytes:
-    thrust_vec = -(tension_n + MASS_KG * np.array([0.0, 0.0, -GRAVITY_MPS2]))
-    q = _quat_aligning_e3(thrust_vec)
-    accel = _rotation(q).T @ np.array([0.0, 0.0, GRAVITY_MPS2]) + rng.normal(0.0, 0.3, 3)
-    thrust = thrust_scale * float(np.linalg.norm(thrust_vec)) + float(rng.normal(0.0, 0.003))
-    body: dict[str, Any] = {
-        "seq": seq,
-        "stamp_s": seq * DT_S,
-        "accel_mps2": accel.tolist(),
-        "quat_wxyz": quat if quat is not None else q.tolist(),
-        "thrust_n": max(thrust, 0.0),
-        "armed": armed,
-    }
-    if position_m is not None:
-        body["position_m"] = position_m
-    if vbat_v is not None:
-        body["vbat_v"] = vbat_v
+    body = hover_body(seq, tension_n, rng, mass_kg=MASS_KG, dt_s=DT_S, **kwargs)
     return json.dumps(body).encode()
 
 
