@@ -166,13 +166,14 @@ def _log(msg: str, t0: float) -> None:
     print(f"[results {time.perf_counter() - t0:6.1f} s] {msg}", file=sys.stderr, flush=True)
 
 
-def run(quick: bool, out_dir: Path, workers: int) -> Outcome:
-    t0 = time.perf_counter()
-    load_start = os.getloadavg()[0]
-    phases: dict[str, float] = {}
+def _closed_loop(
+    quick: bool, workers: int, t0: float
+) -> tuple[dict[str, Any], rp.PaperResults, renv.EnvelopeResult]:
+    """The closed-loop flights of sections (a) and (d) on worker processes.
 
-    # 1. Closed loop (a) and (d), on worker processes, before anything starts threads.
-    t = time.perf_counter()
+    Returns:
+        (a)'s traces by key, (a)'s summary, (d)'s envelope summary.
+    """
     pplan, eplan = rp.plan(quick), renv.plan(quick)
     jobs = rp.jobs(pplan) + renv.jobs(eplan)
     _log(f"closed loop: {len(jobs)} runs, {sum(j.seconds for j in jobs):.0f} s simulated", t0)
@@ -185,8 +186,17 @@ def run(quick: bool, out_dir: Path, workers: int) -> Outcome:
 
     results = run_jobs(jobs, workers, progress)
     traces = {k: v for k, v in results.items() if not k.startswith(("envr/", "envm/"))}
-    paper = rp.summarize(traces, pplan)
-    envelope = renv.summarize(results, eplan)
+    return traces, rp.summarize(traces, pplan), renv.summarize(results, eplan)
+
+
+def run(quick: bool, out_dir: Path, workers: int) -> Outcome:
+    t0 = time.perf_counter()
+    load_start = os.getloadavg()[0]
+    phases: dict[str, float] = {}
+
+    # 1. Closed loop (a) and (d), on worker processes, before anything starts threads.
+    t = time.perf_counter()
+    traces, paper, envelope = _closed_loop(quick, workers, t0)
     phases["closed loop (a), (d)"] = time.perf_counter() - t
 
     # 2. Catenary (b): alone, timing-sensitive.
@@ -1478,20 +1488,7 @@ def results_markdown(o: Outcome, prov: dict[str, str], wall_s: float) -> str:
 def run_envelope_only(quick: bool, out_dir: Path, workers: int) -> EnvelopeOutcome:
     """Section (d) alone: its flights and (a)'s (the bullets cite both), its two figures."""
     t0 = time.perf_counter()
-    pplan, eplan = rp.plan(quick), renv.plan(quick)
-    jobs = rp.jobs(pplan) + renv.jobs(eplan)
-    _log(f"closed loop: {len(jobs)} runs, {sum(j.seconds for j in jobs):.0f} s simulated", t0)
-    done = [0]
-
-    def progress(key: str) -> None:
-        done[0] += 1
-        if done[0] % 20 == 0 or done[0] == len(jobs):
-            _log(f"closed loop: {done[0]}/{len(jobs)}", t0)
-
-    results = run_jobs(jobs, workers, progress)
-    traces = {k: v for k, v in results.items() if not k.startswith(("envr/", "envm/"))}
-    paper = rp.summarize(traces, pplan)
-    env = renv.summarize(results, eplan)
+    _traces, paper, env = _closed_loop(quick, workers, t0)
     figures = {
         "envelope": rfig.envelope(env, out_dir / "figures"),
         "envelope_model": rfig.envelope_model(env, out_dir / "figures"),
