@@ -267,6 +267,16 @@ def _seq_of(payload: bytes) -> int:
     return int(json.loads(payload)["seq"])
 
 
+def _prime(bus: ZenohBus, key: str, payload: bytes, first: threading.Event, endpoint: str) -> None:
+    """Publish ``payload`` until the SUT's first estimate sets ``first`` (at most 30 s)."""
+    deadline = time.monotonic() + 30
+    while not first.is_set() and time.monotonic() < deadline:
+        bus.publish(key, payload)
+        first.wait(0.2)
+    if not first.is_set():
+        raise TimeoutError(f"no estimate from the SUT on {endpoint}")
+
+
 def drive(
     endpoint: str,
     n_drones: int,
@@ -311,12 +321,7 @@ def drive(
     try:
         bus.subscribe("tether/*/estimate", on_estimate)
         keys = [f"tether/d{d}/telemetry" for d in range(n_drones)]
-        deadline = time.monotonic() + 30
-        while not first.is_set() and time.monotonic() < deadline:
-            bus.publish(keys[0], payloads[0][0])
-            first.wait(0.2)
-        if not first.is_set():
-            raise TimeoutError(f"no estimate from the SUT on {endpoint}")
+        _prime(bus, keys[0], payloads[0][0], first, endpoint)
         time.sleep(0.5)  # late warm-up replies out of the way
         publish = bus.publish
         threads0 = thread_cpu_s(sut_pid)
@@ -436,12 +441,7 @@ def capacity(
     try:
         bus.subscribe("tether/*/estimate", on_estimate)
         keys = [f"tether/d{d}/telemetry" for d in range(n_drones)]
-        deadline = time.monotonic() + 30
-        while not first.is_set() and time.monotonic() < deadline:
-            bus.publish(keys[0], payloads[0][0])
-            first.wait(0.2)
-        if not first.is_set():
-            raise TimeoutError(f"no estimate from the SUT on {endpoint}")
+        _prime(bus, keys[0], payloads[0][0], first, endpoint)
         t_start = time.monotonic()
         for k in range(warmup_steps):
             delay = t_start + k * PERIOD_S - time.monotonic()
