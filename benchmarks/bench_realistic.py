@@ -58,6 +58,7 @@ import numpy as np
 
 from groundstation.bus import Sample
 from groundstation.config import CalibrationSection, Settings, load_settings
+from groundstation.evaluation import closed_loop
 from groundstation.localization import localize
 from groundstation.pipeline import Pipeline, calibration_from_config
 from groundstation.sim import PAPER_HOVER_SPOTS_M, SCENARIOS, Pull, Scenario, Simulator, Waypoint
@@ -111,11 +112,15 @@ def _tug_scenario() -> str:
 
 
 def _settings(
-    noise_mps2: float, seed: int, classes: dict[str, bool], calibration: dict[str, Any] | None
+    noise_mps2: float,
+    seed: int,
+    classes: dict[str, bool],
+    calibration: dict[str, Any] | None,
+    mocap: bool = False,
 ) -> Settings:
     realistic: dict[str, Any] = {"accel_noise_mps2": noise_mps2, **classes}
     over: dict[str, Any] = {
-        "sim": {"profile": "realistic", "seed": seed, "mocap": False, "realistic": realistic}
+        "sim": {"profile": "realistic", "seed": seed, "mocap": mocap, "realistic": realistic}
     }
     if calibration is not None:
         over["calibration"] = calibration
@@ -387,6 +392,96 @@ def tug(noise: float, seeds: list[int]) -> dict[str, Any]:
     }
 
 
+def _true_at(run: Any, stamps_s: np.ndarray) -> np.ndarray:
+    """True drone positions (n, 3) at the simulator's truth stamps nearest to ``stamps_s``."""
+    keys = np.array(sorted(run.truth))
+    idx = np.clip(np.searchsorted(keys, stamps_s), 0, len(keys) - 1)
+    return np.array([run.truth[float(keys[i])]["position_m"] for i in idx], dtype=float)
+
+
+def _refusals(pipe: Pipeline) -> int:
+    status = pipe.status(DRONE, math.inf) or {}
+    return int(status.get("drops", {}).get("follow_refused", 0))
+
+
+def follow_flights(
+    noise: float, seeds: list[int], mocap: bool, calibration: str = "truth"
+) -> dict[str, Any]:
+    """The ``follow`` and ``tug_landing`` scenarios in closed loop.
+
+    ``calibration``: ``truth`` (the drawn errors as ``[calibration]``), ``none`` (every
+    drawn error uncorrected; the service refuses follow without motion capture then), or
+    ``declared`` (uncorrected, but ``[calibration] source`` set, so the service takes the
+    defaults for a calibration and follows: what it did before it refused).
+
+    ``follow``: the operator enables following (threshold 0.15 N) at 3 s, a hand pulls
+    with ~0.2 N at 6-8 s and 14-16 s. ``tug_landing``: the same with ``land_below_m``
+    0.25 m, pulled down and toward the base from 6 s. Counted per flight: setpoints before
+    the operator enabled following (must be 0), the drone's true displacement along each
+    pull (from the pull's start to 0.5 s after its end), time with following active and no
+    hand pulling, Stops (``follow``: must be 0; ``tug_landing``: exactly 1, after the pull
+    began), and whether the motors were stopped at the end.
+    """
+    fol_sc, land_sc = SCENARIOS["follow"], SCENARIOS["tug_landing"]
+    enable_s = fol_sc.operator[0][0]
+    along: list[list[float]] = [[] for _ in fol_sc.pulls]
+    early_sp, fol_stops, free_active = [], [], []
+    stops, early_stops, landed, z_stop, stop_delay = [], [], 0, [], []
+    refused: list[int] = []
+    for seed in seeds:
+        cal = (
+            _true_calibration(noise, seed, {})
+            if calibration == "truth"
+            else {"source": "declared, not calibrated"}
+            if calibration == "declared"
+            else None
+        )
+        settings = _settings(noise, seed, {}, cal, mocap)
+        run, pipe, _ = closed_loop(settings, "follow", fol_sc.duration_s or 22.0)
+        refused.append(_refusals(pipe))
+        early_sp.append(sum(1 for sp in run.setpoints if sp["stamp_s"] < enable_s))
+        fol_stops.append(len(run.stops))
+        t = np.array([e["stamp_s"] for e in run.estimates])
+        active = np.array([bool(e["follow"]["active"]) for e in run.estimates])
+        in_pull = np.zeros(t.size, dtype=bool)
+        for j, pull in enumerate(fol_sc.pulls):
+            in_pull |= (t >= pull.start_s) & (t < pull.end_s + 0.5)
+            a, b = _true_at(run, np.array([pull.start_s, pull.end_s + 0.5]))
+            f = np.asarray(pull.force_world_n, dtype=float)
+            along[j].append(float((b - a) @ f / np.linalg.norm(f)))
+        dt = float(np.median(np.diff(t)))
+        free_active.append(float(np.sum(active & ~in_pull)) * dt)
+
+        run, pipe, sim = closed_loop(settings, "tug_landing", land_sc.duration_s or 16.0)
+        refused.append(_refusals(pipe))
+        pull0 = land_sc.pulls[0]
+        stops.append(len(run.stops))
+        early_stops.append(sum(1 for st in run.stops if st["stamp_s"] < pull0.start_s))
+        landed += int(not sim.drones[DRONE].armed)
+        if run.stops:
+            t_stop = float(run.stops[0]["stamp_s"])
+            stop_delay.append(t_stop - pull0.start_s)
+            z_stop.append(float(_true_at(run, np.array([t_stop]))[0, 2]))
+    return {
+        "noise": noise,
+        "mocap": mocap,
+        "calibration": calibration,
+        "seeds": len(seeds),
+        "follow_refused": sum(refused),
+        "flights": len(refused),
+        "setpoints_before_enable": early_sp,
+        "along_pull_m": [float(np.mean(v)) for v in along],
+        "active_without_pull_s": float(np.mean(free_active)),
+        "follow_stops": fol_stops,
+        "landing_stops": stops,
+        "stops_before_pull": early_stops,
+        "landed": landed,
+        "stop_after_pull_s": float(np.median(stop_delay)) if stop_delay else None,
+        "z_at_stop_m": float(np.median(z_stop)) if z_stop else None,
+        "z_at_stop_range_m": [min(z_stop), max(z_stop)] if z_stop else None,
+    }
+
+
 def _settle(t: np.ndarray, err: np.ndarray, tol: float = 0.003) -> float | None:
     bad = np.flatnonzero(~(err <= tol))
     if len(bad) == 0:
@@ -474,6 +569,8 @@ def render(res: dict[str, Any], cmd: str, wall_s: float) -> str:
         L += _render_false(res)
     if "tug" in res:
         L += _render_tug(res)
+    if "follow" in res:
+        L += _render_follow(res)
     if "envelope" in res:
         L += _render_envelope(res)
     L += _render_reading(res)
@@ -567,6 +664,51 @@ def _render_tug(res: dict[str, Any]) -> list[str]:
     return L
 
 
+def _render_follow(res: dict[str, Any]) -> list[str]:
+    L = [
+        "## Tension following and tug-to-land",
+        "",
+        "The scenarios of the results page's section (a), here on the realistic profile: "
+        "`follow` (following enabled at 3 s with threshold 0.15 N; a hand pulls ~0.2 N at "
+        "6-8 s and 14-16 s) and `tug_landing` (the same with `land_below_m` 0.25 m; a pull "
+        "down and toward the base from 6 s). *mocap*: the service gets the motion-capture "
+        "position (the paper's follow mode); *tether*: IMU, attitude and thrust only. Moved "
+        "along pull: the drone's true displacement along the pull's direction from its start "
+        "to 0.5 s after its end, mean over seeds (+: it yields). Active with no pull: time "
+        "with following active outside the pulls (and 0.5 s after them), mean per flight. "
+        "Stops per flight: `follow` must send none, `tug_landing` exactly one after the pull "
+        "began. Calibration: *truth* (the simulator's drawn errors, as for hover), or "
+        "*none* (every drawn error uncorrected), or none but *declared* (`[calibration] "
+        "source` set over the defaults: the service takes them for a calibration, as it did "
+        "for every drone before it refused follow without motion capture and without a "
+        "calibration). Follow refused: the operator's command was rejected.",
+        "",
+        "| accel noise | position | calibration | seeds | follow refused "
+        "| setpoints before enabled | moved along pull 1 / 2 "
+        "| active with no pull | Stops in follow | Stops in tug_landing (before the pull) "
+        "| landed | pull -> Stop | true z at Stop, median (range) |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    for f in res["follow"]:
+        moved = " / ".join(f"{m:.2f} m" for m in f["along_pull_m"])
+        pos = "mocap" if f["mocap"] else "tether"
+        cal = {"truth": "truth", "none": "**none**", "declared": "none, *declared*"}[
+            f["calibration"]
+        ]
+        zr = f["z_at_stop_range_m"]
+        z_at = "n/a" if zr is None else f"{_cm(f['z_at_stop_m'])} ({_cm(zr[0])}-{_cm(zr[1])})"
+        L.append(
+            f"| {f['noise']:.1f} m/s^2 | {pos} | {cal} | {f['seeds']} "
+            f"| {f['follow_refused']} of {f['flights']} flights "
+            f"| {f['setpoints_before_enable']} | {moved} | {f['active_without_pull_s']:.2f} s "
+            f"| {f['follow_stops']} | {f['landing_stops']} ({f['stops_before_pull']}) "
+            f"| {f['landed']}/{f['seeds']} | {_s(f['stop_after_pull_s'])} "
+            f"| {z_at} |"
+        )
+    L.append("")
+    return L
+
+
 def _render_envelope(res: dict[str, Any]) -> list[str]:
     L = [
         "## Uncalibrated: which error costs how many cm",
@@ -615,7 +757,7 @@ def _render_reading(res: dict[str, Any]) -> list[str]:
     return L
 
 
-SECTIONS = ("hover", "false_tugs", "tug", "envelope")
+SECTIONS = ("hover", "false_tugs", "tug", "follow", "envelope")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -675,6 +817,15 @@ def main(argv: list[str] | None = None) -> int:
         for n in levels:
             res["tug"].append(tug(n, seeds))
             log(f"tug: {res['tug'][-1]}")
+    if "follow" in only:
+        follow_seeds = [500, 501, 502, 503] if not quick else [500]
+        res["follow"] = []
+        rows = ((True, "truth"), (True, "none"), (False, "truth"), (False, "none"))
+        rows += ((False, "declared"),)
+        for n in levels:
+            for mocap, cal in rows:
+                res["follow"].append(follow_flights(n, follow_seeds, mocap, cal))
+                log(f"follow: {res['follow'][-1]}")
     if "envelope" in only:
         env_spots = [0, 3] if quick else list(range(6))
         res["envelope_spots"] = len(env_spots)

@@ -73,6 +73,17 @@ MAX_DRONES = 256
 _KEY_CACHE_SIZE = 4 * MAX_DRONES
 """Parsed keys remembered (each drone has four input kinds)."""
 _MAX_GAP_S = 1.0
+MOCAP_HOLD_S = 0.3
+"""A motion-capture position stays the drone's external position for this long (telemetry
+stamp) after the frame that brought it, s. Real motion capture reaches a drone's telemetry
+at 70-116 Hz against the IMU's 100 Hz, in bursts, with gaps up to 150 ms (the realistic
+profile draws the same): without the hold, follow would switch to the tether-based position
+on every telemetry message without a fresh frame."""
+UNTRUSTED_POSITION_REASON = (
+    "no motion capture and no calibration: the tether-based position of an uncalibrated "
+    "drone is off by up to ~1 m, so it is not followed"
+)
+"""The follow ``reason`` while following is held off for want of a position it may fly to."""
 """A telemetry gap longer than this restarts the filter (the tension may have changed)."""
 _COMMAND_KINDS = frozenset({"follow", "params"})
 """Inputs from operators: every rejection of one is told on ``tether/{drone}/events``."""
@@ -168,6 +179,10 @@ class DroneRuntime:
     """Sensor corrections applied in the observation (None: none in force)."""
     calibration_source: str = "none"
     """Which calibration is in force (Estimate and status ``calibration``)."""
+    mocap_m: tuple[float, float, float] | None = None
+    """The last motion-capture ``position_m`` received in Telemetry, m, world frame."""
+    mocap_stamp_s: float = -math.inf
+    """The telemetry ``stamp_s`` that brought :attr:`mocap_m`, s."""
     vbat_range_v: tuple[float, float] | None = None
     """``[calibration] thrust_vbat_range_v``: the battery range the thrust map was calibrated
     over (None: not recorded)."""
@@ -196,6 +211,13 @@ class DroneRuntime:
         if self.last_estimate_fields is None or self.follow_json_cache is None:
             return None
         return Estimate(**{**self.last_estimate_fields, "follow": self.follow_json_cache[0]})
+
+
+def _fresh_mocap(runtime: DroneRuntime, stamp_s: float) -> tuple[float, float, float] | None:
+    """The drone's motion-capture position if a frame came within :data:`MOCAP_HOLD_S`."""
+    if runtime.mocap_m is not None and 0.0 <= stamp_s - runtime.mocap_stamp_s <= MOCAP_HOLD_S:
+        return runtime.mocap_m
+    return None
 
 
 def calibration_from_config(
@@ -529,7 +551,13 @@ class Pipeline:
         - enabling follow on a drone that is stale or has never sent telemetry (the README's
           rule: a stale drone drops follow and the operator enables it again; an unknown drone
           is the most stale of all, and would otherwise fly off in follow mode the moment it
-          starts).
+          starts);
+        - enabling follow on a drone with no motion capture (none within
+          :data:`MOCAP_HOLD_S`) while no calibration is in force: follow would fly it to its
+          tether-based position, which uncalibrated is off by up to a metre (on the
+          realistic simulator a tug-to-land Stop came at 0.9 m instead of 0.25 m;
+          docs/realistic_benchmark.md). The same condition while following holds the goal
+          (:meth:`_telemetry_back`).
 
         That a threshold is not below the tether's own pull is :mod:`groundstation.follow`'s
         business: the threshold applies to the pull beyond the tether's own tension there.
@@ -552,6 +580,19 @@ class Pipeline:
             return "enabled", (
                 f"{runtime.drone} is stale (silent for {now_s - runtime.last_seen_s:.1f} s): "
                 "follow stays off until it is heard again; not applied"
+            )
+        if (
+            runtime.calibration_source == "none"
+            and runtime.last_stamp_s is not None
+            and _fresh_mocap(runtime, runtime.last_stamp_s) is None
+        ):
+            return "enabled", (
+                f"{runtime.drone} has no motion capture (position_m) and no calibration "
+                "([calibration] source = none): following and tug-to-land would fly it to "
+                "its tether-based position, which uncalibrated is off by up to ~1 m (a "
+                "tug-to-land Stop at 0.9 m instead of 0.25 m, docs/realistic_benchmark.md)"
+                "; calibrate it (groundstation calibrate, docs/calibration.md) or send "
+                "position_m; not applied"
             )
         return None
 
@@ -725,6 +766,9 @@ class Pipeline:
         runtime.last_seq = msg.seq
         runtime.last_stamp_s = msg.stamp_s
         runtime.last_seen_s = now_s
+        if msg.position_m is not None:
+            runtime.mocap_m = msg.position_m
+            runtime.mocap_stamp_s = msg.stamp_s
         runtime.stale = False
         runtime.accepted += 1
         runtime.telemetry_rate.add(now_s)
@@ -748,6 +792,7 @@ class Pipeline:
         on_ground = runtime.contact.on_ground or obs.tension_world_n is None
         self._check_vbat_range(runtime, msg.vbat_v, on_ground, now_s)
         ext = runtime.calibration_extrapolated  # this sample's (a later front moves it)
+        mocap = _fresh_mocap(runtime, msg.stamp_s)  # likewise
 
         tension: Sequence[float] = _ZEROS3
         std: Sequence[float] = _ZEROS3
@@ -782,7 +827,19 @@ class Pipeline:
                 # drone's next message is filtered (in a batch, before its localization).
                 self.count_drop(runtime.drone, "non_finite_estimate", "filter produced NaN/inf")
                 runtime.filter.reset()
-                return (runtime, msg, now_s, tension, std, on_ground, converged, False, None, ext)
+                return (
+                    runtime,
+                    msg,
+                    now_s,
+                    tension,
+                    std,
+                    on_ground,
+                    converged,
+                    False,
+                    None,
+                    ext,
+                    mocap,
+                )
             if converged:
                 # Exit angles only while fresh: the reel reports at its own rate.
                 loc = self.settings.localization
@@ -800,8 +857,20 @@ class Pipeline:
                     else None,
                     msg.position_m,
                 )
-                return (runtime, msg, now_s, tension, std, on_ground, converged, True, loc_in, ext)
-        return (runtime, msg, now_s, tension, std, on_ground, converged, True, None, ext)
+                return (
+                    runtime,
+                    msg,
+                    now_s,
+                    tension,
+                    std,
+                    on_ground,
+                    converged,
+                    True,
+                    loc_in,
+                    ext,
+                    mocap,
+                )
+        return (runtime, msg, now_s, tension, std, on_ground, converged, True, None, ext, mocap)
 
     def _localize_one(self, loc_in: _LocalizeIn) -> PositionEstimate | None:
         loc = self.settings.localization
@@ -844,7 +913,7 @@ class Pipeline:
 
     def _telemetry_back(self, front: _Front, position: PositionEstimate | None) -> list[Sample]:
         """A telemetry message from its localization on: follow, the Estimate, commands."""
-        runtime, msg, now_s, tension, std, on_ground, converged, finite, _, ext = front
+        runtime, msg, now_s, tension, std, on_ground, converged, finite, _, ext, mocap = front
         # This sample's flag, as the front pass left it (in a batch, later messages' front
         # passes have moved it since).
         runtime.calibration_extrapolated = ext
@@ -856,24 +925,31 @@ class Pipeline:
             decision = None
         else:
             follow_position = (
-                np.array(msg.position_m, dtype=float)
-                if msg.position_m is not None
+                np.array(mocap, dtype=float)
+                if mocap is not None
                 else (position.position_world_m if position is not None else None)
             )
+            untrusted = mocap is None and runtime.calibration_source == "none"
             decision = follow_mod.follow_step(
                 fs,
                 runtime.follow_params,
                 stamp_s=msg.stamp_s,
                 tension_norm_n=_norm3(tension) if converged else None,
-                position_world_m=follow_position,
+                # Uncalibrated and without motion capture there is no position to fly to
+                # (follow's rule 3: no setpoint, no Stop, landing not armed).
+                position_world_m=None if untrusted else follow_position,
                 base_world_m=runtime.base_world_m,
                 length_m=runtime.length_m,
                 floor_z_m=runtime.params.base.floor_z_m,
                 tension_world_n=tension if converged else None,
-                position_is_external=msg.position_m is not None,
+                position_is_external=mocap is not None,
                 weight_n_per_m=runtime.weight_n_per_m,
                 on_ground=on_ground,
             )
+            if untrusted and decision.state.enabled and not decision.state.stopped:
+                decision = replace(
+                    decision, state=replace(decision.state, reason=UNTRUSTED_POSITION_REASON)
+                )
             runtime.follow_state = decision.state
         out: list[Sample] = []
         estimate = (
@@ -1102,10 +1178,12 @@ _Front = tuple[
     bool,
     "_LocalizeIn | None",
     "bool | None",
+    "tuple[float, float, float] | None",
 ]
 """A telemetry message stepped up to its localization (:meth:`Pipeline._telemetry_front`):
 runtime, message, receive time, tension, its std, on the ground, converged, finite, the
-localization's inputs (None: nothing to localize), calibration_extrapolated."""
+localization's inputs (None: nothing to localize), calibration_extrapolated, the motion
+capture position held for it (:func:`_fresh_mocap`)."""
 
 
 def _follow_stamped(state: follow_mod.FollowState, stamp_s: float) -> follow_mod.FollowState:

@@ -48,6 +48,9 @@ PINNED: dict[str, Any] = {
     "drone": {"mass_kg": MASS_KG, "accel_noise_mps2": 0.3, "thrust_noise_n": 0.003},
     "tether": {"weight_n_per_m": 0.05, "length_m": 1.6},
     "base": {"position_m": [0.0, 0.0, 0.754], "floor_z_m": 0.0},
+    # The synthetic sensors are exact: declared as the calibration, so that follow runs on
+    # the drones without motion capture too (uncalibrated it is refused there).
+    "calibration": {"source": "test: exact synthetic sensors"},
     "follow": {
         "threshold_n": 0.15,
         "hysteresis_ratio": 0.2,

@@ -8,9 +8,13 @@ import numpy as np
 import pytest
 
 from groundstation.bus import Sample
-from groundstation.config import load_settings
+from groundstation.config import Settings, load_settings
 from groundstation.evaluation import closed_loop, settings_for
 from groundstation.pipeline import Pipeline
+
+EXACT = {"calibration": {"source": "ideal simulator: exact sensors"}}
+"""The ideal profile's sensors are exact: declared as the calibration in force, so that
+follow runs without motion capture (uncalibrated it is refused there)."""
 
 GOOD = {
     "seq": 0,
@@ -106,7 +110,7 @@ def test_ground_contact_gives_no_tension() -> None:
 
 
 def test_stale_drone_disengages_follow_and_publishes_nothing() -> None:
-    pipe = Pipeline(settings_for())
+    pipe = Pipeline(load_settings(None, EXACT, use_env=False))
     pipe.handle(_telemetry(0), 0.0)
     pipe.handle(Sample("tether/cf1/follow", b'{"enabled": true}'), 0.01)
     (out,) = pipe.handle(_telemetry(1), 0.02)
@@ -118,8 +122,33 @@ def test_stale_drone_disengages_follow_and_publishes_nothing() -> None:
     assert pipe.drones["cf1"].follow_state.enabled is False
 
 
-def test_reel_params_and_follow_command_apply() -> None:
+def test_motion_capture_is_held_between_frames_and_follow_stops_trusting_without_it() -> None:
+    """Motion capture reaches telemetry at its own rate (70-116 Hz, gaps to 150 ms): a frame
+    stays the external position for MOCAP_HOLD_S of telemetry time, so follow does not fall
+    back to the tether-based position between frames. Uncalibrated, with no frame for longer
+    than that, follow holds off (no setpoint, the reason says why) instead of flying to the
+    tether-based position; a frame again and it trusts the position again."""
+    from groundstation.pipeline import MOCAP_HOLD_S, UNTRUSTED_POSITION_REASON
+
     pipe = Pipeline(settings_for())
+    at = [1.0, 0.0, 1.0]
+    pipe.handle(_telemetry(0, position_m=at), 0.0)
+    pipe.handle(Sample("tether/cf1/follow", b'{"enabled": true}'), 0.001)
+    reasons = []
+    for seq in range(1, 200):  # a frame on the first sample only, then none for 0.8 s
+        (out,) = pipe.handle(_telemetry(seq), seq * 0.004)
+        reasons.append((seq * 0.004, json.loads(out.payload)["follow"]["reason"]))
+    held = [r for t, r in reasons if t <= MOCAP_HOLD_S]
+    after = [r for t, r in reasons if t > MOCAP_HOLD_S]
+    assert held and UNTRUSTED_POSITION_REASON not in held
+    assert after and all(r == UNTRUSTED_POSITION_REASON for r in after)
+    assert pipe.drones["cf1"].follow_state.enabled, "held off, not switched off"
+    (out,) = pipe.handle(_telemetry(200, position_m=at), 0.8)
+    assert json.loads(out.payload)["follow"]["reason"] != UNTRUSTED_POSITION_REASON
+
+
+def test_reel_params_and_follow_command_apply() -> None:
+    pipe = Pipeline(load_settings(None, EXACT, use_env=False))
     pipe.handle(_telemetry(0), 0.0)
     pipe.handle(Sample("tether/cf1/params", b'{"weight_n_per_m": 0.07, "length_m": 2.0}'), 0.0)
     status = pipe.status("cf1", 0.0)
@@ -158,6 +187,74 @@ def test_follow_only_when_enabled_and_tug_landing_stops_once() -> None:
     reach = 1.6
     for sp in run.setpoints:
         assert np.linalg.norm(np.subtract(sp["position_m"], [0.0, 0.0, 0.754])) <= reach
+
+
+def _realistic(seed: int, *, mocap: bool, calibration: dict[str, object] | None) -> Settings:
+    """The realistic profile at its worst real noise (2 m/s^2), every error class at its real
+    size; ``calibration`` None leaves ``[calibration]`` at its defaults (nothing corrected)."""
+    over: dict[str, object] = {
+        "sim": {
+            "profile": "realistic",
+            "mocap": mocap,
+            "seed": seed,
+            "realistic": {"accel_noise_mps2": 2.0},
+        }
+    }
+    if calibration is not None:
+        over["calibration"] = calibration
+    return load_settings(None, over, use_env=False)
+
+
+def _true_calibration(seed: int) -> dict[str, object]:
+    """The flight's drawn sensor errors as ``[calibration]`` (the simulator's equivalent)."""
+    from groundstation.sim import Simulator
+
+    sim = Simulator(_realistic(seed, mocap=False, calibration=None), None, scenario="hover")  # type: ignore[arg-type]
+    drawn = sim.drawn_errors("cf1")
+    assert drawn is not None
+    eq = drawn["calibration"]
+    keys = ("thrust_scale", "thrust_vbat_slope_per_v", "thrust_vbat_ref_v", "thrust_axis_rad")
+    return {k: eq[k] for k in (*keys, "accel_bias_mps2")} | {"source": f"truth {seed}"}
+
+
+def test_uncalibrated_without_mocap_follow_is_refused_and_nothing_moves() -> None:
+    """Uncalibrated, the tether-based height of the realistic drone at 0.9 m reads 0.06-0.28 m
+    (seeds 0-7): a tug-to-land there stopped the motors at 0.86-0.90 m in 7 of 8 flights.
+    So without motion capture and without a calibration the service refuses follow: the
+    operator's command is rejected (counted), no setpoint, no Stop, the drone flies on."""
+    settings = _realistic(11, mocap=False, calibration=None)
+    run, pipe, sim = closed_loop(settings, "tug_landing", 16.0)
+    assert not run.setpoints and not run.stops
+    assert sim.drones["cf1"].armed
+    assert not any(e["follow"]["enabled"] for e in run.estimates)
+    status = pipe.status("cf1", 16.0)
+    assert status is not None and status["drops"].get("follow_refused") == 1
+
+
+def test_calibrated_without_mocap_tug_landing_stops_once_near_the_floor() -> None:
+    """The same flight with the calibration = the drawn truth: the pull engages following,
+    exactly one Stop after the pull began, with the drone low (true z below 0.4 m)."""
+    settings = _realistic(11, mocap=False, calibration=_true_calibration(11))
+    run, _, sim = closed_loop(settings, "tug_landing", 16.0)
+    assert run.setpoints and all(sp["stamp_s"] >= 3.0 for sp in run.setpoints)
+    assert len(run.stops) == 1 and run.stops[0]["stamp_s"] >= 6.0
+    assert run.truth_at(run.stops[0]["stamp_s"])["position_m"][2] < 0.4
+    assert not sim.drones["cf1"].armed
+
+
+def test_uncalibrated_with_mocap_hover_follow_on_and_nobody_pulling() -> None:
+    """Follow on (the default 0.10 N threshold, tug-to-land at 0.5 m) on a biased, vibrating
+    drone with motion capture that nobody pulls: the biases read as a steady tension, which
+    is the tether's own, so following never engages: no setpoint, no Stop, landing not armed."""
+    settings = _realistic(12, mocap=True, calibration=None)
+    enable = Sample("tether/cf1/follow", b'{"enabled": true, "land_below_m": 0.5}')
+    run, _, _ = closed_loop(
+        settings, "hover", 20.0, inject={round(3.0 * settings.sim.rate_hz): [enable]}
+    )
+    late = [e for e in run.estimates if e["stamp_s"] > 3.5]
+    assert late and all(e["follow"]["enabled"] for e in late), "follow was switched on"
+    assert not any(e["follow"]["active"] or e["follow"]["landing_armed"] for e in run.estimates)
+    assert not run.setpoints and not run.stops
 
 
 def test_no_nan_ever_published() -> None:
@@ -241,7 +338,9 @@ def test_near_taut_hover_with_follow_enabled_never_engages_until_pulled(
         ),
     )
     settings = load_settings(
-        None, {"sim": {"mocap": mocap, "seed": 5}, "tether": {"length_m": length_m}}, use_env=False
+        None,
+        {"sim": {"mocap": mocap, "seed": 5}, "tether": {"length_m": length_m}, **EXACT},
+        use_env=False,
     )
     run, _, _ = closed_loop(settings, "near_taut_test", 8.0)
     quiet = [e for e in run.estimates if 1.1 < e["stamp_s"] < 6.0]
@@ -261,9 +360,8 @@ def test_takeoff_ramp_publishes_no_floor_push_and_sends_no_stop(mocap: bool) -> 
     floor no tension above 20 mN is published and landing is never armed; no Stop at all;
     the lift-off is seen (on_ground false) by the time the drone is 4 cm up."""
     follow = Sample("tether/cf1/follow", b'{"enabled": true, "land_below_m": 0.3}')
-    run, _, sim = closed_loop(
-        settings_for(mocap=mocap, seed=11), "takeoff_ramp", 8.0, inject={0: [follow]}
-    )
+    settings = load_settings(None, {"sim": {"mocap": mocap, "seed": 11}, **EXACT}, use_env=False)
+    run, _, sim = closed_loop(settings, "takeoff_ramp", 8.0, inject={0: [follow]})
     assert not run.stops and sim.drones["cf1"].armed
     floor = [e for e in run.estimates if run.truth_at(e["stamp_s"])["on_ground"]]
     ramp = [e for e in floor if e["stamp_s"] >= 2.0]

@@ -32,6 +32,8 @@ def _telemetry(seq: int, pull_down_n: float = 0.0) -> bytes:
             "accel_mps2": [0.0, 0.0, accel_z],
             "quat_wxyz": [1.0, 0.0, 0.0, 0.0],
             "thrust_n": THRUST_N,
+            # motion capture: the service follows only a position it can trust
+            "position_m": [1.0, 0.0, 1.0],
         }
     ).encode()
 

@@ -109,12 +109,20 @@ def test_silence_makes_the_drone_stale_and_publishes_nothing(procs: Procs, make_
     probe, _ = _router_and_service(procs, make_probe)
     probe.collect("tether/*/estimate")
     probe.collect("tether/*/cmd/**")
+    probe.collect("tether/*/events")
     _wait_alive(probe)
     for seq in range(50):
-        probe.publish_json("tether/q1/telemetry", GOOD | {"seq": seq, "stamp_s": seq * 0.004})
+        # with motion capture: without it (and uncalibrated) follow would be refused outright
+        tel = GOOD | {"seq": seq, "stamp_s": seq * 0.004, "position_m": [1.0, 0.0, 1.0]}
+        probe.publish_json("tether/q1/telemetry", tel)
         time.sleep(0.004)
     probe.publish_json("tether/q1/follow", {"enabled": True})
     probe.wait_for(lambda: len(probe.got("tether/*/estimate")) >= 50, 10, "50 estimates")
+    probe.wait_for(
+        lambda: any(e["kind"] == "follow" for e in probe.json("tether/*/events")),
+        10,
+        "the premise: follow switched on",
+    )
     n = len(probe.got("tether/*/estimate"))
     deadline = time.monotonic() + 5.0
     while time.monotonic() < deadline and not _status(probe, "q1")["stale"]:
