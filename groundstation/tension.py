@@ -58,18 +58,6 @@ _EYE3.setflags(write=False)
 FloatArray = NDArray[np.float64]
 
 
-KEEP_AXIS_SIGMAS = 2.0
-"""On a detected change, an axis whose post-change mean lies within this many standard
-deviations of the level before the change keeps its estimate
-(:meth:`TensionFilter._restart`)."""
-WATCH_AXIS_SIGMAS = 3.5
-"""A kept axis restarts later, from the mean of every sample since the change, once that
-mean lies beyond this many standard deviations of its estimate
-(:meth:`TensionFilter._watch_step`)."""
-WATCH_AXIS_S = 1.0
-"""How long after a change the kept axes are watched, s."""
-
-
 class TensionError(ValueError):
     """Base class of the errors raised by this module."""
 
@@ -1020,16 +1008,7 @@ class TensionFilter:
     since then: x = their mean, P = R / n, which is what the Kalman filter itself would
     give from an uninformative prior with Q = 0 over those samples. So after a tug the
     estimate is the mean of every post-tug sample and the detection delay costs nothing;
-    the gain then decays by itself to the hover gain as P shrinks. Per axis: an axis whose
-    post-change mean lies within ``KEEP_AXIS_SIGMAS`` (2) standard deviations of the level
-    before the change keeps its estimate, and is watched for ``WATCH_AXIS_S`` (1 s): once
-    the mean of its samples since the change lies beyond ``WATCH_AXIS_SIGMAS`` (3.5) of
-    that level it restarts from that mean (:meth:`_restart`, :meth:`_watch_step`). A
-    30 mN step along x is found in ~10 samples at 0.3 m/s^2; restarting y and z from those
-    10 samples put 3-4 mN of error on them where they had 0.3-0.5 mN. Measured
-    (tests/test_tension.py, 30 mN along 8 directions x 5 seeds, 250 Hz): per-axis settle
-    within 3 mN, median 0.084 s restarting every axis, 0.036 s per axis; 39 of 40 within
-    0.3 s and at most 3.05 mN after 0.3 s either way.
+    the gain then decays by itself to the hover gain as P shrinks.
 
     **The 30 mN tug target and the rate.** "Within 10 % (3 mN) in 0.3 s" is an
     information limit before it is a filter property: 0.3 s holds 0.3 / dt samples, and
@@ -1119,11 +1098,6 @@ class TensionFilter:
         self._threshold_cache: tuple[tuple[int, int] | None, float] = (None, math.inf)
         self._step_countdown = 0
         self._decay_cache: tuple[float, float] = (math.nan, math.nan)
-        self._watch_axes = [False, False, False]  # axes kept at the last change
-        self._watch_sum = [0.0, 0.0, 0.0]  # sum of their observations since the change
-        self._watch_ref = [(0.0, 0.0)] * 3  # their estimate and variance before it
-        self._watch_n = 0
-        self._watch_left = 0
         self.reset()
 
     # -- state -------------------------------------------------------------------------
@@ -1170,7 +1144,6 @@ class TensionFilter:
         self._scale = 1.0
         self._ring.count = 0
         self._hist.clear()
-        self._watch_left = 0  # samples the kept axes are still watched for
 
     @property
     def initialized(self) -> bool:
@@ -1311,8 +1284,6 @@ class TensionFilter:
                 self._restart(mean, window, r)
             # On the fast test's scale: a detection is a statistic above change_threshold.
             stat = max(stat, step_stat * (p.change_threshold / h_step))
-            if not change and self._watch_left > 0:
-                self._watch_step(z, r)
         if self._noise.samples >= p.noise_warmup_samples or not p.estimate_noise:
             self._hist.push(z)
         return self._publish(change, stat, scale, s2, rho, r, tau)
@@ -1529,103 +1500,17 @@ class TensionFilter:
         self._restart(x.tolist(), window, r)
 
     def _restart(self, mean_n: list[float], window: int, r: tuple[float, ...]) -> None:
-        """x = the mean of the last ``window`` observations, P = R / window, on each axis
-        that changed; an axis without evidence of a change keeps its x and P.
-
-        An axis changed when the window's mean differs from the level before the change
-        (:meth:`_pre_change_level`; else the estimate) by more than ``KEEP_AXIS_SIGMAS``
-        standard deviations of that difference (or, if none does, the axis that differs
-        most); a kept axis is watched (:meth:`_watch_step`). Restarting every axis would
-        trade the other axes' converged estimates for the mean of a short window: a
-        30 mN step along x, found in ~10 samples at 0.3 m/s^2, put 3-4 mN of error
-        on y and z that took 0.3 s to average out again (the norm's settle time on the
-        results page, section (a)), against 0.3-0.5 mN before the step.
+        """x = the mean of the last ``window`` observations, P = R / window.
 
         The new regime began ``window`` samples ago: the step test keeps those samples'
         sums (and the one before them, its baseline) as the start of its next reference.
         """
-        kf = self._kf
-        x_old = kf.x[:, 0].tolist()
-        p_old = [float(kf.P[i, i]) for i in range(3)]
-        p_new = [r[i] / window for i in range(3)]  # P = R / n
-        ref = self._pre_change_level(window, r) or [(x_old[i], p_old[i]) for i in range(3)]
-        z2 = [(mean_n[i] - ref[i][0]) ** 2 / (p_new[i] + ref[i][1]) for i in range(3)]
-        changed = [z2[i] > KEEP_AXIS_SIGMAS**2 for i in range(3)]
-        if not any(changed):
-            changed[int(np.argmax(z2))] = True
-        x = [mean_n[i] if changed[i] else x_old[i] for i in range(3)]
-        P = np.diag([p_new[i] if changed[i] else p_old[i] for i in range(3)])
-        kf.P = P  # diagonal, as P always is here (F = H = I; Q, R diagonal)
-        kf.x = np.array(x).reshape(3, 1)
-        # A kept axis may have changed by less than the short window shows: watch it.
-        self._watch_axes = [not c for c in changed]
-        self._watch_ref = ref
-        self._watch_sum = [mean_n[i] * window for i in range(3)]
-        self._watch_n = window
-        dt_mean = self._dt_mean
-        span = WATCH_AXIS_S / dt_mean if dt_mean == dt_mean and dt_mean > 0.0 else 0.0
-        self._watch_left = int(span) if not all(changed) else 0
+        self._kf.P = np.diag([r[i] / window for i in range(3)])  # P = R / n
+        self._kf.x = np.array(mean_n).reshape(3, 1)
         self._ring.count = 0
         self._hist.count = min(self._hist.count, window)
         self._bias = [0.0, 0.0, 0.0]
         self._bias_var = 0.0
-
-    def _pre_change_level(
-        self, window: int, r: tuple[float, ...]
-    ) -> list[tuple[float, float]] | None:
-        """The level before the change and its variance per axis, ``(mean, r / m)``: the
-        mean of the up to ``long_reference_s`` of observations before the last ``window``
-        (the step test's reference), independent of the samples after the change, unlike
-        the filter's estimate, which has absorbed some of them by the detection. None
-        with fewer than 25 such samples in the regime."""
-        h = self._hist
-        dt_mean = self._dt_mean
-        if not (dt_mean == dt_mean and dt_mean > 0.0):
-            return None
-        # back(k) = C_(t-k); the window's n samples end with the newest, not yet pushed:
-        # the m before them sum to C_(t-n) - C_(t-n-m), as in the step test.
-        m = min(h.count - window, int(self.params.long_reference_s / dt_mean))
-        if m < 25:
-            return None
-        c = h.back(np.array([window, window + m], dtype=np.intp))
-        pre = ((c[0] - c[1]) / m).tolist()
-        return [(pre[i], r[i] / m) for i in range(3)]
-
-    def _watch_step(self, z: list[float], r: tuple[float, ...]) -> None:
-        """After a change, restarts a kept axis once the evidence shows it changed too.
-
-        The kept axes' observations since the change point are summed; once their mean
-        differs from the level before the change by more than ``WATCH_AXIS_SIGMAS``
-        standard deviations, sqrt(r / n + its variance), the axis restarts
-        from that mean (P = r / n): what
-        restarting it at the detection would give by now, without the short window's
-        noise when it had not changed. A 6.5 mN component of a 30 mN step (direction
-        (-1, 2, 0.5)) at 9 mN per sample is taken within ~25 samples; an axis that did
-        not change is taken by chance in a few per cent of changes, from a mean of many
-        samples. Watched for ``WATCH_AXIS_S`` after the change.
-        """
-        self._watch_left -= 1
-        self._watch_n += 1
-        n = self._watch_n
-        kf = self._kf
-        for i in range(3):
-            if not self._watch_axes[i]:
-                continue
-            self._watch_sum[i] += z[i]
-            mean = self._watch_sum[i] / n
-            # Against the level before the change (:meth:`_pre_change_level`).
-            x_ref, p_ref = self._watch_ref[i]
-            d = mean - x_ref
-            if d * d > WATCH_AXIS_SIGMAS**2 * (r[i] / n + p_ref):
-                kf.x[i, 0] = mean
-                P = kf.P.copy()
-                P[i, :] = 0.0
-                P[:, i] = 0.0
-                P[i, i] = r[i] / n
-                kf.P = P
-                self._watch_axes[i] = False
-        if not any(self._watch_axes):
-            self._watch_left = 0
 
     def _publish(
         self,
