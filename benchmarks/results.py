@@ -1043,7 +1043,10 @@ def _paper_section(o: Outcome) -> list[str]:
             f"{pulls_m}); following stayed active for {_s(ft.active_without_pull_s, 1)} with no "
             f"pull acting (mocap: {_s(fm.active_without_pull_s, 1)}). In `tug_landing` it sent "
             f"{lt.stops:g} Stop per run, at a true height of {_f(lt.z_at_stop_m, 1, 3, 'm')}, "
-            f"and landed in {lt.landed}/{lt.runs} runs."
+            f"and landed in {lt.landed}/{lt.runs} runs. (Without motion capture the service "
+            "follows only with a calibration in force; these runs declare the ideal profile's "
+            "exact sensors as one. Uncalibrated on the realistic profile it refuses: "
+            "docs/realistic_benchmark.md.)"
         )
     else:
         text = (
