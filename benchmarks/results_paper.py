@@ -332,6 +332,11 @@ class TugResult:
     release_norm_s: tuple[float, float] | None
     unsettled: int
     hover: ErrorStats  # error norm before the tug (2 s … onset), N
+    # The step oracle in the same runs: the mean of the raw observations since the step,
+    # its time known (no estimator without that knowledge or a prior on the step's
+    # direction settles sooner on average).
+    oracle_onset_axis_s: tuple[float, float] | None = None
+    oracle_onset_norm_s: tuple[float, float] | None = None
 
 
 def _median_max(values: list[float | None]) -> tuple[float, float] | None:
@@ -344,6 +349,7 @@ def tug(traces: dict[str, Trace]) -> TugResult:
     pull = sc.pulls[0]
     runs = _runs(traces, "tug")
     on_a, on_n, rel_a, rel_n, hover = [], [], [], [], []
+    orc_a, orc_n = [], []
     for tr in runs:
         diff = tr.est_tension_n - tr.true_tension_n
         norm = np.linalg.norm(diff, axis=1)
@@ -351,6 +357,15 @@ def tug(traces: dict[str, Trace]) -> TugResult:
         w = (tr.t_s >= pull.start_s) & (tr.t_s < pull.end_s)
         on_a.append(convergence_time_s(tr.t_s[w], axis[w], TENSION_TOL_N, pull.start_s))
         on_n.append(convergence_time_s(tr.t_s[w], norm[w], TENSION_TOL_N, pull.start_s))
+        y = tr.raw_tension_n[w]
+        mean = np.cumsum(y, axis=0) / np.arange(1, len(y) + 1)[:, None]
+        orc = mean - tr.true_tension_n[w]
+        orc_a.append(
+            convergence_time_s(tr.t_s[w], np.abs(orc).max(axis=1), TENSION_TOL_N, pull.start_s)
+        )
+        orc_n.append(
+            convergence_time_s(tr.t_s[w], np.linalg.norm(orc, axis=1), TENSION_TOL_N, pull.start_s)
+        )
         w = tr.t_s >= pull.end_s
         if w.sum() > 1:
             rel_a.append(convergence_time_s(tr.t_s[w], axis[w], TENSION_TOL_N, pull.end_s))
@@ -366,6 +381,8 @@ def tug(traces: dict[str, Trace]) -> TugResult:
         release_norm_s=_median_max(rel_n),
         unsettled=sum(v is None for v in all_),
         hover=error_stats(_cat(hover)),
+        oracle_onset_axis_s=_median_max(orc_a),
+        oracle_onset_norm_s=_median_max(orc_n),
     )
 
 
