@@ -744,6 +744,25 @@ def _render_reading(res: dict[str, Any]) -> list[str]:
             "10 s into a flight its noise estimate is young, and the youth factor (1.25 "
             "there) delays it by about that factor.",
         ]
+    if "follow" in res:
+        rows = res["follow"]
+        declared = [f for f in rows if f["calibration"] == "declared"]
+        refused = [f for f in rows if f["calibration"] == "none" and not f["mocap"]]
+        truth = [f for f in rows if f["calibration"] == "truth" and not f["mocap"]]
+        z_hi = [f["z_at_stop_range_m"][1] for f in declared if f["z_at_stop_range_m"]]
+        z_truth = [f["z_at_stop_range_m"][1] for f in truth if f["z_at_stop_range_m"]]
+        n_ref = sum(f["follow_refused"] for f in refused)
+        n_fl = sum(f["flights"] for f in refused)
+        L += [
+            "- Following without motion capture on an uncalibrated drone is what the "
+            "*declared* rows show: the tether-based height is off by most of a metre, so the "
+            "first tug's Stop came while the drone was still high (true z at the Stop up to "
+            f"{_cm(max(z_hi) if z_hi else None)}; land_below_m is 25 cm). With the calibration "
+            f"= truth the highest Stop was at {_cm(max(z_truth) if z_truth else None)}. "
+            f"Uncalibrated, the service refused follow in {n_ref} of {n_fl} flights (the rows "
+            "*none*, tether); with motion capture the calibration does not matter to it (the "
+            "biases read as a steady tension, which the tether's own tension absorbs).",
+        ]
     if "hover" in res:
         L += [
             "- Near plumb (the spot (0.5, -0.6, 1.0), H ~ 9 mN) the azimuth is poorly "
