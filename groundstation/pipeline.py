@@ -73,6 +73,7 @@ MAX_DRONES = 256
 _KEY_CACHE_SIZE = 4 * MAX_DRONES
 """Parsed keys remembered (each drone has four input kinds)."""
 _MAX_GAP_S = 1.0
+"""A telemetry gap longer than this restarts the filter (the tension may have changed)."""
 MOCAP_HOLD_S = 0.3
 """A motion-capture position stays the drone's external position for this long (telemetry
 stamp) after the frame that brought it, s. Real motion capture reaches a drone's telemetry
@@ -84,7 +85,6 @@ UNTRUSTED_POSITION_REASON = (
     "drone is off by up to ~1 m, so it is not followed"
 )
 """The follow ``reason`` while following is held off for want of a position it may fly to."""
-"""A telemetry gap longer than this restarts the filter (the tension may have changed)."""
 _COMMAND_KINDS = frozenset({"follow", "params"})
 """Inputs from operators: every rejection of one is told on ``tether/{drone}/events``."""
 BATCH_LOCALIZE_MIN = 12
