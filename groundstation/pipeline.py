@@ -793,6 +793,7 @@ class Pipeline:
         self._check_vbat_range(runtime, msg.vbat_v, on_ground, now_s)
         ext = runtime.calibration_extrapolated  # this sample's (a later front moves it)
         mocap = _fresh_mocap(runtime, msg.stamp_s)  # likewise
+        tail = (ext, mocap)  # the last two fields of the front, as they are now
 
         tension: Sequence[float] = _ZEROS3
         std: Sequence[float] = _ZEROS3
@@ -827,19 +828,7 @@ class Pipeline:
                 # drone's next message is filtered (in a batch, before its localization).
                 self.count_drop(runtime.drone, "non_finite_estimate", "filter produced NaN/inf")
                 runtime.filter.reset()
-                return (
-                    runtime,
-                    msg,
-                    now_s,
-                    tension,
-                    std,
-                    on_ground,
-                    converged,
-                    False,
-                    None,
-                    ext,
-                    mocap,
-                )
+                return (runtime, msg, now_s, tension, std, on_ground, converged, False, None, *tail)
             if converged:
                 # Exit angles only while fresh: the reel reports at its own rate.
                 loc = self.settings.localization
@@ -867,10 +856,9 @@ class Pipeline:
                     converged,
                     True,
                     loc_in,
-                    ext,
-                    mocap,
+                    *tail,
                 )
-        return (runtime, msg, now_s, tension, std, on_ground, converged, True, None, ext, mocap)
+        return (runtime, msg, now_s, tension, std, on_ground, converged, True, None, *tail)
 
     def _localize_one(self, loc_in: _LocalizeIn) -> PositionEstimate | None:
         loc = self.settings.localization

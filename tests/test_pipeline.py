@@ -282,6 +282,31 @@ def test_realistic_spool_up_with_follow_on_publishes_no_floor_push_and_no_stop(
     assert all(e["follow"]["enabled"] for e in run.estimates if e["stamp_s"] > 0.6)
 
 
+def _near_taut_scenario(
+    monkeypatch: pytest.MonkeyPatch, name: str, length_m: float, fraction: float, pull_n: float
+) -> None:
+    """Hover at ``fraction`` of the tether's reach, 0.3 m above the base; follow and
+    tug-to-land (0.5 m) switched on at 1 s; a ``pull_n`` pull toward the base at 6-8 s."""
+    from groundstation.sim.scenarios import SCENARIOS, Pull, Scenario, Waypoint
+
+    base = (0.0, 0.0, 0.754)
+    chord = fraction * length_m
+    spot = (float(np.sqrt(chord**2 - 0.3**2)), 0.0, base[2] + 0.3)
+    monkeypatch.setitem(
+        SCENARIOS,
+        name,
+        Scenario(
+            name,
+            f"hover near taut; follow on at 1 s; a {pull_n:g} N pull toward the base at 6 s",
+            start_m=spot,
+            waypoints=(Waypoint(0.0, spot),),
+            length_m=length_m,
+            pulls=(Pull(6.0, 8.0, (-pull_n, 0.0, 0.0)),),
+            operator=((1.0, {"enabled": True, "land_below_m": 0.5}),),
+        ),
+    )
+
+
 @pytest.mark.parametrize("fraction", [0.97, 0.90])
 def test_realistic_near_taut_with_follow_on_and_nobody_pulling(
     monkeypatch: pytest.MonkeyPatch, fraction: float
@@ -291,23 +316,7 @@ def test_realistic_near_taut_with_follow_on_and_nobody_pulling(
     1.6 m tether's reach (there the tether alone pulls 0.105 N and 0.066 N, against the
     0.10 N threshold) with follow and tug-to-land on and nobody pulling: following never
     engages, no setpoint, no Stop, landing not armed; a 0.15 N pull at 6 s engages."""
-    from groundstation.sim.scenarios import SCENARIOS, Pull, Scenario, Waypoint
-
-    base = (0.0, 0.0, 0.754)
-    chord = fraction * 1.6
-    spot = (float(np.sqrt(chord**2 - 0.3**2)), 0.0, base[2] + 0.3)
-    monkeypatch.setitem(
-        SCENARIOS,
-        "near_taut_realistic",
-        Scenario(
-            "near_taut_realistic",
-            "hover near taut; follow on at 1 s; a 0.15 N pull toward the base at 6 s",
-            start_m=spot,
-            waypoints=(Waypoint(0.0, spot),),
-            pulls=(Pull(6.0, 8.0, (-0.15, 0.0, 0.0)),),
-            operator=((1.0, {"enabled": True, "land_below_m": 0.5}),),
-        ),
-    )
+    _near_taut_scenario(monkeypatch, "near_taut_realistic", 1.6, fraction, 0.15)
     run, _, _ = closed_loop(
         _realistic(14, mocap=True, calibration=None), "near_taut_realistic", 8.0
     )
@@ -384,24 +393,7 @@ def test_near_taut_hover_with_follow_enabled_never_engages_until_pulled(
     """Issue 11 §2 through the pipeline and the simulator: near taut the tether alone pulls
     with more than the 0.10 N threshold; with follow and tug-to-land enabled and nobody
     pulling nothing engages, no setpoint, landing not armed; a 0.12 N pull at 6 s engages."""
-    from groundstation.sim.scenarios import SCENARIOS, Pull, Scenario, Waypoint
-
-    base = (0.0, 0.0, 0.754)
-    chord = fraction * length_m
-    spot = (float(np.sqrt(chord**2 - 0.3**2)), 0.0, base[2] + 0.3)
-    monkeypatch.setitem(
-        SCENARIOS,
-        "near_taut_test",
-        Scenario(
-            "near_taut_test",
-            "hover near taut; follow on at 1 s; a 0.12 N pull toward the base at 6 s",
-            start_m=spot,
-            waypoints=(Waypoint(0.0, spot),),
-            length_m=length_m,
-            pulls=(Pull(6.0, 8.0, (-0.12, 0.0, 0.0)),),
-            operator=((1.0, {"enabled": True, "land_below_m": 0.5}),),
-        ),
-    )
+    _near_taut_scenario(monkeypatch, "near_taut_test", length_m, fraction, 0.12)
     settings = load_settings(
         None,
         {"sim": {"mocap": mocap, "seed": 5}, "tether": {"length_m": length_m}, **EXACT},
