@@ -37,7 +37,6 @@ import argparse
 import json
 import math
 import platform
-import subprocess
 import sys
 import time
 from dataclasses import dataclass, field
@@ -46,6 +45,7 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks import git_commit
 from groundstation.config import Settings, load_settings
 from groundstation.pipeline import Pipeline
 from groundstation.sim import Simulator
@@ -184,15 +184,13 @@ def render_header(profile: str, seconds: float, seed: int, quick: bool, elapsed_
     if profile != "realistic":
         cmd += f" --profile {profile}"
     profile = "realistic, then ideal" if profile == "realistic" and not quick else profile
-    commit = subprocess.run(
-        ["git", "rev-parse", "--short=12", "HEAD"], capture_output=True, text=True, check=False
-    ).stdout.strip()
+    commit = git_commit()
     return "\n".join(
         [
             "# Position error per azimuth source, plumb to taut",
             "",
             f"From `{cmd}` ({elapsed_s:.0f} s on a shared 2-core machine; commit "
-            f"`{commit or 'unknown'}`, Python {platform.python_version()}, numpy "
+            f"`{commit}`, Python {platform.python_version()}, numpy "
             f"{np.__version__}). Issue 11 §1; the method is in the benchmark's docstring.",
             "",
             f"Simulator profile **{profile}** (each section names its own); seed {seed}; "

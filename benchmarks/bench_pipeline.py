@@ -39,7 +39,6 @@ import json
 import math
 import os
 import platform
-import subprocess
 import sys
 import time
 from collections.abc import Callable
@@ -48,6 +47,7 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks import git
 from benchmarks.bench_service import _telemetry_payloads
 from groundstation import follow as follow_mod
 from groundstation.bus import Sample
@@ -320,24 +320,10 @@ def _best(results: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def _commit() -> str:
-    try:
-        out = subprocess.run(
-            ["git", "rev-parse", "--short", "HEAD"],
-            capture_output=True,
-            text=True,
-            check=True,
-            cwd=DOC_PATH.parent.parent,
-        )
-        dirty = subprocess.run(
-            ["git", "status", "--porcelain", "groundstation"],
-            capture_output=True,
-            text=True,
-            check=True,
-            cwd=DOC_PATH.parent.parent,
-        )
-    except (OSError, subprocess.CalledProcessError):
+    commit = git("rev-parse", "--short", "HEAD").strip()
+    if not commit:
         return "unknown"
-    return out.stdout.strip() + (" (modified)" if dirty.stdout.strip() else "")
+    return commit + (" (modified)" if git("status", "--porcelain", "groundstation").strip() else "")
 
 
 def _fmt(v: float | None) -> str:

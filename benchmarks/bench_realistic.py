@@ -46,7 +46,6 @@ import argparse
 import json
 import math
 import platform
-import subprocess
 import sys
 import time
 from collections.abc import Callable
@@ -56,6 +55,7 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks import git_commit
 from groundstation.bus import Sample
 from groundstation.config import CalibrationSection, Settings, load_settings
 from groundstation.evaluation import closed_loop
@@ -812,12 +812,7 @@ def main(argv: list[str] | None = None) -> int:
     hover_s = 14.0 if quick else 20.0
     log: Callable[[str], None] = lambda s: print(s, file=sys.stderr, flush=True)  # noqa: E731
     res: dict[str, Any] = {"spots": len(spots), "hover_seconds": hover_s}
-    try:
-        res["commit"] = subprocess.run(
-            ["git", "rev-parse", "--short=12", "HEAD"], capture_output=True, text=True, check=True
-        ).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        res["commit"] = "unknown"
+    res["commit"] = git_commit()
     if "hover" in only:
         res["hover"] = []
         for noise in levels:

@@ -26,7 +26,6 @@ from __future__ import annotations
 import argparse
 import math
 import platform
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -34,6 +33,7 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks import git_commit
 from groundstation.tension import TensionFilter
 
 DOC_PATH = Path(__file__).resolve().parent.parent / "docs" / "step_test_benchmark.md"
@@ -187,12 +187,7 @@ def main(argv: list[str] | None = None) -> int:
     trials = 4 if quick else 12
     t0 = time.time()
     res: dict[str, Any] = {"hover": [], "steps": []}
-    try:
-        res["commit"] = subprocess.run(
-            ["git", "rev-parse", "--short=12", "HEAD"], capture_output=True, text=True, check=True
-        ).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        res["commit"] = "unknown"
+    res["commit"] = git_commit()
     for level, colour in CASES:
         held = hover(level, colour, minutes, flights)
         res["hover"].append({"level": level, "colour": colour, **held})

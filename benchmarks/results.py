@@ -42,7 +42,6 @@ import json
 import math
 import os
 import re
-import subprocess
 import sys
 import time
 from collections.abc import Iterable, Mapping, Sequence
@@ -50,6 +49,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from benchmarks import git, git_commit
 from benchmarks import results_envelope as renv
 from benchmarks import results_figures as rfig
 from benchmarks import results_paper as rp
@@ -115,18 +115,9 @@ def _tick(ok: bool) -> str:
 # ---------------------------------------------------------------------------- provenance
 
 
-def _git(*args: str) -> str:
-    try:
-        return subprocess.run(
-            ["git", *args], cwd=REPO, capture_output=True, text=True, check=True, timeout=10
-        ).stdout
-    except (OSError, subprocess.SubprocessError):
-        return ""
-
-
 def provenance() -> dict[str, str]:
-    commit = _git("rev-parse", "--short=12", "HEAD").strip() or "unknown"
-    dirty = _git("status", "--porcelain", "--", "groundstation", "benchmarks")
+    commit = git_commit()
+    dirty = git("status", "--porcelain", "--", "groundstation", "benchmarks")
     changed = sorted({line[3:] for line in dirty.splitlines() if line.strip()})
     return {
         "commit": commit,
