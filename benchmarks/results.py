@@ -1277,6 +1277,19 @@ def _drawn_text(c: renv.ErrorClass, drawn: Mapping[str, float]) -> str:
     return f"{v:g}"
 
 
+def _stats_cells(st: renv.Stats) -> tuple[str, ...]:
+    """A point's errors as table cells: median and p95 3D, median horizontal and |Δz|,
+    tension median / p95, position available."""
+    return (
+        _cm(st.median_m),
+        _cm(st.p95_m),
+        _cm(st.horizontal_median_m),
+        _cm(st.vertical_median_m),
+        f"{_mn(st.tension_median_n)} / {_mn(st.tension_p95_n)}",
+        _pct(st.availability, 0),
+    )
+
+
 def _cal_text(st: renv.Stats | None) -> str:
     if st is None:
         return "—"
@@ -1378,12 +1391,7 @@ def _envelope_section(o: Outcome | EnvelopeOutcome) -> list[str]:
                     renv.size_text(c.cls, pt.value)
                     + (" (baseline)" if renv.is_baseline(c.cls, pt.value) else ""),
                     _drawn_text(c.cls, pt.drawn),
-                    _cm(pt.raw.median_m),
-                    _cm(pt.raw.p95_m),
-                    _cm(pt.raw.horizontal_median_m),
-                    _cm(pt.raw.vertical_median_m),
-                    f"{_mn(pt.raw.tension_median_n)} / {_mn(pt.raw.tension_p95_n)}",
-                    _pct(pt.raw.availability, 0),
+                    *_stats_cells(pt.raw),
                     _cal_text(pt.cal),
                 )
                 for pt in c.points
@@ -1416,12 +1424,7 @@ def _envelope_section(o: Outcome | EnvelopeOutcome) -> list[str]:
             [
                 (
                     f"{pt.value:g}",
-                    _cm(pt.stats.median_m),
-                    _cm(pt.stats.p95_m),
-                    _cm(pt.stats.horizontal_median_m),
-                    _cm(pt.stats.vertical_median_m),
-                    f"{_mn(pt.stats.tension_median_n)} / {_mn(pt.stats.tension_p95_n)}",
-                    _pct(pt.stats.availability, 0),
+                    *_stats_cells(pt.stats),
                     "—" if math.isnan(pt.azimuth_determined) else _pct(pt.azimuth_determined, 0),
                     "—" if math.isnan(pt.floor_contact) else _pct(pt.floor_contact, 0),
                 )
