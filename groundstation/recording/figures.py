@@ -79,22 +79,10 @@ def write_figures(path: str | Path, figures_dir: str | Path) -> list[Path]:
                     lw=0,
                     label="±1σ",
                 )
-            if truth:
-                ax.plot(
-                    [s for s, _ in truth],
-                    [d["tension_n"][i] for _, d in truth],
-                    "k--",
-                    lw=1,
-                    label="truth",
-                )
+            _plot_truth(ax, truth, "tension_n", i)
             ax.set_ylabel(f"T{axes_names[i]} [N]")
-        axs[0].legend(loc="upper right", fontsize=8)
-        axs[0].set_title(f"{drone}: tether tension on the drone (world frame)")
-        axs[-1].set_xlabel("time [s]")
-        target = out_dir / f"{drone}_tension.png"
-        fig.savefig(target, dpi=100)
-        plt.close(fig)
-        written.append(target)
+        title = f"{drone}: tether tension on the drone (world frame)"
+        written.append(_save(plt, fig, axs, title, out_dir / f"{drone}_tension.png"))
 
         fig, axs = plt.subplots(3, 1, sharex=True, figsize=(9, 7))
         for i, ax in enumerate(axs):
@@ -104,20 +92,24 @@ def write_figures(path: str | Path, figures_dir: str | Path) -> list[Path]:
             mocap = [(s, d["position_m"][i]) for s, d in tele if d.get("position_m") is not None]
             if mocap:
                 ax.plot(*zip(*mocap, strict=True), lw=1, alpha=0.7, label="motion capture")
-            if truth:
-                ax.plot(
-                    [s for s, _ in truth],
-                    [d["position_m"][i] for _, d in truth],
-                    "k--",
-                    lw=1,
-                    label="truth",
-                )
+            _plot_truth(ax, truth, "position_m", i)
             ax.set_ylabel(f"{axes_names[i]} [m]")
-        axs[0].legend(loc="upper right", fontsize=8)
-        axs[0].set_title(f"{drone}: position (world frame)")
-        axs[-1].set_xlabel("time [s]")
-        target = out_dir / f"{drone}_position.png"
-        fig.savefig(target, dpi=100)
-        plt.close(fig)
-        written.append(target)
+        title = f"{drone}: position (world frame)"
+        written.append(_save(plt, fig, axs, title, out_dir / f"{drone}_position.png"))
     return written
+
+
+def _plot_truth(ax: Any, truth: list[tuple[float, Any]], field: str, i: int) -> None:
+    """The simulator's truth of ``field``'s component ``i`` as a dashed line, if recorded."""
+    if truth:
+        ax.plot([s for s, _ in truth], [d[field][i] for _, d in truth], "k--", lw=1, label="truth")
+
+
+def _save(plt: Any, fig: Any, axs: Any, title: str, target: Path) -> Path:
+    """Legend, title and time axis of a 3-row figure; written to ``target`` and closed."""
+    axs[0].legend(loc="upper right", fontsize=8)
+    axs[0].set_title(title)
+    axs[-1].set_xlabel("time [s]")
+    fig.savefig(target, dpi=100)
+    plt.close(fig)
+    return target
