@@ -1277,9 +1277,19 @@ def _drawn_text(c: renv.ErrorClass, drawn: Mapping[str, float]) -> str:
     return f"{v:g}"
 
 
+STATS_HEADERS = (
+    "median 3D",
+    "p95 3D",
+    "median horizontal",
+    "median |Δz|",
+    "tension median / p95",
+    "position available",
+)
+"""The column headers of :func:`_stats_cells`."""
+
+
 def _stats_cells(st: renv.Stats) -> tuple[str, ...]:
-    """A point's errors as table cells: median and p95 3D, median horizontal and |Δz|,
-    tension median / p95, position available."""
+    """A point's errors as table cells, in the order of :data:`STATS_HEADERS`."""
     return (
         _cm(st.median_m),
         _cm(st.p95_m),
@@ -1378,12 +1388,7 @@ def _envelope_section(o: Outcome | EnvelopeOutcome) -> list[str]:
             (
                 "size",
                 "drawn",
-                "median 3D",
-                "p95 3D",
-                "median horizontal",
-                "median |Δz|",
-                "tension median / p95",
-                "position available",
+                *STATS_HEADERS,
                 "calibration = truth: median / p95",
             ),
             [
@@ -1412,12 +1417,7 @@ def _envelope_section(o: Outcome | EnvelopeOutcome) -> list[str]:
         L += _table(
             (
                 "value",
-                "median 3D",
-                "p95 3D",
-                "median horizontal",
-                "median |Δz|",
-                "tension median / p95",
-                "position available",
+                *STATS_HEADERS,
                 "azimuth determined",
                 "tether on the floor",
             ),
