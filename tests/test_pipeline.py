@@ -189,32 +189,23 @@ def test_follow_only_when_enabled_and_tug_landing_stops_once() -> None:
         assert np.linalg.norm(np.subtract(sp["position_m"], [0.0, 0.0, 0.754])) <= reach
 
 
+NOISE_MPS2 = 2.0
+"""The realistic tests' accelerometer noise: the worst of the real flights'."""
+
+
 def _realistic(seed: int, *, mocap: bool, calibration: dict[str, object] | None) -> Settings:
-    """The realistic profile at its worst real noise (2 m/s^2), every error class at its real
-    size; ``calibration`` None leaves ``[calibration]`` at its defaults (nothing corrected)."""
-    over: dict[str, object] = {
-        "sim": {
-            "profile": "realistic",
-            "mocap": mocap,
-            "seed": seed,
-            "realistic": {"accel_noise_mps2": 2.0},
-        }
-    }
-    if calibration is not None:
-        over["calibration"] = calibration
-    return load_settings(None, over, use_env=False)
+    """The realistic profile at 2 m/s^2, every error class at its real size, as the realistic
+    benchmark flies it; ``calibration`` None leaves ``[calibration]`` at its defaults."""
+    from benchmarks.bench_realistic import _settings
+
+    return _settings(NOISE_MPS2, seed, {}, calibration, mocap)  # type: ignore[arg-type]
 
 
 def _true_calibration(seed: int) -> dict[str, object]:
     """The flight's drawn sensor errors as ``[calibration]`` (the simulator's equivalent)."""
-    from groundstation.sim import Simulator
+    from benchmarks.bench_realistic import _true_calibration as truth
 
-    sim = Simulator(_realistic(seed, mocap=False, calibration=None), None, scenario="hover")  # type: ignore[arg-type]
-    drawn = sim.drawn_errors("cf1")
-    assert drawn is not None
-    eq = drawn["calibration"]
-    keys = ("thrust_scale", "thrust_vbat_slope_per_v", "thrust_vbat_ref_v", "thrust_axis_rad")
-    return {k: eq[k] for k in (*keys, "accel_bias_mps2")} | {"source": f"truth {seed}"}
+    return truth(NOISE_MPS2, seed, {})
 
 
 def test_uncalibrated_without_mocap_follow_is_refused_and_nothing_moves() -> None:
