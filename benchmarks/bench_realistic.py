@@ -429,13 +429,11 @@ def follow_flights(
     stops, early_stops, landed, z_stop, stop_delay = [], [], 0, [], []
     refused: list[int] = []
     for seed in seeds:
-        cal = (
-            _true_calibration(noise, seed, {})
-            if calibration == "truth"
-            else {"source": "declared, not calibrated"}
-            if calibration == "declared"
-            else None
-        )
+        cal: dict[str, Any] | None = None  # "none"
+        if calibration == "truth":
+            cal = _true_calibration(noise, seed, {})
+        elif calibration == "declared":
+            cal = {"source": "declared, not calibrated"}
         settings = _settings(noise, seed, {}, cal, mocap)
         run, pipe, _ = closed_loop(settings, "follow", fol_sc.duration_s or 22.0)
         refused.append(_refusals(pipe))

@@ -220,6 +220,11 @@ def _fresh_mocap(runtime: DroneRuntime, stamp_s: float) -> tuple[float, float, f
     return None
 
 
+def _no_trusted_position(runtime: DroneRuntime, mocap: tuple[float, float, float] | None) -> bool:
+    """Nothing follow may fly to: no fresh motion capture and no calibration in force."""
+    return mocap is None and runtime.calibration_source == "none"
+
+
 def calibration_from_config(
     section: CalibrationSection,
 ) -> tuple[ObservationCalibration | None, str]:
@@ -581,10 +586,8 @@ class Pipeline:
                 f"{runtime.drone} is stale (silent for {now_s - runtime.last_seen_s:.1f} s): "
                 "follow stays off until it is heard again; not applied"
             )
-        if (
-            runtime.calibration_source == "none"
-            and runtime.last_stamp_s is not None
-            and _fresh_mocap(runtime, runtime.last_stamp_s) is None
+        if runtime.last_stamp_s is not None and _no_trusted_position(
+            runtime, _fresh_mocap(runtime, runtime.last_stamp_s)
         ):
             return "enabled", (
                 f"{runtime.drone} has no motion capture (position_m) and no calibration "
@@ -917,7 +920,7 @@ class Pipeline:
                 if mocap is not None
                 else (position.position_world_m if position is not None else None)
             )
-            untrusted = mocap is None and runtime.calibration_source == "none"
+            untrusted = _no_trusted_position(runtime, mocap)
             decision = follow_mod.follow_step(
                 fs,
                 runtime.follow_params,
