@@ -35,6 +35,7 @@ from __future__ import annotations
 import itertools
 import math
 from dataclasses import dataclass
+from types import MappingProxyType
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -82,6 +83,7 @@ PARAMETERS: tuple[str, ...] = (
 """The parameter vector, in order. ``base_d*`` is an offset added to the recorded base."""
 
 _SCALES = np.array([0.05, 0.02, 0.02, 0.2, 0.2, 0.2, 0.1, 0.01, 0.05, 0.05, 0.05])
+_SCALES.setflags(write=False)
 """Typical magnitude of each parameter: a combination whose standard error exceeds half of
 it (:data:`UNDETERMINED_RATIO`) is taken as undetermined by the data."""
 
@@ -114,18 +116,20 @@ CONVENTIONS: tuple[tuple[str, str], ...] = (
 )
 """Order in which undetermined parameters are fixed, and the reason printed for each."""
 
-_CONVENTION_VALUE = {
-    "thrust_scale": 1.0,
-    "about_x_rad": 0.0,
-    "about_y_rad": 0.0,
-    "bias_x_mps2": 0.0,
-    "bias_y_mps2": 0.0,
-    "bias_z_mps2": 0.0,
-    "vbat_slope_per_v": 0.0,
-    "base_dx_m": 0.0,
-    "base_dy_m": 0.0,
-    "base_dz_m": 0.0,
-}
+_CONVENTION_VALUE = MappingProxyType(
+    {
+        "thrust_scale": 1.0,
+        "about_x_rad": 0.0,
+        "about_y_rad": 0.0,
+        "bias_x_mps2": 0.0,
+        "bias_y_mps2": 0.0,
+        "bias_z_mps2": 0.0,
+        "vbat_slope_per_v": 0.0,
+        "base_dx_m": 0.0,
+        "base_dy_m": 0.0,
+        "base_dz_m": 0.0,
+    }
+)
 
 
 class CalibrationError(ValueError):

@@ -9,9 +9,11 @@ must be given a room below (and in docs/architecture.md) before it can land.
 from __future__ import annotations
 
 import ast
+import importlib
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 PACKAGE = Path(__file__).resolve().parent.parent / "groundstation"
@@ -68,18 +70,41 @@ def _modules() -> list[tuple[str, Path]]:
     return out
 
 
+def _absolute(node: ast.ImportFrom, path: Path) -> str:
+    """The absolute module name of a ``from`` import, relative ones resolved."""
+    if node.level == 0:
+        return node.module or ""
+    # The importing module's package: its folder, as a dotted name under groundstation.
+    package = ["groundstation", *path.parent.relative_to(PACKAGE).parts]
+    if node.level - 1 >= len(package):
+        raise AssertionError(f"{path}: line {node.lineno} imports beyond the package")
+    base = package[: len(package) - (node.level - 1)]
+    return ".".join([*base, node.module] if node.module else base)
+
+
 def _imports(path: Path) -> list[tuple[int, str]]:
     tree = ast.parse(path.read_text(), filename=str(path))
     found = []
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):
             found += [(node.lineno, alias.name) for alias in node.names]
-        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
-            if node.module == "groundstation":
-                found += [(node.lineno, f"groundstation.{a.name}") for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            module = _absolute(node, path)
+            if module == "groundstation" or (node.level > 0 and not node.module):
+                # `from groundstation import x` / `from . import x`: each x is a module
+                # (or a name of the package's __init__).
+                found += [(node.lineno, f"{module}.{a.name}") for a in node.names]
             else:
-                found.append((node.lineno, node.module))
+                found.append((node.lineno, module))
     return found
+
+
+def test_relative_imports_are_resolved() -> None:
+    """`from ..pipeline import X` inside sim/ counts as groundstation.pipeline."""
+    tree = ast.parse("from ..pipeline import Pipeline\nfrom . import rotation\n")
+    path = PACKAGE / "sim" / "runner.py"
+    names = [_absolute(n, path) for n in tree.body if isinstance(n, ast.ImportFrom)]
+    assert names == ["groundstation.pipeline", "groundstation.sim"]
 
 
 @pytest.mark.parametrize(("module", "path"), _modules(), ids=lambda v: str(v))
@@ -108,3 +133,16 @@ def test_every_room_is_described_in_the_architecture_page() -> None:
     text = (PACKAGE.parent / "docs" / "architecture.md").read_text()
     for room in ROOMS:
         assert f"**{room}**" in text, f"docs/architecture.md does not describe the {room} room"
+
+
+@pytest.mark.parametrize("module", PHYSICS)
+def test_physics_modules_hold_no_mutable_global_state(module: str) -> None:
+    """No module-level list, dict, set or writable array: a pure module has no memory
+    (constants are tuples, read-only arrays or mapping proxies)."""
+    mod = importlib.import_module(f"groundstation.{module}")
+    for name, value in vars(mod).items():
+        if name.startswith("__"):
+            continue
+        assert not isinstance(value, list | dict | set | bytearray), f"{module}.{name}"
+        if isinstance(value, np.ndarray):
+            assert not value.flags.writeable, f"{module}.{name}"

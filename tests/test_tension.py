@@ -812,15 +812,3 @@ def test_a_stream_repeating_one_value_stays_finite() -> None:
     np.testing.assert_allclose(e.tension_world_n, HOVER_TENSION_N, atol=1e-12)
     e = filt.update(HOVER_TENSION_N + 0.03, DT_S)  # and a step after it is still handled
     assert np.all(np.isfinite(e.tension_world_n))
-
-
-def test_pure_module_holds_no_mutable_global_state() -> None:
-    """No module-level list, dict, set or writable array: a pure module has no memory."""
-    import groundstation.tension as mod
-
-    for name, value in vars(mod).items():
-        if name.startswith("__"):
-            continue
-        assert not isinstance(value, list | dict | set | bytearray), name
-        if isinstance(value, np.ndarray):
-            assert not value.flags.writeable, name

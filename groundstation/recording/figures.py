@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-import json
 import logging
 import re
 from collections import defaultdict
 from pathlib import Path
 from typing import Any
 
+from groundstation.messages import Estimate, Telemetry, Truth
 from groundstation.recording.format import (
     RecordingError,
 )
@@ -46,12 +46,19 @@ def write_figures(path: str | Path, figures_dir: str | Path) -> list[Path]:
             continue
         if t0_ns is None:
             t0_ns = msg.log_time_ns
+        # One definition of each payload: the contract's models read them (an invalid one,
+        # which the service would have dropped too, is not drawn).
+        data: Estimate | Truth | Telemetry
         try:
-            data = json.loads(msg.payload)
-        except ValueError:
+            if m.group(2) == "estimate":
+                data = Estimate.read(msg.payload)
+            elif m.group(2) == "truth":
+                data = Truth.read(msg.payload)
+            else:
+                data = Telemetry.parse(msg.payload)
+        except ValueError:  # InvalidMessage
             continue
-        if isinstance(data, dict):
-            series[m.group(1)][m.group(2)].append(((msg.log_time_ns - t0_ns) / 1e9, data))
+        series[m.group(1)][m.group(2)].append(((msg.log_time_ns - t0_ns) / 1e9, data))
 
     out_dir = Path(figures_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -68,8 +75,8 @@ def write_figures(path: str | Path, figures_dir: str | Path) -> list[Path]:
         for i, ax in enumerate(axs):
             if est:
                 t = [s for s, _ in est]
-                v = [d["tension_n"][i] for _, d in est]
-                sd = [d.get("tension_std_n", [0, 0, 0])[i] for _, d in est]
+                v = [d.tension_n[i] for _, d in est]
+                sd = [d.tension_std_n[i] for _, d in est]
                 ax.plot(t, v, lw=1, label="estimate")
                 ax.fill_between(
                     t,
@@ -86,10 +93,10 @@ def write_figures(path: str | Path, figures_dir: str | Path) -> list[Path]:
 
         fig, axs = plt.subplots(3, 1, sharex=True, figsize=(9, 7))
         for i, ax in enumerate(axs):
-            pts = [(s, d["position_m"][i]) for s, d in est if d.get("position_m") is not None]
+            pts = [(s, d.position_m[i]) for s, d in est if d.position_m is not None]
             if pts:
                 ax.plot(*zip(*pts, strict=True), lw=1, label="tether estimate")
-            mocap = [(s, d["position_m"][i]) for s, d in tele if d.get("position_m") is not None]
+            mocap = [(s, d.position_m[i]) for s, d in tele if d.position_m is not None]
             if mocap:
                 ax.plot(*zip(*mocap, strict=True), lw=1, alpha=0.7, label="motion capture")
             _plot_truth(ax, truth, "position_m", i)
@@ -102,7 +109,8 @@ def write_figures(path: str | Path, figures_dir: str | Path) -> list[Path]:
 def _plot_truth(ax: Any, truth: list[tuple[float, Any]], field: str, i: int) -> None:
     """The simulator's truth of ``field``'s component ``i`` as a dashed line, if recorded."""
     if truth:
-        ax.plot([s for s, _ in truth], [d[field][i] for _, d in truth], "k--", lw=1, label="truth")
+        values = [getattr(d, field)[i] for _, d in truth]
+        ax.plot([s for s, _ in truth], values, "k--", lw=1, label="truth")
 
 
 def _save(plt: Any, fig: Any, axs: Any, title: str, target: Path) -> Path:
