@@ -63,6 +63,11 @@ class Bus(Protocol):
 
     def liveliness_token(self, key: str) -> Subscription: ...
 
+    def alive(self, keyexpr: str, timeout_s: float = 1.0) -> list[str]:
+        """Keys of the liveliness tokens matching ``keyexpr`` that are alive now (e.g.
+        ``groundstation/service/*``: the services running)."""
+        ...
+
     def close(self) -> None: ...
 
 
@@ -249,8 +254,8 @@ class InMemoryBus:
             self._tokens.add(key)
         return _Closer(lambda: self._tokens.discard(key))
 
-    def alive(self, keyexpr: str) -> list[str]:
-        """Liveliness tokens matching ``keyexpr`` (test helper)."""
+    def alive(self, keyexpr: str, timeout_s: float = 1.0) -> list[str]:
+        """Liveliness tokens matching ``keyexpr``, sorted (``timeout_s`` unused: local)."""
         with self._lock:
             return sorted(t for t in self._tokens if keyexpr_matches(keyexpr, t))
 

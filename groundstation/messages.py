@@ -488,8 +488,12 @@ class Status(_Out):
     service: str | None = None
     """The answering service instance (liveliness token ``groundstation/service/{instance}``)."""
     peers: int | None = None
-    """Zenoh peers and routers the service's session is connected to (0: nobody can reach it;
-    None on an in-memory bus)."""
+    """Zenoh peers and routers the service's session is connected to (0: nobody outside its
+    process can reach it; None on an in-memory bus)."""
+    alone_ok: bool | None = None
+    """(added) The service expects no peer: ``groundstation demo`` runs simulator, service
+    and dashboard on one session in one process, so ``peers: 0`` is normal there, not a
+    fault (the dashboard then raises no alarm)."""
     events_suppressed: int | None = None
     """Events for this drone not published because of the per-drone cap (a flood)."""
     rest_calibration: dict[str, Any] | None = None

@@ -553,6 +553,9 @@ class Pipeline:
         Checked at the command boundary, before :func:`follow.set_enabled`:
 
         - a threshold below ``[service] follow_threshold_min_n``;
+        - a tug-to-land height ``land_below_m`` at or below the floor (``[base] floor_z_m``:
+          tug-to-land would never stop the motors) or at or above base + tether length (out
+          of reach: the first tug would stop them at any height);
         - enabling follow on a drone that is stale or has never sent telemetry (the README's
           rule: a stale drone drops follow and the operator enables it again; an unknown drone
           is the most stale of all, and would otherwise fly off in follow mode the moment it
@@ -574,6 +577,17 @@ class Pipeline:
                 "([service] follow_threshold_min_n): that low a threshold follows the sensor "
                 "noise and any error in the tether's own tension; not applied"
             )
+        if cmd.land_below_m is not None:
+            # A height outside (floor, base + tether) is no landing height: above the reach
+            # the first tug stops the motors at any height, at or below the floor never.
+            floor_z_m = runtime.params.base.floor_z_m
+            reach_top_m = float(runtime.base_world_m[2]) + runtime.length_m
+            if not floor_z_m < cmd.land_below_m < reach_top_m:
+                return "land_below_m", (
+                    f"land_below_m {cmd.land_below_m:g} m is outside the tether's reach: it "
+                    f"must lie above the floor ({floor_z_m:g} m, [base] floor_z_m) and below "
+                    f"base + tether ({reach_top_m:.3f} m); not applied"
+                )
         if not cmd.enabled:
             return None
         if runtime.last_seen_s is None:

@@ -10,7 +10,9 @@ thresholds, tether parameters), follow switched off by a silent drone, and every
 own and anyone's on ``tether/{drone}/cmd/stop``) is one line in the log and one
 :class:`~groundstation.messages.Event` on ``tether/{drone}/events``, which the recorder
 records with the rest of ``tether/**``. Events are capped per drone
-(``EVENTS_PER_S``) so a flood of bad commands cannot flood the bus.
+(``EVENTS_PER_S``) so a flood of bad commands cannot flood the bus; a Stop and follow
+switched on or off are never capped (:func:`never_capped`), so a flood cannot hide them from
+the log or the recording.
 """
 
 from __future__ import annotations
@@ -37,7 +39,7 @@ from groundstation.config import Settings
 from groundstation.messages import Event, InvalidMessage, StopIn
 from groundstation.pipeline import Parsed, Pipeline
 
-__all__ = ["EVENTS_PER_S", "Service"]
+__all__ = ["EVENTS_PER_S", "Service", "never_capped"]
 
 _log = logging.getLogger("groundstation.service")
 _actions = logging.getLogger("groundstation.actions")
@@ -55,7 +57,9 @@ class Service:
         bus: the bus to serve on (the service does not close it).
         clock: monotonic seconds (a parameter so tests can drive time).
         instance: the instance id (default: random).
-        alone_ok: no peer is normal (``demo``): "no peer / no router" is only a debug line.
+        alone_ok: no peer is normal (``demo``: simulator, service and dashboard share one
+            session): "no peer / no router" is only a debug line, and ``status`` says
+            ``alone_ok: true`` so that ``peers: 0`` raises no alarm.
     """
 
     def __init__(
@@ -71,6 +75,7 @@ class Service:
         self.bus = bus
         self.clock = clock
         self.instance = instance or uuid.uuid4().hex[:12]
+        self.alone_ok = alone_ok
         self.pipeline = Pipeline(
             settings, on_drop=self._on_drop, on_event=self._on_event, wall_clock=time.time
         )
@@ -176,6 +181,7 @@ class Service:
                 if status is not None:
                     status["service"] = self.instance
                     status["peers"] = None if self.peer_watch is None else self.peer_watch.peers
+                    status["alone_ok"] = self.alone_ok
                     status["events_suppressed"] = self.events_suppressed.get(drone, 0)
                     replies.append(Sample(key, json.dumps(status).encode()))
         return replies
@@ -226,18 +232,23 @@ class Service:
         self._on_event(drone, event)
 
     def _on_event(self, drone: str, event: Event) -> None:
-        """Log one action line and publish the Event (any thread; capped per drone)."""
+        """Log one action line and publish the Event (any thread; capped per drone, but
+        never a Stop or follow switched on/off: :func:`never_capped`)."""
         now_s = self.clock()
+        keep = never_capped(event)
         with self._event_lock:
             tokens, at_s = self._event_budget.get(drone, (2 * EVENTS_PER_S, now_s))
             tokens = min(2 * EVENTS_PER_S, tokens + (now_s - at_s) * EVENTS_PER_S)
-            if tokens < 1.0:
+            if tokens < 1.0 and not keep:
                 self._event_budget[drone] = (tokens, now_s)
                 self.events_suppressed[drone] = self.events_suppressed.get(drone, 0) + 1
                 return
-            if drone not in self._event_budget and len(self._event_budget) >= 1024:
+            if drone in self._event_budget or len(self._event_budget) < 1024:
+                # A kept event still spends the budget (not below zero), so what it lets
+                # through is one event per Stop or switch, never more.
+                self._event_budget[drone] = (max(0.0, tokens - 1.0), now_s)
+            elif not keep:
                 return  # bounded memory against a flood of drone ids
-            self._event_budget[drone] = (tokens - 1.0, now_s)
             self.events += 1
         level = logging.INFO if event.kind in ("follow", "params") else logging.WARNING
         _actions.log(
@@ -309,6 +320,19 @@ class Service:
                     self._own_stops.append(out.payload)
             publish(out.key, out.payload)
         self.published += len(outputs)
+
+
+def never_capped(event: Event) -> bool:
+    """Whether ``event`` is logged and published whatever the per-drone cap says: a Stop
+    (anyone's, or the service's own), and follow switched on or off (by a command, or off by
+    a silent drone). An operator's Stop must be in the action log even while someone floods
+    the drone with bad commands; each of these is one event per input, so keeping them
+    cannot multiply a flood."""
+    if event.kind == "stop":
+        return True
+    return event.kind == "follow" and (
+        event.input == "service" or event.reason in ("follow on", "follow off")
+    )
 
 
 _MAX_BATCH = 32

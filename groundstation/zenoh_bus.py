@@ -165,6 +165,15 @@ class ZenohBus:
     def liveliness_token(self, key: str) -> Subscription:
         return _Handle(self.session.liveliness().declare_token(key))
 
+    def alive(self, keyexpr: str, timeout_s: float = 1.0) -> list[str]:
+        """Keys of the liveliness tokens matching ``keyexpr`` alive now, sorted."""
+        keys = []
+        for reply in self.session.liveliness().get(keyexpr, timeout=timeout_s):
+            ok = reply.ok
+            if ok is not None:
+                keys.append(str(ok.key_expr))
+        return sorted(keys)
+
     @property
     def zid(self) -> str:
         """This session's zenoh id (hex), as receivers see it in ``Sample.source``."""

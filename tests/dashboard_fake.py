@@ -3,8 +3,10 @@
 It speaks the contract on a bus: Estimates and telemetry (with motion capture) for a few
 drones circling a base, the ``tether/*/status`` queryable, and it answers commands the way
 the service does: a FollowCommand shows up in the next Estimates' ``follow``, a params
-message in the status, a Stop in ``follow.stopped``. Drone 0 pulls with a fixed tension of
-|T| = 0.250 N (H = 0.150 N, T_v = 0.200 N) so a test can look for that number.
+message in the status, a Stop in ``follow.stopped``; with :attr:`FakeService.refuse_follow`
+set it refuses FollowCommands instead, with that reason on ``tether/{drone}/events``. It holds
+a service's liveliness token. Drone 0 pulls with a fixed tension of |T| = 0.250 N
+(H = 0.150 N, T_v = 0.200 N) so a test can look for that number.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from groundstation.bus import Bus, Sample, Subscription
+from groundstation.messages import Event
 
 BASE_M = (0.0, 0.0, 0.754)
 FIXED_H_N = 0.150
@@ -66,6 +69,7 @@ class FakeService:
         mocap: bool | Collection[str] = True,
         obey_stop: bool = True,
         peers: int | None = 1,
+        alone_ok: bool | None = None,
     ) -> None:
         self.bus = bus
         self.drones = drones
@@ -76,6 +80,10 @@ class FakeService:
         """A Stop disarms the drone (its telemetry then says armed: false, thrust 0)."""
         self.peers = peers
         """The status' ``peers`` (None: not reported, as a service before issue 14)."""
+        self.alone_ok = alone_ok
+        """The status' ``alone_ok`` (None: not reported)."""
+        self.refuse_follow: str | None = None
+        """When set, FollowCommands are refused with this reason (an Event), not applied."""
         self.follow_commands: list[tuple[str, dict[str, Any]]] = []
         self.params: list[tuple[str, dict[str, Any]]] = []
         self.stops: list[tuple[str, dict[str, Any]]] = []
@@ -90,6 +98,7 @@ class FakeService:
             bus.subscribe("tether/*/params", self._on_params),
             bus.subscribe("tether/*/cmd/stop", self._on_stop),
             bus.queryable("tether/*/status", self._on_status_query),
+            bus.liveliness_token("groundstation/service/fake"),
         ]
 
     # ------------------------------------------------------------------ commands in
@@ -104,6 +113,11 @@ class FakeService:
 
     def _on_follow(self, sample: Sample) -> None:
         drone, cmd = self._record(self.follow_commands, sample)
+        reason = self.refuse_follow
+        if reason is not None:
+            event = Event(stamp_s=time.time(), kind="rejected", input="follow", reason=reason)
+            self.bus.publish(f"tether/{drone}/events", event.to_json())
+            return
         with self._lock:
             state = self._state.get(drone)
             if state is None:
@@ -174,6 +188,8 @@ class FakeService:
                 }
                 if self.peers is not None:
                     status["peers"] = self.peers
+                if self.alone_ok is not None:
+                    status["alone_ok"] = self.alone_ok
                 replies.append(Sample(f"tether/{drone}/status", json.dumps(status).encode()))
         return replies
 

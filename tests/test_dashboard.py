@@ -26,8 +26,9 @@ from groundstation.config import Settings, load_settings
 from groundstation.dashboard import scene as scene_mod
 from groundstation.dashboard.app import Dashboard
 from groundstation.dashboard.commands import (
-    MIN_THRESHOLD_N,
     FollowLimits,
+    check_tether,
+    follow_blocker,
     follow_command,
     params_command,
     stop_command,
@@ -44,6 +45,7 @@ from groundstation.dashboard.model import (
 )
 from groundstation.dashboard.panel import PENDING_HOLD_S, Panel
 from groundstation.dashboard.readouts import (
+    BusView,
     LinkStats,
     follow_html,
     health_html,
@@ -65,6 +67,7 @@ from groundstation.dashboard.scene import (
 from groundstation.evaluation import settings_for
 from groundstation.messages import (
     Estimate,
+    Event,
     FollowCommand,
     FollowInfo,
     InvalidMessage,
@@ -263,19 +266,23 @@ def test_params_and_stop_commands() -> None:
 
 
 def test_follow_limits_refuse_with_a_reason_and_never_clamp() -> None:
-    # sigma_T = |(4, 4, 3)| mN = 6.4 mN -> floor 3 sigma = 19.2 mN.
-    limits = FollowLimits.for_drone((0.004, 0.004, 0.003), 0.0, 0.754, 1.6)
-    assert limits.threshold_floor_n == pytest.approx(3.0 * math.hypot(0.004, 0.004, 0.003))
+    # sigma_T = |(8, 8, 6)| mN = 12.8 mN -> floor 3 sigma = 38.4 mN, above the service's 0.02 N.
+    limits = FollowLimits.for_drone((0.008, 0.008, 0.006), 0.0, 0.754, 1.6, min_threshold_n=0.02)
+    assert limits.threshold_floor_n == pytest.approx(3.0 * math.hypot(0.008, 0.008, 0.006))
     assert limits.check_threshold(0.10) is None
     for bad in (-1.0, 0.0, math.nan):
         message = limits.check_threshold(bad)
         assert message is not None and "> 0" in message
-    low = limits.check_threshold(0.015)
-    assert low is not None and "0.019 N" in low and "σ" in low
-    quiet = FollowLimits.for_drone((1e-4, 1e-4, 1e-4), 0.0, 0.754, 1.6)
-    assert quiet.threshold_floor_n == MIN_THRESHOLD_N
-    assert quiet.check_threshold(0.005) is not None
-    assert FollowLimits.for_drone(None, 0.0, 0.754, 1.6).threshold_floor_n == MIN_THRESHOLD_N
+    low = limits.check_threshold(0.03)
+    assert low is not None and "0.038 N" in low and "σ" in low
+    # The service's floor ([service] follow_threshold_min_n) is the panel's: 0.015 N is refused
+    # here, not sent to be refused there (3 sigma = 19.2 mN is below it).
+    quiet = FollowLimits.for_drone((0.004, 0.004, 0.003), 0.0, 0.754, 1.6, min_threshold_n=0.02)
+    assert quiet.threshold_floor_n == 0.02
+    refused = quiet.check_threshold(0.015)
+    assert refused is not None and "follow_threshold_min_n" in refused
+    unknown = FollowLimits.for_drone(None, 0.0, 0.754, 1.6, min_threshold_n=0.05)
+    assert unknown.threshold_floor_n == 0.05
     # Land height: above the floor, below base + tether (0.754 + 1.6 m).
     assert limits.check_land_height(0.25) is None
     for bad in (0.0, -0.1, 2.36, 5.0, math.inf):
@@ -467,10 +474,52 @@ def test_health_html_with_and_without_status() -> None:
 
 
 def test_link_warning_for_no_service_and_no_peers() -> None:
-    assert link_warning_html(any_status=True, peers=3) == ""
-    assert link_warning_html(any_status=True, peers=None) == ""
-    assert "No service answers" in link_warning_html(any_status=False, peers=None)
-    assert "0 peers" in link_warning_html(any_status=True, peers=0)
+    answered = BusView(any_status=True, services=("groundstation/service/a",))
+    assert link_warning_html(answered, Status(drone="cf1", peers=3)) == ""
+    assert link_warning_html(answered, Status(drone="cf1")) == ""
+    assert link_warning_html(answered) == ""
+    nobody = link_warning_html(BusView(any_status=False, own_peers=0))
+    assert "No service answers" in nobody and "connected to 0 zenoh peer" in nobody
+    assert "0 peers" in link_warning_html(answered, Status(drone="cf1", peers=0))
+    # demo: service, simulator and dashboard share one session; 0 peers is no fault there.
+    demo = Status(drone="cf1", peers=0, alone_ok=True)
+    assert link_warning_html(answered, demo) == ""
+    local = LinkStats(250.0, 250.0, 0.01)
+    assert "in-process" in health_html(demo, local, 0.5)
+    # A service is running (its liveliness token) but no drone has reported to it yet.
+    waiting = link_warning_html(BusView(any_status=False, services=("groundstation/service/a",)))
+    assert "Service running (instance a)" in waiting and "alert" not in waiting
+
+
+def test_follow_blocker_says_why_the_service_would_refuse() -> None:
+    def blocked(**kw: Any) -> str | None:
+        args = {
+            "telemetry_age_s": 0.01,
+            "stale_after_s": 0.5,
+            "has_mocap": False,
+            "calibration": "none",
+        }
+        return follow_blocker("cf2", **(args | kw))
+
+    no_position = blocked()
+    assert no_position is not None and "no motion capture" in no_position
+    assert "groundstation calibrate" in no_position
+    assert blocked(has_mocap=True) is None
+    assert blocked(calibration="lab 2026-11-30") is None
+    assert blocked(has_mocap=None) is None  # no telemetry read here: the service decides
+    stale = blocked(has_mocap=True, telemetry_age_s=2.0)
+    assert stale is not None and "stale" in stale
+    assert blocked(has_mocap=True, telemetry_age_s=None) is None
+
+
+def test_tether_parameters_are_checked_with_a_reason() -> None:
+    assert check_tether(0.05, 1.6) is None
+    assert check_tether(0.05, None) is None
+    for weight in (-1.0, 0.0, math.nan):
+        message = check_tether(weight, 1.6)
+        assert message is not None and "ω" in message and "> 0" in message
+    length = check_tether(0.05, -0.5)
+    assert length is not None and "Length -0.5 m refused" in length
 
 
 # ------------------------------------------------------------------------------ the dashboard
@@ -639,10 +688,11 @@ def test_follow_checkbox_shows_the_report_and_publishes_on_click(
     assert checkbox.value is False
 
 
-def test_follow_request_not_confirmed_reverts_to_the_report(
+def test_follow_request_nobody_answers_reverts_and_says_so(
     dash: Dashboard, bus: InMemoryBus
 ) -> None:
-    # A service that ignores the command: the box shows the report again after the hold.
+    # A service that ignores the command: the box shows the report again after the hold, and
+    # the panel says that nothing confirmed it (never a silent revert).
     estimate = _estimate(follow=FollowInfo(enabled=False, active=False, threshold_n=0.15))
     bus.publish("tether/cf9/estimate", estimate.to_json())
     assert bus.flush()
@@ -659,6 +709,127 @@ def test_follow_request_not_confirmed_reverts_to_the_report(
     assert bus.flush()
     dash.update(t0 + PENDING_HOLD_S + 1.0)
     assert panel.follow.handle.value is False
+    message = panel.follow_message.content
+    assert "Not confirmed" in message and "follow mode" in message
+    assert "tether/cf9/events" in message
+
+
+def _telemetry_with_mocap(seq: int) -> bytes:
+    return json.dumps(
+        {
+            "seq": seq,
+            "stamp_s": seq * 0.004,
+            "accel_mps2": [0.0, 0.0, (0.33 - 0.05) / 0.030],
+            "quat_wxyz": [1.0, 0.0, 0.0, 0.0],
+            "thrust_n": 0.33,
+            "position_m": [1.0, 0.0, 1.0],
+        }
+    ).encode()
+
+
+def test_a_refusal_by_the_service_is_said_where_the_operator_typed(bus: InMemoryBus) -> None:
+    from groundstation.service import Service
+
+    # The real service, configured with a higher threshold floor than this dashboard knows:
+    # the panel lets 0.07 N through, the service refuses it and says why on its events.
+    strict = load_settings(
+        use_env=False, cli_overrides={"service": {"follow_threshold_min_n": 0.09}}
+    )
+    service = Service(strict, bus)
+    dash_settings = load_settings(
+        use_env=False, cli_overrides={"web": {"port": 0, "panel": "shared"}}
+    )
+    dashboard = Dashboard(dash_settings, bus, port=0, update_thread=False)
+    service.start()
+    dashboard.start()
+    try:
+        for seq in range(30):
+            bus.publish("tether/cf1/telemetry", _telemetry_with_mocap(seq))
+        assert _wait_until(lambda: dashboard.poll_status() == 1, 5.0)
+        assert bus.flush()
+        t0 = time.monotonic()
+        dashboard.update(t0)
+        panel = _panel(dashboard)
+        assert panel.selected == "cf1" and panel.warning.content == ""
+        follow_seen = _record(bus, "tether/cf1/follow")
+        panel.threshold.handle.value = 0.07
+        panel._on_follow_submit(None)
+        assert bus.flush() and len(follow_seen) == 1, panel.follow_message.content
+        assert "answer follows" in panel.follow_message.content
+        inbox = dashboard._inboxes["cf1"]
+        assert _wait_until(lambda: inbox.n_events >= 1, 5.0), "the service did not answer"
+        dashboard.update(t0 + 0.2)
+        message = panel.follow_message.content
+        assert "The service refused the follow command" in message
+        assert "follow_threshold_min_n" in message and 'role="alert"' in message
+        # Nothing of the command was applied: the inputs show the report again at once.
+        assert panel.threshold.pending is None
+        assert panel.threshold.handle.value == pytest.approx(strict.follow.threshold_n)
+        # An event never creates a drone (the service answers for drones that never flew).
+        bus.publish(
+            "tether/cf7/events", Event(stamp_s=0.0, kind="rejected", input="follow").to_json()
+        )
+        assert bus.flush()
+        dashboard.update(t0 + 0.4)
+        assert dashboard.drones == ["cf1"]
+    finally:
+        dashboard.close()
+        service.close()
+
+
+def test_the_fake_services_refusal_is_said_once_then_applied_answers(
+    dash: Dashboard, bus: InMemoryBus, fake: FakeService
+) -> None:
+    t0 = time.monotonic()
+    _feed(dash, bus, fake, 0.0, t0)
+    panel = _panel(dash)
+    fake.refuse_follow = "cf1 is busy; not applied"
+    panel.follow.handle.value = True
+    panel._on_follow_toggled(_client_event())
+    assert bus.flush()
+    _feed(dash, bus, fake, 0.1, t0 + 0.2)
+    assert "cf1 is busy" in panel.follow_message.content
+    assert panel.follow.handle.value is False and panel.follow.pending is None
+    fake.refuse_follow = None
+    bus.publish(
+        "tether/cf1/events",
+        Event(stamp_s=0.0, kind="follow", input="follow", reason="follow on").to_json(),
+    )
+    assert bus.flush()
+    _feed(dash, bus, fake, 0.2, t0 + 0.4)
+    assert "The service: follow on." in panel.follow_message.content
+
+
+def test_follow_mode_without_a_trusted_position_is_refused_on_the_panel(
+    settings: Settings, bus: InMemoryBus
+) -> None:
+    # cf2 has no motion capture and no calibration in force: the service would refuse
+    # follow, so the panel says why and sends nothing (instead of a box that unticks itself).
+    service = FakeService(bus, ("cf1", "cf2"), mocap=("cf1",))
+    dashboard = Dashboard(settings, bus, port=0, update_thread=False)
+    dashboard.start()
+    try:
+        follow_seen = _record(bus, "tether/*/follow")
+        _feed(dashboard, bus, service, 0.0, time.monotonic())
+        dashboard.select("cf2")
+        panel = _panel(dashboard)
+        dashboard.update(time.monotonic() + 1.0)
+        assert "cannot be switched on now" in panel.follow_help.content
+        panel.follow.handle.value = True
+        panel._on_follow_toggled(_client_event())
+        assert bus.flush()
+        assert follow_seen == [], "follow went out for a drone the service would refuse"
+        assert panel.follow.handle.value is False
+        message = panel.follow_message.content
+        assert "Follow mode not switched on" in message and "no motion capture" in message
+        dashboard.select("cf1")  # with motion capture: allowed
+        panel.follow.handle.value = True
+        panel._on_follow_toggled(_client_event())
+        assert bus.flush()
+        assert [json.loads(s.payload) for s in follow_seen] == [{"enabled": True}]
+    finally:
+        dashboard.close()
+        service.close()
 
 
 def test_settings_forms_publish_follow_and_params(
@@ -689,6 +860,27 @@ def test_settings_forms_publish_follow_and_params(
         {"weight_n_per_m": 0.04, "length_m": 1.9}
     ]
     assert fake.params == [("cf1", {"weight_n_per_m": 0.04, "length_m": 1.9})]
+
+
+def test_tether_parameters_out_of_range_are_refused_on_the_panel(
+    dash: Dashboard, bus: InMemoryBus, fake: FakeService
+) -> None:
+    # No browser minimum on ω and length: a typed -1 is said and not sent, never clamped.
+    params_seen = _record(bus, "tether/*/params")
+    _feed(dash, bus, fake, 0.0, time.monotonic())
+    panel = _panel(dash)
+    panel.weight.handle.value = -1.0
+    panel._tether_typed(panel.weight)(_client_event())
+    assert "ω -1 N/m refused" in panel.tether_message.content
+    panel._on_tether_submit(None)
+    panel.weight.handle.value = 0.05
+    panel.length.handle.value = 0.0
+    panel._on_tether_submit(None)
+    assert bus.flush()
+    assert params_seen == [], "refused tether parameters went out"
+    assert "Length 0 m refused" in panel.tether_message.content
+    assert "Nothing was sent" in panel.tether_message.content
+    assert panel.length.handle.value == 0.0  # not clamped behind the operator's back
 
 
 @pytest.mark.parametrize(
@@ -880,6 +1072,38 @@ def test_no_status_reply_shows_a_warning(dash: Dashboard, bus: InMemoryBus) -> N
     assert dash.poll_status() == 0  # nobody answers
     dash.update(time.monotonic())
     assert "No service answers" in _panel(dash).warning.content
+
+
+def test_a_running_service_without_drones_is_not_called_missing(
+    dash: Dashboard, bus: InMemoryBus
+) -> None:
+    token = bus.liveliness_token("groundstation/service/abc")
+    assert dash.poll_status() == 0  # no drone: no status to give
+    dash.update(time.monotonic())
+    content = _panel(dash).warning.content
+    assert "No service answers" not in content
+    assert "Service running (instance abc)" in content
+    token.close()
+    dash.poll_status()
+    dash.update(time.monotonic() + 1.0)
+    assert "No service answers" in _panel(dash).warning.content
+
+
+def test_zero_peers_in_the_demo_is_no_alarm(settings: Settings, bus: InMemoryBus) -> None:
+    service = FakeService(bus, ("cf1",), peers=0, alone_ok=True)
+    dashboard = Dashboard(settings, bus, port=0, update_thread=False)
+    dashboard.start()
+    try:
+        service.publish_once(0.0)
+        assert bus.flush()
+        assert dashboard.poll_status() == 1
+        dashboard.update(time.monotonic())
+        panel = _panel(dashboard)
+        assert panel.warning.content == ""
+        assert "in-process" in panel.health_html.content
+    finally:
+        dashboard.close()
+        service.close()
 
 
 def test_zero_peers_shows_a_warning(settings: Settings, bus: InMemoryBus) -> None:

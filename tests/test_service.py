@@ -16,7 +16,7 @@ import pytest
 from groundstation.bus import InMemoryBus, PeerWatch, Sample
 from groundstation.config import Settings, load_settings
 from groundstation.messages import Event, Status
-from groundstation.service import EVENTS_PER_S, Service
+from groundstation.service import EVENTS_PER_S, Service, never_capped
 
 MASS_KG = 0.030
 THRUST_N = 0.33
@@ -123,6 +123,12 @@ def test_follow_for_a_stale_drone_is_refused(h: Harness) -> None:
         ({"enable": True}, "enabled", "'enable'"),
         ({"enabled": "yes"}, "enabled", "valid boolean"),
         (b"not json", None, "JSON"),
+        # Tug-to-land heights outside (floor 0 m, base 0.754 m + tether 1.6 m): above the
+        # reach the first tug stops the motors at any height, at the floor or below never.
+        ({"enabled": True, "land_below_m": 50.0}, "land_below_m", "outside the tether's reach"),
+        ({"enabled": True, "land_below_m": -5.0}, "land_below_m", "above the floor (0 m"),
+        ({"enabled": False, "land_below_m": 0.0}, "land_below_m", "outside the tether's reach"),
+        ({"enabled": True, "land_below_m": 2.354}, "land_below_m", "below base + tether"),
     ],
 )
 def test_bad_follow_commands_are_rejected_with_the_reason(
@@ -141,6 +147,12 @@ def test_bad_follow_commands_are_rejected_with_the_reason(
     assert after is not None
     assert after["follow"] == before["follow"], "a rejected command changes nothing"
     assert after["follow"]["threshold_n"] == 0.10
+
+
+def test_a_land_height_within_reach_is_applied(h: Harness) -> None:
+    h.fly("cf1", 300)
+    event = h.command("cf1", {"enabled": False, "land_below_m": 0.25})
+    assert event.kind == "follow" and event.changes["land_below_m"] == 0.25
 
 
 def test_a_valid_threshold_is_applied_and_told(h: Harness) -> None:
@@ -219,6 +231,43 @@ def test_a_flood_of_bad_commands_is_capped(h: Harness) -> None:
     assert status is not None and status["events_suppressed"] >= 200
 
 
+def test_a_flood_never_hides_a_stop_or_a_follow_switch(
+    h: Harness, caplog: pytest.LogCaptureFixture
+) -> None:
+    # The cap drops events of a flood of bad commands, but never a Stop or follow switched
+    # on/off: those stay in the action log (and on the bus, hence in a recording).
+    caplog.set_level(logging.INFO, logger="groundstation.actions")
+    h.fly("cf1", 300)
+    for _ in range(300):
+        h.bus.publish("tether/cf1/follow", b'{"enabled": 1}')
+    h.bus.publish("tether/cf1/follow", b'{"enabled": true}')
+    h.bus.publish("tether/cf1/cmd/stop", b'{"stamp_s": 1.0, "reason": "operator"}')
+    assert h.bus.flush()
+    assert _wait(lambda: any(e.kind == "stop" for e in h.events))
+    assert sum(h.service.events_suppressed.values()) >= 200, "the flood was capped"
+    kinds = [e.kind for e in h.events]
+    assert "follow" in kinds and "stop" in kinds
+    lines = [r.getMessage() for r in caplog.records if r.name == "groundstation.actions"]
+    assert any(line.startswith("cf1 follow on follow from unknown: follow on") for line in lines)
+    assert any(line.startswith("cf1 stop on cmd/stop from unknown: operator") for line in lines)
+
+
+def test_which_events_are_never_capped() -> None:
+    def event(kind: Any, reason: str = "", input_kind: str = "follow") -> Event:
+        return Event(stamp_s=0.0, kind=kind, input=input_kind, reason=reason)
+
+    assert never_capped(event("stop", "operator", "cmd/stop"))
+    assert never_capped(event("stop", "tug-to-land", "service"))
+    assert never_capped(event("follow", "follow on")) and never_capped(
+        event("follow", "follow off")
+    )
+    assert never_capped(event("follow", "cf1 silent for 0.60 s: follow off", "service"))
+    assert not never_capped(event("follow", "re-tuned"))
+    assert not never_capped(event("follow", "no change"))
+    assert not never_capped(event("rejected", "threshold_n ..."))
+    assert not never_capped(event("warning", "unknown fields ignored"))
+
+
 def test_status_matches_its_documented_model(h: Harness) -> None:
     h.fly("cf1", 10)
     status = h.status("cf1")
@@ -227,6 +276,22 @@ def test_status_matches_its_documented_model(h: Harness) -> None:
     undocumented = set(status) - set(Status.model_fields)
     assert not undocumented, f"status fields missing from messages.Status: {undocumented}"
     assert status["peers"] is None, "an in-memory bus has no peers to count"
+    assert status["alone_ok"] is False
+
+
+def test_status_says_when_being_alone_is_expected() -> None:
+    bus = InMemoryBus()
+    service = Service(load_settings(None, use_env=False), bus, alone_ok=True)
+    service.start()
+    try:
+        bus.publish("tether/cf1/telemetry", _telemetry(0))
+        assert _wait(lambda: bool(bus.query("tether/cf1/status")))
+        status = json.loads(bus.query("tether/cf1/status")[0].payload)
+        assert status["alone_ok"] is True
+        assert bus.alive("groundstation/service/*") == [f"groundstation/service/{service.instance}"]
+    finally:
+        service.close()
+        bus.close()
 
 
 def test_events_are_recorded(tmp_path: Path) -> None:

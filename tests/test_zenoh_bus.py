@@ -1,4 +1,4 @@
-"""The zenoh adapter's configuration: nothing listens beyond loopback unless configured."""
+"""The zenoh adapter: nothing listens beyond loopback unless configured; liveliness."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from groundstation.config import ZenohSection
-from groundstation.zenoh_bus import make_zenoh_config
+from groundstation.zenoh_bus import ZenohBus, make_zenoh_config
 
 
 def _listen(section: ZenohSection) -> object:
@@ -35,3 +35,13 @@ def test_the_files_and_the_tables_endpoints_are_kept(tmp_path: Path) -> None:
     assert _listen(ZenohSection(config_file=str(listening))) == ["tcp/127.0.0.1:0"]
     section = ZenohSection(config_file=str(listening), listen=("tcp/127.0.0.1:7999",))
     assert _listen(section) == ["tcp/127.0.0.1:7999"]
+
+
+def test_alive_lists_the_liveliness_tokens_of_this_session() -> None:
+    # The dashboard finds a running service by its token, also in ``demo``, where service and
+    # dashboard share this one session.
+    with ZenohBus(ZenohSection(mode="peer")) as bus:
+        token = bus.liveliness_token("groundstation/service/abc")
+        assert bus.alive("groundstation/service/*", timeout_s=1.0) == ["groundstation/service/abc"]
+        token.close()
+        assert bus.alive("groundstation/service/*", timeout_s=0.5) == []

@@ -4,8 +4,11 @@ It is an edge, like the simulator: everything it shows comes from the bus and ev
 does is a message on the bus, so it can run in the service's process or in its own.
 
 Reads (subscriptions): ``tether/*/estimate``, ``tether/*/telemetry``, ``tether/*/truth``,
-``tether/*/reel`` and ``tether/*/cmd/stop``; about once a second it queries
-``tether/*/status`` (the service's health per drone, with its peer count). Writes:
+``tether/*/reel``, ``tether/*/cmd/stop`` and ``tether/*/events`` (the service's answers to
+commands: a refused follow command is said on the panel with the service's reason); about
+once a second it queries ``tether/*/status`` (the service's health per drone, with its peer
+count) and the liveliness tokens ``groundstation/service/*`` (a service is running even
+before any drone has reported to it). Writes:
 ``tether/{drone}/follow`` (FollowCommand), ``tether/{drone}/params`` (tether ω and length)
 and ``tether/{drone}/cmd/stop`` (the emergency Stop, after a confirmation).
 
@@ -40,6 +43,7 @@ from groundstation.bus import Bus, Sample, Subscription
 from groundstation.config import Settings
 from groundstation.dashboard.commands import (
     FollowLimits,
+    follow_blocker,
     follow_command,
     params_command,
     stop_command,
@@ -53,6 +57,7 @@ from groundstation.dashboard.model import (
     Throttle,
 )
 from groundstation.dashboard.panel import Panel
+from groundstation.dashboard.readouts import BusView
 from groundstation.dashboard.scene import PALETTE, Scene, camera_framing
 from groundstation.messages import DRONE_ID_RE
 
@@ -72,6 +77,8 @@ CHART_RATE_HZ = 4.0
 STATUS_PERIOD_S = 1.0
 """How often ``tether/*/status`` is queried."""
 STATUS_TIMEOUT_S = 0.5
+SERVICE_TOKENS = "groundstation/service/*"
+"""The services' liveliness tokens (:class:`groundstation.service.Service`)."""
 SHARED = -1
 """Key of the shared panel in :attr:`Dashboard.panels` (``[web] panel = "shared"``)."""
 
@@ -140,6 +147,10 @@ class Dashboard:
         self._cpu_s = 0.0
         self._polled = False
         self._status_rx_s = -math.inf
+        self._services: tuple[str, ...] = ()
+        """Services alive at the last poll (their liveliness tokens)."""
+        count = getattr(bus, "peer_count", None)
+        self._peer_count = count if callable(count) else None
         self._scene_throttle = Throttle(self._scene_rate_hz)
         self._panel_throttle = Throttle(min(PANEL_RATE_HZ, self._scene_rate_hz))
         self._chart_throttle = Throttle(min(CHART_RATE_HZ, self._scene_rate_hz))
@@ -174,6 +185,7 @@ class Dashboard:
             ("stop", "tether/*/cmd/stop"),
         ):
             self._subs.append(self._bus.subscribe(keyexpr, functools.partial(self._receive, kind)))
+        self._subs.append(self._bus.subscribe("tether/*/events", self._receive_event))
         if self._use_thread:
             for target, name in (
                 (self._run_updates, "dashboard-update"),
@@ -303,6 +315,17 @@ class Dashboard:
         if kind in ("telemetry", "stop"):  # link health, and when the Stop was seen
             setattr(inbox, f"{kind}_rx_s", now_s)
 
+    def _receive_event(self, sample: Sample) -> None:
+        """Bus callback: keep an Event for a drone seen here (no parsing here). An event
+        neither creates a drone nor keeps one alive: the service answers a command for a
+        drone that never flew, too."""
+        parts = sample.key.split("/", 2)
+        inbox = self._inboxes.get(parts[1]) if len(parts) == 3 else None
+        if inbox is None:
+            return
+        inbox.n_events += 1
+        inbox.events.append((inbox.n_events, sample.payload))
+
     # ---------------------------------------------------------------- status polling
 
     def poll_status(self) -> int:
@@ -330,8 +353,29 @@ class Dashboard:
             count += 1
         if replies:
             self._status_rx_s = now_s
+        try:
+            self._services = tuple(self._bus.alive(SERVICE_TOKENS, timeout_s=STATUS_TIMEOUT_S))
+        except Exception as exc:  # as above: the poller goes on, the page says no service
+            self._log_once("liveliness-query", "service liveliness query failed: %s", exc)
+            self._services = ()
         self._polled = True
         return count
+
+    def bus_view(self, clock_s: float | None = None) -> BusView:
+        """What the last polls found: a status reply lately, the services alive, and this
+        dashboard's own peer count."""
+        clock_s = time.monotonic() if clock_s is None else clock_s
+        own_peers = None
+        if self._peer_count is not None:
+            try:
+                own_peers = int(self._peer_count())
+            except Exception:  # a closing session: not known
+                own_peers = None
+        return BusView(
+            any_status=not self._polled or clock_s - self._status_rx_s <= STATUS_STALE_S,
+            services=self._services if self._polled else (),
+            own_peers=own_peers,
+        )
 
     def _run_status(self) -> None:
         while not self._stop_event.is_set():
@@ -387,16 +431,35 @@ class Dashboard:
         return drones
 
     def follow_limits(self, drone_id: str) -> FollowLimits:
-        """What a follow setting for ``drone_id`` must respect (floor, reach, noise)."""
-        params = self._settings.for_drone(drone_id)
+        """What a follow setting for ``drone_id`` must respect (the service's threshold
+        floor, noise, floor, reach) and why follow cannot be switched on now, if so."""
+        settings = self._settings
+        params = settings.for_drone(drone_id)
         drone = self._drones.get(drone_id)
+        blocked = None
         if drone is None:
             base_z_m, length_m, std_n = params.base.position_m[2], params.tether.length_m, None
         else:
             base_z_m = drone.base_m(params.base.position_m)[2]
             length_m = drone.length_m(params.tether.length_m)
             std_n = drone.estimate.tension_std_n if drone.estimate is not None else None
-        return FollowLimits.for_drone(std_n, params.base.floor_z_m, base_z_m, length_m)
+            now_s = time.monotonic()
+            telemetry = drone.telemetry
+            blocked = follow_blocker(
+                drone_id,
+                telemetry_age_s=drone.telemetry_age_s(now_s),
+                stale_after_s=settings.service.stale_after_s,
+                has_mocap=None if telemetry is None else telemetry.position_m is not None,
+                calibration=drone.calibration(now_s),
+            )
+        return FollowLimits.for_drone(
+            std_n,
+            params.base.floor_z_m,
+            base_z_m,
+            length_m,
+            min_threshold_n=settings.service.follow_threshold_min_n,
+            follow_blocked=blocked,
+        )
 
     # ---------------------------------------------------------------- forgetting
 
@@ -532,18 +595,17 @@ class Dashboard:
     def _update_panels(self, now_s: float, clock_s: float) -> None:
         panel_due = self._panel_throttle.due(now_s)
         chart_due = self._chart_throttle.due(now_s)
-        any_status = not self._polled or clock_s - self._status_rx_s <= STATUS_STALE_S
+        any_changed = any(panel.selection_changed for panel in self._panels.values())
+        view = self.bus_view(clock_s) if panel_due or any_changed else None
         for panel in self._panels.values():
             drone = self._drones.get(panel.selected) if panel.selected is not None else None
             if drone is None:
-                if panel_due:
-                    panel.show_no_drone(any_status, None)
+                if view is not None:
+                    panel.show_no_drone(view)
                 continue
             changed = panel.selection_changed
-            if panel_due or changed:
-                status = drone.current_status(clock_s)
-                peers = status.peers if status is not None else None
-                panel.update(drone, now_s, clock_s, any_status=any_status, peers=peers)
+            if view is not None and (panel_due or changed):
+                panel.update(drone, now_s, clock_s, view)
             if chart_due or changed:
                 panel.update_charts(drone, now_s)
             panel.selection_changed = False

@@ -2,8 +2,11 @@
 
 Payloads are built with the models of :mod:`groundstation.messages` (FollowCommand,
 TetherParams, Stop), so what the panel sends is what the service accepts. A follow setting
-the operator types is checked against the selected drone here, and a refusal is a sentence
-on the panel, never a silent clamp (issue 14).
+the operator types is checked against the selected drone here, with the service's own rules
+(its threshold floor ``[service] follow_threshold_min_n``, the tether's reach, no follow
+without a trusted position), and a refusal is a sentence on the panel, never a silent clamp
+(issue 14). What the service refuses anyway comes back on ``tether/{drone}/events`` and is
+shown in the same place.
 """
 
 from __future__ import annotations
@@ -14,16 +17,15 @@ from dataclasses import dataclass
 from groundstation.messages import FollowCommand, Stop, TetherParams
 
 __all__ = [
-    "MIN_THRESHOLD_N",
     "NOISE_SIGMAS",
     "FollowLimits",
+    "check_tether",
+    "follow_blocker",
     "follow_command",
     "params_command",
     "stop_command",
 ]
 
-MIN_THRESHOLD_N = 0.01
-"""No follow threshold below this, newtons, whatever the noise figures say."""
 NOISE_SIGMAS = 3.0
 """A threshold must exceed this many standard deviations of the drone's tension estimate:
 below that, noise alone crosses it and the drone "follows" a pull nobody makes."""
@@ -98,6 +100,26 @@ def params_command(*, weight_n_per_m: float | None = None, length_m: float | Non
     return _compact(cmd)
 
 
+def check_tether(weight_n_per_m: float, length_m: float | None) -> str | None:
+    """None if these tether parameters may be sent, else the sentence the panel shows.
+
+    The panel's number fields have no browser minimum (it would replace a typed ``-1``
+    silently); a value the service would refuse is refused here with the reason instead.
+
+    Args:
+        weight_n_per_m: tether weight per length ω typed, N/m.
+        length_m: tether length typed, metres (None: not editable, a reel reports it).
+    """
+    if not math.isfinite(weight_n_per_m) or weight_n_per_m <= 0.0:
+        return (
+            f"ω {weight_n_per_m:g} N/m refused: it must be a number > 0 N/m (weigh a "
+            "measured piece of the tether: ω = m·g / L)."
+        )
+    if length_m is not None and (not math.isfinite(length_m) or length_m <= 0.0):
+        return f"Length {length_m:g} m refused: it must be a number > 0 m."
+    return None
+
+
 def stop_command(stamp_s: float, reason: str = "operator") -> bytes:
     """A Stop payload for ``tether/{drone}/cmd/stop``.
 
@@ -113,17 +135,23 @@ class FollowLimits:
     """What a follow setting typed into the panel must respect, for one drone.
 
     Attributes:
-        threshold_floor_n: lowest accepted threshold, newtons: the larger of
-            :data:`MIN_THRESHOLD_N` and :data:`NOISE_SIGMAS` × |σ_T| of the latest Estimate.
+        threshold_floor_n: lowest accepted threshold, newtons: the larger of the service's
+            floor (``[service] follow_threshold_min_n``) and :data:`NOISE_SIGMAS` × |σ_T| of
+            the latest Estimate.
         tension_std_n: |σ_T| used, newtons (None: no Estimate yet).
         floor_z_m: the floor, world z, metres; a land height must lie above it.
         reach_top_m: base exit height + tether length, metres; nothing above it is reachable.
+        min_threshold_n: the service's floor, newtons (``[service] follow_threshold_min_n``).
+        follow_blocked: why the service would refuse to switch follow on now (see
+            :func:`follow_blocker`), or None.
     """
 
     threshold_floor_n: float
     tension_std_n: float | None
     floor_z_m: float
     reach_top_m: float
+    min_threshold_n: float
+    follow_blocked: str | None = None
 
     @classmethod
     def for_drone(
@@ -132,11 +160,15 @@ class FollowLimits:
         floor_z_m: float,
         base_z_m: float,
         length_m: float,
+        *,
+        min_threshold_n: float,
+        follow_blocked: str | None = None,
     ) -> FollowLimits:
-        """Limits from the drone's latest σ_T (world, N), its floor, base height and tether."""
+        """Limits from the drone's latest σ_T (world, N), its floor, base height and tether,
+        and the service's threshold floor (N)."""
         std_n = None if tension_std_n is None else math.hypot(*tension_std_n)
-        floor_n = MIN_THRESHOLD_N if std_n is None else max(MIN_THRESHOLD_N, NOISE_SIGMAS * std_n)
-        return cls(floor_n, std_n, floor_z_m, base_z_m + length_m)
+        floor_n = min_threshold_n if std_n is None else max(min_threshold_n, NOISE_SIGMAS * std_n)
+        return cls(floor_n, std_n, floor_z_m, base_z_m + length_m, min_threshold_n, follow_blocked)
 
     def check_threshold(self, threshold_n: float) -> str | None:
         """None if ``threshold_n`` may be sent, else the sentence the panel shows."""
@@ -146,8 +178,8 @@ class FollowLimits:
             noise = (
                 f"{NOISE_SIGMAS:g} σ of this drone's tension estimate "
                 f"(σ = {1e3 * self.tension_std_n:.1f} mN)"
-                if self.tension_std_n is not None and self.threshold_floor_n > MIN_THRESHOLD_N
-                else f"the floor of {MIN_THRESHOLD_N:g} N"
+                if self.tension_std_n is not None and self.threshold_floor_n > self.min_threshold_n
+                else "the service's floor ([service] follow_threshold_min_n)"
             )
             return (
                 f"Threshold {threshold_n:g} N refused: below {self.threshold_floor_n:.3f} N, "
@@ -167,3 +199,43 @@ class FollowLimits:
                 f"{self.reach_top_m:.2f} m)."
             )
         return None
+
+
+def follow_blocker(
+    drone_id: str,
+    *,
+    telemetry_age_s: float | None,
+    stale_after_s: float,
+    has_mocap: bool | None,
+    calibration: str | None,
+) -> str | None:
+    """Why the service would refuse ``{"enabled": true}`` for this drone now, or None.
+
+    The panel's copy of the service's rules (``Pipeline._refuse_follow``; docs/contract.md,
+    "what is refused"), read from what the dashboard last saw, so that ticking Follow mode
+    is refused with the reason on the page instead of unticking itself. The service still
+    decides; its own refusal comes back on ``tether/{drone}/events``.
+
+    Args:
+        drone_id: the drone.
+        telemetry_age_s: seconds since its last Telemetry arrived here (None: none seen
+            here, e.g. a dashboard that may read Estimates only: then the service decides).
+        stale_after_s: ``[service] stale_after_s``, seconds.
+        has_mocap: its latest Telemetry carried ``position_m`` (None: no Telemetry yet).
+        calibration: the calibration in force as the service reports it (Estimate or status
+            ``calibration``; None: not reported yet).
+    """
+    if telemetry_age_s is not None and telemetry_age_s > stale_after_s:
+        return (
+            f"{drone_id} is stale (no telemetry for {telemetry_age_s:.1f} s): the service "
+            "keeps follow off until it is heard again."
+        )
+    if has_mocap is False and calibration == "none":
+        return (
+            f"{drone_id} has no motion capture (its telemetry carries no position_m) and no "
+            "calibration is in force ([calibration] source = none): follow would fly it to "
+            "its tether-based position, off by up to ~1 m uncalibrated, so the service "
+            "refuses it. Calibrate the drone (groundstation calibrate, docs/calibration.md) "
+            "or give it motion capture."
+        )
+    return None

@@ -22,6 +22,7 @@ import numpy.typing as npt
 
 from groundstation.messages import (
     Estimate,
+    Event,
     FollowInfo,
     InvalidMessage,
     Reel,
@@ -32,10 +33,12 @@ from groundstation.messages import (
 )
 
 __all__ = [
+    "EVENTS_KEPT",
     "HISTORY_S",
     "THRUST_GONE_RATIO",
     "TRAIL_S",
     "DroneState",
+    "FollowOutcome",
     "History",
     "Inbox",
     "Pending",
@@ -59,6 +62,9 @@ THRUST_GONE_RATIO = 0.05
 """After a Stop, telemetry confirms it when the drone is disarmed or its thrust is below this
 fraction of its weight (motors off; a hovering drone reports about 1.0)."""
 GRAVITY_MPS2 = 9.81
+EVENTS_KEPT = 16
+"""Events (``tether/{drone}/events``) kept per drone between two update passes: the service
+sends at most 20 per drone and second, and an operator's answer is among the last few."""
 
 Vec3 = tuple[float, float, float]
 
@@ -193,8 +199,10 @@ class Inbox:
 
     __slots__ = (
         "estimate",
+        "events",
         "last_rx_s",
         "n_estimate",
+        "n_events",
         "n_reel",
         "n_stop",
         "n_telemetry",
@@ -224,8 +232,27 @@ class Inbox:
         self.stop_rx_s = 0.0
         self.status: bytes | None = None
         self.status_rx_s = 0.0
+        self.events: deque[tuple[int, bytes]] = deque(maxlen=EVENTS_KEPT)
+        """The latest Events as ``(n_events when it came, payload)``, oldest first: every
+        answer to a command counts, not only the last payload (a deque's append costs as
+        little as a reference assignment)."""
+        self.n_events = 0
         self.last_rx_s = time.monotonic()
         """When a sample (not a status reply) last arrived for this drone."""
+
+
+@dataclass(frozen=True)
+class FollowOutcome:
+    """The service's latest answer about follow for one drone (``tether/{drone}/events``):
+    a follow command refused or applied, or follow switched off by the service."""
+
+    n: int
+    """Counts the answers seen for this drone (a panel shows each one once)."""
+    event: Event
+
+    @property
+    def refused(self) -> bool:
+        return self.event.kind == "rejected"
 
 
 @dataclass(frozen=True)
@@ -272,7 +299,7 @@ class DroneState:
         self.inbox = inbox
         self.color = color
         self.weight_n = weight_n
-        self.seen: dict[str, float] = dict.fromkeys((*KINDS, "status"), 0)
+        self.seen: dict[str, float] = dict.fromkeys((*KINDS, "status", "events"), 0)
         """What was last parsed: a count per kind, the arrival time for the status."""
         self.estimate: Estimate | None = None
         self.telemetry: Telemetry | None = None
@@ -281,6 +308,8 @@ class DroneState:
         self.reel: Reel | None = None
         self.status: Status | None = None
         self.last_stop: StopSeen | None = None
+        self.follow_outcome: FollowOutcome | None = None
+        self._n_outcomes = 0
         self.invalid: dict[str, int] = {}
         self.history = History(H_COLS, capacity)
         self.trail: deque[Vec3] = deque()
@@ -318,6 +347,13 @@ class DroneState:
             return self.estimate.follow
         status = self.current_status(now_s)
         return None if status is None else status.follow
+
+    def calibration(self, now_s: float) -> str | None:
+        """The calibration the service applies (Estimate, else status); None: not reported."""
+        if self.estimate is not None:
+            return self.estimate.calibration
+        status = self.current_status(now_s)
+        return None if status is None else status.calibration
 
     def body_position(self) -> Vec3 | None:
         """Where the drone is drawn: the estimate, else motion capture, else truth."""
@@ -413,6 +449,12 @@ class DroneState:
             self.last_stop = new_stop
         if new_telemetry:
             self._confirm_stop()
+        if inbox.n_events != seen["events"]:
+            for n, payload in list(inbox.events):  # a copy: the bus thread appends
+                if n > seen["events"]:
+                    seen["events"] = n
+                    changed = True
+                    self._on_event(self._read("events", payload, Event.read, log))
 
         self._measure_rates(now_s)
         if new_estimate and self.estimate is not None:
@@ -421,6 +463,16 @@ class DroneState:
             self.trail_t.popleft()
             self.trail.popleft()
         return changed, new_stop
+
+    def _on_event(self, event: Event | None) -> None:
+        """Keep the service's answers about follow: a follow command refused or applied,
+        or follow switched off by the service (a silent drone)."""
+        if event is None or event.kind not in ("rejected", "follow"):
+            return
+        if event.input not in ("follow", "service"):
+            return
+        self._n_outcomes += 1
+        self.follow_outcome = FollowOutcome(self._n_outcomes, event)
 
     def _confirm_stop(self) -> None:
         """A Stop is acknowledged by telemetry sent after it: disarmed, or thrust gone. Once

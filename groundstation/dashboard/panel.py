@@ -8,7 +8,9 @@ every tab sees a change made from anywhere; a click publishes a command and the 
 the requested value for at most :data:`PENDING_HOLD_S` until the report catches up.
 
 Follow inputs are checked where they are typed (:class:`~.commands.FollowLimits`): a value
-the panel refuses is said on the panel and not sent; nothing is clamped silently.
+the panel refuses is said on the panel and not sent; nothing is clamped silently. What the
+service answers (``tether/{drone}/events``: refused, with its reason, or applied) is said in
+the same place, and a request nobody answers is said too when it expires.
 """
 
 from __future__ import annotations
@@ -24,10 +26,16 @@ import viser
 
 from groundstation.config import Settings
 from groundstation.dashboard.charts import Charts
-from groundstation.dashboard.commands import LAND_HELP, THRESHOLD_HELP, FollowLimits
-from groundstation.dashboard.model import HISTORY_S, DroneState, Pending, reconcile
+from groundstation.dashboard.commands import (
+    LAND_HELP,
+    THRESHOLD_HELP,
+    FollowLimits,
+    check_tether,
+)
+from groundstation.dashboard.model import HISTORY_S, DroneState, FollowOutcome, Pending, reconcile
 from groundstation.dashboard.readouts import (
     SMOOTH_VIEW_NOTE,
+    BusView,
     LinkStats,
     follow_html,
     health_html,
@@ -117,9 +125,14 @@ class _Synced:
         self.reset()
         _set_value(self.handle, self.written)
 
-    def show(self, reported: Any, now_s: float) -> None:
+    def show(self, reported: Any, now_s: float) -> bool:
+        """Show ``reported`` unless a request or an edit holds the input.
+
+        Returns:
+            True when a request expired without the report ever confirming it.
+        """
         if reported is None or now_s < self.editing_until_s:
-            return
+            return False
         if self.pending is None and self.handle.value != self.written:
             # viser stores a browser's edit before it calls our callback, which then turns
             # it into a pending request. Overwriting it in between would make the callback
@@ -127,11 +140,13 @@ class _Synced:
             if self.foreign_since_s is None:
                 self.foreign_since_s = now_s
             if now_s - self.foreign_since_s < FOREIGN_EDIT_WAIT_S:
-                return
+                return False
         self.foreign_since_s = None
+        before = self.pending
         value, self.pending = reconcile(reported, self.pending, now_s)
         _set_value(self.handle, value)
         self.written = value
+        return before is not None and self.pending is None and reported != before.value
 
 
 @dataclass
@@ -162,6 +177,8 @@ class Panel:
         self._drones: tuple[str, ...] = ()
         self._asks: dict[int, _StopAsk] = {}
         self._asks_lock = threading.Lock()
+        self._outcome_n = 0
+        """The last of the selected drone's follow outcomes this panel has looked at."""
 
         self.warning = gui.add_html("")
         self.drone_select = gui.add_dropdown("Drone", (NO_DRONE,), initial_value=NO_DRONE)
@@ -271,21 +288,20 @@ class Panel:
         settings = self._settings
         with gui.add_folder("Tether", expand_by_default=False):
             with gui.add_form("Tether parameters") as form:
+                # No min= (as for the threshold): a typed -1 is refused with a sentence.
                 self.weight = _Synced(
                     gui.add_number(
                         "ω (N/m)",
                         settings.tether.weight_n_per_m,
-                        min=0.0001,
                         step=0.005,
                         disabled=True,
-                        hint="Tether weight per length",
+                        hint="Tether weight per length, N/m, > 0",
                     )
                 )
                 self.length = _Synced(
                     gui.add_number(
                         "Length (m)",
                         settings.tether.length_m,
-                        min=0.01,
                         step=0.05,
                         disabled=True,
                         hint="Editable only while no reel reports the length",
@@ -295,7 +311,8 @@ class Panel:
             self.tether_apply.on_click(lambda _event: form.submit())
             form.on_submit(self._on_tether_submit)
             for synced in (self.weight, self.length):
-                synced.handle.on_update(self._edit_marker(synced))
+                synced.handle.on_update(self._tether_typed(synced))
+            self.tether_message = gui.add_html("")
             self.tether_html = gui.add_html("")
 
     def _build_view(self, gui: viser.GuiApi) -> None:
@@ -360,6 +377,7 @@ class Panel:
             for synced in self._all_synced():
                 synced.reset()
             self.follow_message.content = ""
+            self.tether_message.content = ""
 
     def _on_select(self, event: viser.GuiEvent[Any]) -> None:
         if event.client_id is None:
@@ -371,12 +389,22 @@ class Panel:
 
     # ---------------------------------------------------------------- follow
 
-    def _edit_marker(self, synced: _Synced) -> Callable[[viser.GuiEvent[Any]], None]:
-        def mark(event: viser.GuiEvent[Any]) -> None:
-            if event.client_id is not None:
+    def _tether_typed(self, synced: _Synced) -> Callable[[viser.GuiEvent[Any]], None]:
+        def typed(event: viser.GuiEvent[Any]) -> None:
+            if event.client_id is None:
+                return
+            with self._host.gui_lock:
                 synced.editing_until_s = time.monotonic() + EDIT_HOLD_S
+                problem = self._check_tether()
+                self.tether_message.content = "" if problem is None else warning_html(problem)
 
-        return mark
+        return typed
+
+    def _typed_length_m(self) -> float | None:
+        return None if self.length.handle.disabled else float(self.length.handle.value)
+
+    def _check_tether(self) -> str | None:
+        return check_tether(float(self.weight.handle.value), self._typed_length_m())
 
     def _refuse(self, message: str) -> None:
         self.follow_message.content = warning_html(message)
@@ -418,6 +446,14 @@ class Panel:
             if drone is None:
                 return
             enabled = bool(self.follow.handle.value)
+            blocked = self._host.follow_limits(drone).follow_blocked if enabled else None
+            if blocked is not None:
+                self._refuse(f"Follow mode not switched on: {blocked}")
+                self.follow.revert()
+                return
+            self.follow_message.content = note_html(
+                f"Sent: follow {'on' if enabled else 'off'}; the service's answer follows."
+            )
             self.follow.pending = Pending(enabled, time.monotonic() + PENDING_HOLD_S)
             self._host.request_follow(drone, enabled)
 
@@ -451,7 +487,7 @@ class Panel:
             if problem is not None:
                 self._refuse(problem + " Nothing was sent.")
                 return
-            self.follow_message.content = note_html("Sent; the service's report follows.")
+            self.follow_message.content = note_html("Sent; the service's answer follows.")
             now_s = time.monotonic()
             threshold_n = float(self.threshold.handle.value)
             land = bool(self.land.handle.value)
@@ -478,12 +514,17 @@ class Panel:
                 return
             now_s = time.monotonic()
             weight = float(self.weight.handle.value)
-            length_m = None if self.length.handle.disabled else float(self.length.handle.value)
+            length_m = self._typed_length_m()
+            problem = self._check_tether()
+            if problem is not None:
+                self.tether_message.content = warning_html(problem + " Nothing was sent.")
+                return
             try:
                 self._host.request_params(drone, weight_n_per_m=weight, length_m=length_m)
             except ValueError as exc:
-                self.tether_html.content = warning_html(f"Not sent: {exc}")
+                self.tether_message.content = warning_html(f"Not sent: {exc}")
                 return
+            self.tether_message.content = note_html("Sent; the service's report follows.")
             self.weight.editing_until_s = -math.inf
             self.weight.pending = Pending(weight, now_s + PENDING_HOLD_S)
             self.length.editing_until_s = -math.inf
@@ -552,44 +593,54 @@ class Panel:
 
     # ---------------------------------------------------------------- update
 
-    def update(
-        self,
-        drone: DroneState,
-        now_s: float,
-        clock_s: float,
-        *,
-        any_status: bool,
-        peers: int | None,
-    ) -> None:
+    def update(self, drone: DroneState, now_s: float, clock_s: float, view: BusView) -> None:
         """Refresh the readouts and the synced inputs for the selected ``drone``.
 
         Args:
             drone: the selected drone.
             now_s: the pass's time (the clock of requests held by the inputs), seconds.
             clock_s: ``time.monotonic()`` (the clock of arrival: ages, staleness), seconds.
-            any_status: some service answered the status query recently.
-            peers: the peer count of the service that owns ``drone`` (None: not reported).
+            view: what the dashboard's polls found (services, status replies, peers).
         """
         settings = self._settings
         params = settings.for_drone(drone.id)
-        self.warning.content = link_warning_html(any_status, peers)
         est = drone.estimate
         status = drone.current_status(clock_s)
+        self.warning.content = link_warning_html(view, status)
         follow = drone.follow(clock_s)
         age_s = drone.telemetry_age_s(clock_s)
         self.tension_html.content = tension_html(est, drone.truth)
         self.follow_html.content = follow_html(follow)
         self.stop_html.content = stop_html(drone.last_stop, clock_s, age_s)
+        self._show_outcome(drone.follow_outcome)
         if follow is not None:
-            self.follow.show(follow.enabled, now_s)
-            self.land.show(follow.land_below_m is not None, now_s)
-            self.threshold.show(follow.threshold_n, now_s)
-            self.land_height.show(follow.land_below_m, now_s)
+            unconfirmed = [
+                name
+                for name, synced, reported in (
+                    ("follow mode", self.follow, follow.enabled),
+                    ("tug-to-land", self.land, follow.land_below_m is not None),
+                    ("threshold", self.threshold, follow.threshold_n),
+                    ("land height", self.land_height, follow.land_below_m),
+                )
+                if synced.show(reported, now_s)
+            ]
+            if unconfirmed:
+                self._refuse(
+                    f"Not confirmed: after {PENDING_HOLD_S:g} s the service still reports the "
+                    f"old {' and '.join(unconfirmed)} and sent no answer on "
+                    f"tether/{drone.id}/events. Is a service running for this drone?"
+                )
         limits = self._host.follow_limits(drone.id)
-        self.follow_help.content = note_html(
+        help_text = (
             f"{THRESHOLD_HELP} Accepted here: ≥ {limits.threshold_floor_n:.3f} N. Land height "
             f"between the floor ({limits.floor_z_m:.2f} m) and {limits.reach_top_m:.2f} m."
         )
+        if limits.follow_blocked is not None and not (follow is not None and follow.enabled):
+            self.follow_help.content = note_html(
+                f"Follow mode cannot be switched on now: {limits.follow_blocked}", "#e8590c"
+            ) + note_html(help_text)
+        else:
+            self.follow_help.content = note_html(help_text)
 
         length_source = status.length_source if status is not None else None
         from_reel = length_source == "reel" or drone.reel is not None
@@ -604,12 +655,29 @@ class Panel:
         local = LinkStats(drone.telemetry_hz, drone.estimate_hz, age_s, dict(drone.invalid))
         self.health_html.content = health_html(status, local, settings.service.stale_after_s)
 
+    def _show_outcome(self, outcome: FollowOutcome | None) -> None:
+        """Say the service's latest answer about follow once, where the operator typed; a
+        refusal ends the requests held by the inputs (nothing of the command was applied)."""
+        if outcome is None or outcome.n == self._outcome_n:
+            return
+        self._outcome_n = outcome.n
+        if self.selection_changed:
+            return  # an answer from before this drone was chosen: not news here
+        event = outcome.event
+        if outcome.refused:
+            for synced in (self.follow, self.land, self.threshold, self.land_height):
+                if synced.pending is not None:
+                    synced.revert()
+            self._refuse(f"The service refused the follow command: {event.reason}")
+        else:
+            self.follow_message.content = note_html(f"The service: {event.reason}.")
+
     def update_charts(self, drone: DroneState, now_s: float) -> None:
         """Re-send the charts of the selected ``drone``."""
         self.charts.update(drone, now_s)
 
-    def show_no_drone(self, any_status: bool, peers: int | None) -> None:
+    def show_no_drone(self, view: BusView) -> None:
         """Readouts when no drone is known (yet, or all forgotten)."""
-        self.warning.content = link_warning_html(any_status, peers)
+        self.warning.content = link_warning_html(view)
         self.tension_html.content = tension_html(None)
         self.stop_html.content = ""

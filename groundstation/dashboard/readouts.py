@@ -13,6 +13,7 @@ from groundstation.messages import Estimate, FollowInfo, Status, Truth
 
 __all__ = [
     "SMOOTH_VIEW_NOTE",
+    "BusView",
     "LinkStats",
     "follow_html",
     "health_html",
@@ -182,19 +183,52 @@ class LinkStats:
     """Payloads the dashboard itself could not parse, per kind."""
 
 
-def link_warning_html(any_status: bool, peers: int | None) -> str:
-    """A warning when nothing connects this dashboard to a service (empty when all is well).
+@dataclass(frozen=True)
+class BusView:
+    """What the dashboard knows of the services on its bus (from its last polls).
+
+    Attributes:
+        any_status: some service answered ``tether/*/status`` recently (it answers only for
+            drones it has heard).
+        services: the services' liveliness tokens alive at the last poll
+            (``groundstation/service/{instance}``): a service is running even before any
+            drone has reported to it.
+        own_peers: zenoh peers and routers of the dashboard's own session (None: not known,
+            an in-memory bus).
+    """
+
+    any_status: bool
+    services: tuple[str, ...] = ()
+    own_peers: int | None = None
+
+
+def link_warning_html(view: BusView, status: Status | None = None) -> str:
+    """What connects this dashboard to a service: a warning when nothing does, a note when a
+    service runs but no drone has reported to it yet, empty when all is well.
 
     Args:
-        any_status: some service answered ``tether/*/status`` recently.
-        peers: the peer count the service reports (None: not reported).
+        view: what the dashboard's polls found.
+        status: the selected drone's current status reply (its ``peers`` and ``alone_ok``).
     """
-    if not any_status:
-        return warning_html(
-            "No service answers tether/*/status: no router or peer reachable from this "
-            "dashboard, or no service running. Commands from this page reach nobody."
+    if not view.any_status and not view.services:
+        mine = (
+            ""
+            if view.own_peers is None
+            else f" This dashboard is connected to {view.own_peers} zenoh peer(s)/router(s)."
         )
-    if peers == 0:
+        return warning_html(
+            "No service answers tether/*/status and none holds a liveliness token "
+            "(groundstation/service/*): no router or peer reachable from this dashboard, or "
+            f"no service running. Commands from this page reach nobody.{mine}"
+        )
+    if not view.any_status:
+        names = ", ".join(t.rsplit("/", 1)[-1] for t in view.services)
+        return note_html(
+            f"Service running (instance {names}); no drone has reported to it yet, so it "
+            "has no status to give.",
+            color="#2f9e44",
+        )
+    if status is not None and status.peers == 0 and not status.alone_ok:
         return warning_html(
             "The service reports 0 peers: no router or peer is connected to it, so no drone "
             "or reel outside its process can reach it."
@@ -235,7 +269,11 @@ def health_html(status: Status | None, local: LinkStats, stale_after_s: float) -
         ]
         if status.peers is not None:
             peers = f"{status.peers:d}"
-            rows.append(("peers (service)", badge(peers, "#e03131") if not status.peers else peers))
+            if status.peers == 0 and status.alone_ok:
+                peers += " (in-process, as expected: demo)"
+            elif status.peers == 0:
+                peers = badge(peers, "#e03131")
+            rows.append(("peers (service)", peers))
         if status.drops:
             text = ", ".join(f"{html.escape(k)}: {v}" for k, v in sorted(status.drops.items()))
             rows.append(("invalid / dropped", f"{sum(status.drops.values())} ({text})"))

@@ -1,8 +1,9 @@
 """The dashboard in a real Chromium: it renders, shows |T|, and its buttons put commands on
 the bus (Follow mode at once; Stop only after the confirmation, then acknowledged when the
-telemetry says so). Follow inputs are refused on the page, not clamped; the follow controls
-fit a 1280×800 screen; the position chart survives switching between drones with and without
-motion capture; each tab selects its own drone. Nothing it loads comes from outside.
+telemetry says so). Follow inputs are refused on the page, not clamped, and the service's own
+refusals are said there too; the follow controls fit a 1280×800 screen; the position chart
+survives switching between drones with and without motion capture; each tab selects its own
+drone. Nothing it loads comes from outside.
 
 The feed is :class:`tests.dashboard_fake.FakeService` on an in-memory bus (it echoes a
 FollowCommand into the next Estimates, as the service does); one test drives the real
@@ -211,6 +212,42 @@ def test_a_threshold_below_the_floor_is_refused_on_the_page(feed: Feed) -> None:
         lambda f: any(c.get("threshold_n") == 0.12 for _, c in f.follow_commands[n_before:]),
         COMMAND_TIMEOUT_S,
     ), "a valid threshold was not sent"
+
+
+def test_the_services_refusal_is_said_on_the_page(feed: Feed) -> None:
+    from playwright.sync_api import expect
+
+    page, fake = feed.page, feed.fake
+    checkbox = page.get_by_label("Follow mode", exact=True)
+    expect(checkbox).not_to_be_checked(timeout=COMMAND_TIMEOUT_S * 1000)
+    fake.refuse_follow = "cf1 is busy (this test's refusal); not applied"
+    try:
+        checkbox.click()
+        refused = page.get_by_text("The service refused the follow command", exact=False)
+        expect(refused.first).to_be_visible(timeout=COMMAND_TIMEOUT_S * 1000)
+        expect(page.get_by_text("cf1 is busy", exact=False).first).to_be_visible()
+        expect(checkbox).not_to_be_checked(timeout=COMMAND_TIMEOUT_S * 1000)
+    finally:
+        fake.refuse_follow = None
+
+
+def test_follow_without_a_trusted_position_is_refused_on_the_page(feed: Feed) -> None:
+    from playwright.sync_api import expect
+
+    page, fake = feed.page, feed.fake
+    select_drone(page, "cf2")  # no motion capture, no calibration
+    assert wait_until(lambda: only_panel(feed).selected == "cf2", COMMAND_TIMEOUT_S)
+    expect(page.get_by_text("cannot be switched on now", exact=False).first).to_be_visible(
+        timeout=COMMAND_TIMEOUT_S * 1000
+    )
+    n_before = len(fake.follow_commands)
+    page.get_by_label("Follow mode", exact=True).click()
+    expect(page.get_by_text("Follow mode not switched on", exact=False).first).to_be_visible()
+    expect(page.get_by_label("Follow mode", exact=True)).not_to_be_checked()
+    assert feed.bus.flush()
+    assert fake.follow_commands[n_before:] == [], "follow went out for a drone without position"
+    select_drone(page, "cf1")
+    assert wait_until(lambda: only_panel(feed).selected == "cf1", COMMAND_TIMEOUT_S)
 
 
 def test_position_chart_survives_switching_motion_capture_on_and_off(feed: Feed) -> None:

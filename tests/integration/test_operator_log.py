@@ -58,16 +58,22 @@ def test_refusals_and_stops_reach_the_sender_with_its_id(procs: Procs, make_prob
     assert "connected to 1 zenoh peer(s)/router(s)" in log
 
 
-def test_a_service_alone_says_no_router_is_reachable(procs: Procs) -> None:
+@pytest.mark.parametrize(
+    "command",
+    [["serve", "--headless"], ["sim", "--scenario", "hover"], ["record", "--out", "alone.mcap"]],
+    ids=["serve", "sim", "record"],
+)
+def test_a_process_alone_says_no_router_is_reachable(procs: Procs, command: list[str]) -> None:
     port = free_port()
     # Peer mode keeps trying in the background: it starts, and says what is missing.
-    serve = procs.groundstation(
-        "serve", "serve", "--mode", "peer", "--connect", f"tcp/127.0.0.1:{port}", "--headless"
+    proc = procs.groundstation(
+        command[0], *command, "--mode", "peer", "--connect", f"tcp/127.0.0.1:{port}"
     )
     deadline = time.monotonic() + 20.0
-    while "no peer / no router reachable" not in serve.output():
-        assert time.monotonic() < deadline, serve.output()
-        assert serve.popen.poll() is None, serve.output()
+    while "no peer / no router reachable" not in proc.output():
+        assert time.monotonic() < deadline, proc.output()
+        assert proc.popen.poll() is None, proc.output()
         time.sleep(0.1)  # polling a log file
-    assert f"reachable at tcp/127.0.0.1:{port}" in serve.output()
-    assert serve.stop(signal.SIGINT) == 0
+    assert f"groundstation {command[0]}: no peer / no router reachable" in proc.output()
+    assert f"reachable at tcp/127.0.0.1:{port}" in proc.output()
+    assert proc.stop(signal.SIGINT) == 0
