@@ -573,10 +573,12 @@ class CrazyflieSection(_Section):
     """``[a, b, c]``: thrust of one motor, ``a·pwm² + b·pwm + c`` newtons, pwm in 0..65535
     (a motor at pwm 0 gives 0 N). The default is the widely used Crazyflie 2.x fit."""
     motor_variables: Literal["motor", "pwm"] = "motor"
-    """``motor``: ``motor.m1..m4``; ``pwm``: ``pwm.m1_pwm..m4_pwm``. Where the firmware logs
-    both, ``motor.*`` is the request before its battery compensation (keep
-    ``thrust_vbat_slope_per_v = 0``) and ``pwm.*`` the duty after it (fit the slope); see
-    docs/real-lab.md, "compensating once"."""
+    """``motor``: ``motor.m1..m4``; ``pwm``: ``pwm.m1_pwm..m4_pwm`` (firmware of about
+    2021–2022 only). Compensate the battery once (docs/real-lab.md, "compensating once"):
+    current firmware logs ``motor.*`` after its battery compensation (the duty: fit
+    ``[calibration] thrust_vbat_slope_per_v``) and has no ``pwm`` group; firmware of about
+    2021–2022 logs ``motor.*`` before it (the request: keep the slope 0) and ``pwm.*`` after it
+    (the duty: fit the slope)."""
     attitude_source: Literal["estimator", "mocap"] = "estimator"
     """``estimator``: ``stateEstimate.qw..qz``; ``mocap``: ``quat_wxyz`` of ``mocap_key``."""
     mocap_key: str | None = None
@@ -590,7 +592,8 @@ class CrazyflieSection(_Section):
     """``supervisor``: bit 1 of ``supervisor.info``; ``auto``: that when the firmware logs it,
     else no ``armed`` field; ``none``: never report ``armed``."""
     rate_hz: float = Field(100.0, ge=0.5, le=100.0)
-    """Telemetry rate; the log period is the nearest multiple of 10 ms."""
+    """Telemetry rate; the log period is the nearest multiple of 10 ms. Setpoints go out every
+    20 ms whatever the rate (the firmware's commander watchdog acts after 0.5 s)."""
     slow_period_ms: int = Field(100, ge=10, le=2540)
     """Period of the slowly changing variables (battery, armed), ms, a multiple of 10."""
     watchdog_s: float = Field(0.5, gt=0.0)
@@ -603,7 +606,8 @@ class CrazyflieSection(_Section):
     toc_cache_dir: str | None = None
     """Directory where cflib caches the firmware's TOCs (faster reconnections); None: none."""
     data_timeout_s: float = Field(1.0, gt=0.0)
-    """No log data for this long on an open link: taken as lost (a driver may not notice)."""
+    """No log data for this long on an open link: taken as lost (a driver may not notice); at
+    least three periods of the most frequent log block."""
     reconnect_max_s: float = Field(5.0, gt=0.0)
     """Longest wait between reconnection attempts (the back-off doubles from 0.25 s)."""
     status_period_s: float = Field(1.0, gt=0.0)

@@ -13,7 +13,7 @@ import socket
 import struct
 import threading
 import time
-from collections.abc import Mapping
+from collections.abc import Mapping, Set
 from dataclasses import dataclass
 
 # CRTP ports (cflib.crtp.crtpstack.CRTPPort)
@@ -45,11 +45,18 @@ class _Block:
 
 
 class CrtpFirmware:
-    """Serve ``toc`` (``{"group.name": C type}``) on ``udp://127.0.0.1:{port}``."""
+    """Serve ``toc`` (``{"group.name": C type}``) on ``udp://127.0.0.1:{port}``.
 
-    def __init__(self, toc: Mapping[str, str], motor_pwm: float = 40000.0) -> None:
+    A log block holding a variable of ``refuse`` is refused at creation with ``ENOMEM``, as
+    firmware out of log memory answers.
+    """
+
+    def __init__(
+        self, toc: Mapping[str, str], motor_pwm: float = 40000.0, refuse: Set[str] = frozenset()
+    ) -> None:
         self.toc = list(toc.items())
         self.motor_pwm = motor_pwm
+        self.refuse = refuse
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.bind(("127.0.0.1", 0))
         self.sock.settimeout(0.01)
@@ -140,7 +147,11 @@ class CrtpFirmware:
                 toc_id = data[i + 1] | data[i + 2] << 8
                 block.variables.append((self.toc[toc_id][0], fetch))
             size = sum(struct.calcsize("<" + PACK[f]) for _, f in block.variables)
-            self._send(LOGGING, 1, bytes([cmd, ident, 0 if size <= 26 else 7]))
+            error = 0 if size <= 26 else 7  # E2BIG
+            if any(name in self.refuse for name, _ in block.variables):
+                error = 12  # ENOMEM
+                del self._blocks[ident]
+            self._send(LOGGING, 1, bytes([cmd, ident, error]))
         elif cmd == 3:  # start
             ident, period = data[1], data[2]
             block = self._blocks[ident]

@@ -31,7 +31,7 @@ from groundstation.bridges.crazyflie.bridge import (
     thrust_n,
     yaw_deg_from_quat,
 )
-from groundstation.bridges.crazyflie.fake import FAKE_TOC, FakeLink, pwm_for_thrust
+from groundstation.bridges.crazyflie.fake import FAKE_TOC, FIRMWARE_TOCS, FakeLink, pwm_for_thrust
 from groundstation.bridges.crazyflie.link import TYPE_SIZES
 from groundstation.bridges.crazyflie.runner import CrazyflieBridge
 from groundstation.bus import InMemoryBus, Sample
@@ -77,10 +77,14 @@ def _block_bytes(block: Any) -> int:
     return sum(TYPE_SIZES[t] for t in block.fetch_as)
 
 
-@pytest.mark.parametrize("motor_variables", ["motor", "pwm"])
-def test_blocks_fit_one_packet_and_carry_every_variable_once(motor_variables: str) -> None:
+@pytest.mark.parametrize(
+    ("firmware", "motor_variables"), [("current", "motor"), ("2022", "motor"), ("2022", "pwm")]
+)
+def test_blocks_fit_one_packet_and_carry_every_variable_once(
+    firmware: str, motor_variables: str
+) -> None:
     section = CrazyflieSection(motor_variables=motor_variables)  # type: ignore[arg-type]
-    plan = plan_variables(section, FAKE_TOC, "fake://")
+    plan = plan_variables(section, FIRMWARE_TOCS[firmware], "fake://")
     fast_vars = [v for b in plan.fast for v in b.variables]
     assert sorted(fast_vars) == sorted([*ACC, *GYRO, *ATTITUDE, *plan.motors])
     assert len(plan.fast) == 2, "acc+gyro, then attitude+motors (motors as uint16)"
@@ -112,7 +116,9 @@ def test_blocks_split_when_nothing_is_narrowed() -> None:
 
 
 def test_missing_variables_are_all_named() -> None:
-    toc = {k: v for k, v in FAKE_TOC.items() if k not in ("stateEstimate.qw", "motor.m3")}
+    toc = {
+        k: v for k, v in FIRMWARE_TOCS["2022"].items() if k not in ("stateEstimate.qw", "motor.m3")
+    }
     with pytest.raises(MissingVariables) as info:
         plan_variables(CrazyflieSection(), toc, "radio://0/80/2M")
     msg = str(info.value)
@@ -128,6 +134,25 @@ def test_missing_variables_are_all_named() -> None:
     assert not plan_variables(CrazyflieSection(), no_sup, "x").armed
     with pytest.raises(MissingVariables, match=r"supervisor\.info"):
         plan_variables(CrazyflieSection(armed_source="supervisor"), no_sup, "x")
+
+
+def test_the_default_configuration_fits_current_firmware_which_has_no_pwm_group() -> None:
+    """Current firmware logs motor.m1..m4 after its battery compensation and no pwm group;
+    firmware of about 2021-2022 logs both. The default (``motor``) works on both; ``pwm`` on
+    current firmware fails, naming the variables and what to choose instead."""
+    current, older = FIRMWARE_TOCS["current"], FIRMWARE_TOCS["2022"]
+    assert not any(k.startswith("pwm.") for k in current)
+    assert all(f"pwm.m{i}_pwm" in older for i in range(1, 5))
+    assert current == FAKE_TOC, "the fake plays current firmware unless told otherwise"
+    for toc in (current, older):
+        plan = plan_variables(CrazyflieSection(), toc, "x")
+        assert plan.motors == ("motor.m1", "motor.m2", "motor.m3", "motor.m4")
+        assert plan.not_logged == ()
+    with pytest.raises(MissingVariables) as info:
+        plan_variables(CrazyflieSection(motor_variables="pwm"), current, "radio://0/80/2M")
+    msg = str(info.value)
+    assert "pwm.m1_pwm" in msg and "pwm.m4_pwm" in msg
+    assert 'motor_variables = "motor"' in msg and "thrust_vbat_slope_per_v" in msg
 
 
 # --------------------------------------------------------------------------- alignment
@@ -338,7 +363,7 @@ class Harness:
             for i, block in enumerate((*plan.slow, *plan.fast)):
                 values = {v: sample[v] for v in block.variables}
                 self.link.emit(block.name, self.clock_ms + i, values)
-            self.clock_ms += 10
+            self.clock_ms += self.bridge.section.log_period_ms
 
     def publish(self, key: str, payload: dict[str, Any]) -> None:
         self.bus.publish(key, json.dumps(payload).encode())
@@ -533,15 +558,44 @@ def test_runner_attaches_mocap_position_and_forwards_extpos(harness: Any) -> Non
 
 
 class _RecordingDriver:
-    """Stands in for cflib's radio driver below a real ``Crazyflie``: records packets."""
+    """Stands in for cflib's radio driver below a real ``Crazyflie``: records packets, and
+    answers log block creation and start as the firmware does (error ``refuse_errno`` for
+    the creation of a block holding a variable of ``refuse``; nothing when not ``answers``)."""
 
     needs_resending = False
 
     def __init__(self) -> None:
         self.sent: list[tuple[int, int, bytes]] = []
+        self.cf: Any = None
+        self.refuse: set[int] = set()
+        """TOC ids whose blocks the creation refuses."""
+        self.refuse_errno = 12  # ENOMEM
+        self.answers = True
 
     def send_packet(self, pk: Any) -> None:
-        self.sent.append((pk.port, pk.channel, bytes(pk.data)))
+        data = bytes(pk.data)
+        self.sent.append((pk.port, pk.channel, data))
+        if self.answers and pk.port == 5 and pk.channel == 1 and data[0] in (0, 6, 3):
+            # create (v1, v2) or start
+            ids: set[int] = set()
+            if data[0] == 0:  # v1 create: (type, id) per variable
+                ids = {data[i + 1] for i in range(2, len(data), 2)}
+            elif data[0] == 6:  # v2 create: (type, id_lo, id_hi) per variable
+                ids = {data[i + 1] | data[i + 2] << 8 for i in range(2, len(data), 3)}
+            error = self.refuse_errno if ids & self.refuse else 0
+            # Answer from another thread, as the radio's reader does: cflib sends the start
+            # from inside its answer handler, under the send lock held here.
+            answer = threading.Thread(target=self._answer, args=(data[0], data[1], error))
+            answer.daemon = True
+            answer.start()
+
+    def _answer(self, cmd: int, block_id: int, error: int) -> None:
+        from cflib.crtp.crtpstack import CRTPPacket
+
+        pk = CRTPPacket()
+        pk.set_header(5, 1)
+        pk.data = bytes([cmd, block_id, error])
+        self.cf.log._new_packet_cb(pk)
 
     def close(self) -> None:
         pass
@@ -557,6 +611,7 @@ def _cflib_link(toc: dict[str, str]) -> tuple[Any, Any, _RecordingDriver]:
 
     cf = Crazyflie()
     driver = _RecordingDriver()
+    driver.cf = cf
     cf.link = driver
     cf.platform._protocolVersion = 12  # a firmware with the supervisor port
     type_ids = {v[0]: k for k, v in LogTocElement.types.items()}
@@ -771,3 +826,135 @@ def test_the_bridge_runs_on_cflib_over_udp(firmware: Any) -> None:
     assert last["armed"] is True and last["vbat_v"] == pytest.approx(3.9)
     stamps = [t["stamp_s"] for t in telemetry]
     assert all(b > a for a, b in itertools.pairwise(stamps))
+
+
+# ------------------------------------------------------------------ gaps of issue 12
+
+
+class _TimedLink(FakeLink):
+    """The fake, recording when each position setpoint went out (host monotonic clock)."""
+
+    def __init__(self, uri: str = "fake://hover") -> None:
+        super().__init__(uri)
+        self.setpoint_times: list[float] = []
+
+    def send_position_setpoint(self, x_m: float, y_m: float, z_m: float, yaw_deg: float) -> None:
+        self.setpoint_times.append(time.monotonic())
+        super().send_position_setpoint(x_m, y_m, z_m, yaw_deg)
+
+
+def test_runner_streams_setpoints_every_20_ms_at_a_half_hertz_log_rate(harness: Any) -> None:
+    """At ``rate_hz = 0.5`` a log period lasts 2 s, four times the firmware's 0.5 s commander
+    watchdog: setpoints must go out on their own cadence (every SETPOINT_PERIOD_S), holding
+    the last one. Without a slow block the 2 s log period is the only data, which is no
+    loss of the link either (``data_timeout_s`` 0.2 s is stretched to three log periods)."""
+    from groundstation.bridges.crazyflie.runner import SETPOINT_PERIOD_S
+
+    link = _TimedLink("fake://hover?missing=pm.vbat,supervisor.info")
+    h = harness(link, rate_hz=0.5, data_timeout_s=0.2)
+    assert h.bridge.section.log_period_ms == 2000 and not h.bridge._plan.slow
+    h.period(2)
+    wait_for(lambda: len(h.telemetry) >= 2, "telemetry")
+    stamp = h.telemetry[-1]["stamp_s"]
+    h.publish("tether/cf1/cmd/setpoint", {"stamp_s": stamp, "position_m": [0.1, 0.0, 0.5]})
+    # 1.2 s of setpoints with no new log data: longer than the 0.5 s watchdog (holding).
+    times = link.setpoint_times
+    wait_for(lambda: len(times) >= 2 and times[-1] - times[0] > 1.2, "1.2 s of setpoints")
+    times = list(times)
+    gaps = [b - a for a, b in itertools.pairwise(times)]
+    assert sorted(gaps)[len(gaps) // 2] == pytest.approx(SETPOINT_PERIOD_S, abs=0.005)
+    assert max(gaps) < 0.3, f"longest gap {max(gaps):.3f} s (the firmware levels after 0.5 s)"
+    assert len(times) >= (times[-1] - times[0]) / 0.05, "at least 20 Hz on average"
+    assert all(a[:3] == (0.1, 0.0, 0.5) for n, a in link.commands if n == "send_position_setpoint")
+    assert h.bridge.gate.holding(time.monotonic()), "no fresh setpoint for 0.5 s: holding"
+    assert link.opens == 1 and h.bridge.counts.get("link_lost", 0) == 0
+
+
+def test_runner_warns_once_when_battery_or_armed_state_is_not_logged(
+    harness: Any, caplog: pytest.LogCaptureFixture
+) -> None:
+    caplog.set_level(logging.WARNING, logger="groundstation.crazyflie")
+    link = FakeLink("fake://hover?missing=pm.vbat,supervisor.info")
+    h = harness(link)
+    h.period(3)
+    wait_for(lambda: len(h.telemetry) >= 3, "telemetry")
+    assert "vbat_v" not in h.telemetry[-1]
+    assert h.telemetry[-1].get("armed", True) is True, "the contract's default"
+    warnings = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
+    (vbat,) = [m for m in warnings if "does not log pm.vbat" in m]
+    (armed,) = [m for m in warnings if "does not log supervisor.info" in m]
+    assert "no battery term" in vbat and "thrust_vbat_slope_per_v" in vbat
+    assert "armed: true" in armed and "default" in armed
+    wait_for(lambda: bool(h.status) and "not_logged" in h.status[-1], "status")
+    not_logged = h.status[-1]["not_logged"]
+    assert set(not_logged) == {"pm.vbat", "supervisor.info"}
+    assert "no battery term" in not_logged["pm.vbat"]
+    # A reconnection does not repeat the warnings.
+    link.lose()
+    wait_for(lambda: link.opens >= 2 and h.bridge.connected, "reconnected")
+    again = [r.getMessage() for r in caplog.records if "does not log" in r.getMessage()]
+    assert len(again) == 2
+    # Choosing not to report the armed state is not a gap; a complete TOC has none.
+    none = plan_variables(
+        CrazyflieSection(armed_source="none"), {**FAKE_TOC, "supervisor.info": "x"}, "x"
+    )
+    assert none.not_logged == ()
+    assert plan_variables(CrazyflieSection(), FAKE_TOC, "x").not_logged == ()
+
+
+def test_runner_stops_with_the_reason_when_the_firmware_refuses_a_log_block(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    caplog.set_level(logging.ERROR, logger="groundstation.crazyflie")
+    link = FakeLink("fake://hover?refuse=pm.vbat")
+    bus = InMemoryBus()
+    try:
+        rc = CrazyflieBridge(CrazyflieSection(), bus, "cf1", link).run(threading.Event())
+    finally:
+        bus.close()
+    assert rc == 2, "a refused block is not retried"
+    msg = " ".join(r.getMessage() for r in caplog.records)
+    assert "refused log block slow0" in msg and "pm.vbat" in msg
+    assert "No more memory available" in msg
+    assert _names(link) == ["open", "refused", "close"], "one attempt, no reconnection loop"
+
+
+def test_cflib_link_raises_when_the_firmware_refuses_a_block() -> None:
+    from groundstation.bridges.crazyflie.link import LinkError, LogBlockRefused
+
+    toc = dict(FAKE_TOC)
+    link, _, driver = _cflib_link(toc)
+    driver.refuse = {list(toc).index("pm.vbat")}
+    plan = plan_variables(CrazyflieSection(), toc, link.uri)
+    with pytest.raises(LogBlockRefused) as info:
+        link.start_logging([*plan.fast, *plan.slow], lambda b, t, v: None, timeout_s=5.0)
+    assert info.value.block.name == "slow0"
+    assert "No more memory available" in str(info.value) and "pm.vbat" in str(info.value)
+    # No answer at all is a link problem, retried (not a refusal).
+    silent, _, silent_driver = _cflib_link(toc)
+    silent_driver.answers = False
+    with pytest.raises(LinkError, match="did not start log block") as no_answer:
+        silent.start_logging(list(plan.fast), lambda b, t, v: None, timeout_s=0.2)
+    assert not isinstance(no_answer.value, LogBlockRefused)
+
+
+def test_the_bridge_on_cflib_stops_when_the_firmware_refuses_a_block(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """The refusal travels as the firmware sends it: an error code in the create-block
+    answer, through cflib's UDP driver and its error callback."""
+    from groundstation.bridges.crazyflie.link import CflibLink
+    from tests.crtp_firmware import CrtpFirmware
+
+    caplog.set_level(logging.ERROR, logger="groundstation.crazyflie")
+    fw = CrtpFirmware(FAKE_TOC, refuse={"stateEstimate.qw"})
+    bus = InMemoryBus()
+    try:
+        bridge = CrazyflieBridge(CrazyflieSection(), bus, "cf1", CflibLink(fw.uri))
+        rc = bridge.run(threading.Event())
+    finally:
+        bus.close()
+        fw.close()
+    assert rc == 2
+    msg = " ".join(r.getMessage() for r in caplog.records)
+    assert "refused log block tel1" in msg and "No more memory available" in msg

@@ -7,11 +7,13 @@ it receives to a JSON-lines file that the test reads.
 
 from __future__ import annotations
 
+import itertools
 import json
 import signal
 import subprocess
 import sys
 import threading
+import time
 from pathlib import Path
 from typing import Any
 
@@ -33,6 +35,13 @@ def _names(path: Path) -> list[str]:
     return [c["cmd"] for c in _commands(path)]
 
 
+def _service_status(probe: Probe, drone: str = "cf1") -> dict[str, Any] | None:
+    """The service's ``tether/{drone}/status`` (a zenoh query), or None before it knows the
+    drone."""
+    replies = probe.bus.query(f"tether/{drone}/status", timeout_s=3.0)
+    return dict(json.loads(replies[0].payload)) if replies else None
+
+
 def _start(
     procs: Procs, make_probe: Any, uri: str, *bridge_args: str
 ) -> tuple[Probe, Any, Any, str]:
@@ -52,8 +61,10 @@ def _start(
 def test_fake_hover_gives_estimates_and_a_stop_reaches_the_link_once(
     procs: Procs, make_probe: Any, tmp_path: Path
 ) -> None:
+    """The default configuration against the fake's current firmware (no pwm group), with
+    out-of-order log packets (``ooo``: an old timestamp every 25th period)."""
     record = tmp_path / "commands.jsonl"
-    probe, service, bridge, _ = _start(procs, make_probe, f"fake://hover?record={record}")
+    probe, service, bridge, _ = _start(procs, make_probe, f"fake://hover?record={record}&ooo=1")
     probe.wait_for(
         lambda: sum(1 for e in probe.json("tether/cf1/estimate") if e["converged"]) > 300,
         timeout_s=40,
@@ -62,6 +73,24 @@ def test_fake_hover_gives_estimates_and_a_stop_reaches_the_link_once(
     estimates = probe.json("tether/cf1/estimate")
     seqs = [e["seq"] for e in estimates]
     assert seqs == sorted(seqs) and len(set(seqs)) == len(seqs)
+    stamps = [e["stamp_s"] for e in estimates]
+    assert all(b > a for a, b in itertools.pairwise(stamps)), "stamps only forward"
+    # The bridge drops the old packets and counts them; the service never sees one.
+    probe.wait_for(
+        lambda: any(s["out_of_order"] >= 5 for s in probe.json("tether/cf1/bridge")),
+        timeout_s=10,
+        what="the bridge's status counting out-of-order packets",
+    )
+    status = _service_status(probe)
+    assert status is not None and not status["stale"]
+    for kind in ("stamp_backwards", "seq_backwards", "seq_repeated"):
+        assert status["drops"].get(kind, 0) == 0, status["drops"]
+    n_before = len(probe.json("tether/cf1/estimate"))
+    probe.wait_for(
+        lambda: len(probe.json("tether/cf1/estimate")) > n_before + 100,
+        timeout_s=10,
+        what="estimates still coming after the out-of-order packets",
+    )
     late = [e for e in estimates if e["converged"]][-200:]
     # The fake hovers level with the tether pulling 0.05 N straight down: the service sees
     # exactly that through the bridge's unit conversion (g, deg/s, PWM -> SI).
@@ -107,16 +136,21 @@ def test_tug_to_land_from_the_service_stops_the_fake_drone_once(
 ) -> None:
     record = tmp_path / "commands.jsonl"
     cfg = tmp_path / "bridge.toml"
-    cfg.write_text('[crazyflie]\nmocap_key = "mocap/{drone}"\nmocap_stale_s = 0.5\n')
+    # watchdog_s: on a loaded test machine the service's setpoints may trail the telemetry by
+    # more than the 0.5 s default, and the bridge would drop them as stale.
+    cfg.write_text(
+        '[crazyflie]\nmocap_key = "mocap/{drone}"\nmocap_stale_s = 0.5\nwatchdog_s = 2.0\n'
+    )
     probe, service, bridge, _ = _start(
         procs, make_probe, f"fake://tug?record={record}", "--config", str(cfg)
     )
-    # Motion capture of a drone hovering 0.5 m up, 0.3 m from the base.
+    # Motion capture of a drone hovering 0.3 m from the base, 0.7 m up: above the land height.
     done = threading.Event()
+    height_m = [0.7]
 
     def mocap() -> None:
         while not done.wait(0.02):  # a 50 Hz stream
-            probe.publish_json("mocap/cf1", {"position_m": [0.3, 0.0, 0.5]})
+            probe.publish_json("mocap/cf1", {"position_m": [0.3, 0.0, height_m[0]]})
 
     thread = threading.Thread(target=mocap, daemon=True)
     thread.start()
@@ -135,10 +169,22 @@ def test_tug_to_land_from_the_service_stops_the_fake_drone_once(
         )
         late = probe.json("tether/cf1/estimate")[-100:]
         assert np.median([e["vertical_n"] for e in late]) == pytest.approx(0.2, abs=0.02)
-        # Follow with tug-to-land above the drone: the pull engages it, the height stops it.
+        # Follow with tug-to-land: the pull engages it, and the service's setpoints reach
+        # the drone while it is above the land height.
         probe.publish_json(
             "tether/cf1/follow", {"enabled": True, "threshold_n": 0.1, "land_below_m": 0.6}
         )
+        try:
+            probe.wait_for(
+                lambda: _names(record).count("send_position_setpoint") >= 10,
+                timeout_s=15,
+                what="the service's setpoints on the link while following",
+            )
+        except AssertionError as exc:  # say why: dropped by the bridge, or never sent
+            bridge_status = probe.json("tether/cf1/bridge")[-1:]
+            raise AssertionError(f"{exc}; bridge status {bridge_status}") from None
+        assert "stop_motors" not in _names(record)
+        height_m[0] = 0.5  # pulled down below land_below_m: the service stops it
         probe.wait_for(lambda: "stop_motors" in _names(record), 15, "the service's Stop")
         stops = [json.loads(s.payload) for s in probe.got("tether/cf1/cmd/**")]
         assert any("tug-to-land" in s.get("reason", "") for s in stops)
@@ -153,7 +199,8 @@ def test_tug_to_land_from_the_service_stops_the_fake_drone_once(
     names = _names(record)
     assert names.count("stop_motors") == 1
     i_stop = names.index("stop_motors")
-    assert "send_position_setpoint" not in names[i_stop:]
+    assert names[:i_stop].count("send_position_setpoint") >= 10, "setpoints flowed before"
+    assert "send_position_setpoint" not in names[i_stop:], "and none after the Stop"
     assert bridge.stop(signal.SIGTERM) == 0
     assert service.stop(signal.SIGTERM) == 0
 
@@ -161,42 +208,76 @@ def test_tug_to_land_from_the_service_stops_the_fake_drone_once(
 def test_a_dropped_link_stops_telemetry_and_reconnects(
     procs: Procs, make_probe: Any, tmp_path: Path
 ) -> None:
+    """A link lost for a few seconds: the bridge stops publishing and reconnects, and a real
+    service marks the drone stale meanwhile and estimates again once telemetry resumes."""
     record = tmp_path / "commands.jsonl"
     port = free_port()
     procs.router(port)
     probe: Probe = make_probe(port)
     probe.collect("tether/cf1/telemetry")
+    probe.collect("tether/cf1/estimate")
+    ep = f"tcp/127.0.0.1:{port}"
+    service = procs.groundstation("serve", "serve", "--connect", ep, "--headless")
+    deadline = time.monotonic() + 30.0
+    while not any(  # the service is up before the drone flies
+        r.ok is not None
+        for r in probe.bus.session.liveliness().get("groundstation/service/*", timeout=1.0)
+    ):
+        assert time.monotonic() < deadline, "no service liveliness token"
     bridge = procs.groundstation(
         "bridge",
         "crazyflie",
         "--uri",
-        f"fake://hover?record={record}&drop_after_s=1.5&down_s=1.0",
+        f"fake://hover?record={record}&drop_after_s=3&down_s=2",
         "--drone",
         "cf1",
         "--connect",
-        f"tcp/127.0.0.1:{port}",
+        ep,
         "--rate-hz",
         "50",
     )
     probe.wait_for(
+        lambda: len(probe.json("tether/cf1/estimate")) > 20,
+        timeout_s=30,
+        what="estimates before the drop",
+    )
+
+    def stale() -> bool:
+        status = _service_status(probe)
+        return status is not None and status["stale"]
+
+    probe.wait_for(
+        lambda: "lost" in _names(record) and stale(),
+        timeout_s=15,
+        what="the service marking the drone stale once the link dropped",
+    )
+    before = probe.json("tether/cf1/estimate")
+    n_stale = len(before)
+    probe.wait_for(
         lambda: (
             _names(record).count("open") >= 3
-            and len(probe.json("tether/cf1/telemetry")) > 20
-            and probe.json("tether/cf1/telemetry")[-1]["stamp_s"] > 7.0
+            and len(probe.json("tether/cf1/estimate")) > n_stale + 50
         ),
         timeout_s=30,
-        what="telemetry again after the link came back",
+        what="telemetry and estimates again after the link came back",
     )
+    probe.wait_for(lambda: not stale(), timeout_s=10, what="the drone no longer stale")
+    status = _service_status(probe)
+    assert status is not None
+    assert status["drops"].get("stamp_backwards", 0) == 0, status["drops"]
     tel = probe.json("tether/cf1/telemetry")
     seqs = [t["seq"] for t in tel]
     assert seqs == list(range(seqs[0], seqs[0] + len(seqs))), "seq without gaps or repeats"
     stamps = np.array([t["stamp_s"] for t in tel])
     assert np.all(np.diff(stamps) > 0)
     assert np.median(np.diff(stamps)) == pytest.approx(0.02), "--rate-hz 50: a 20 ms period"
+    resumed = probe.json("tether/cf1/estimate")[n_stale:]
+    assert all(e["stamp_s"] > before[-1]["stamp_s"] for e in resumed), "of the new telemetry"
     assert bridge.stop(signal.SIGINT) == 0
     out = bridge.output()
     assert out.count(" lost (") == 1, out
     assert "no answer" in out  # the refused reconnection attempt, logged once
+    assert service.stop(signal.SIGTERM) == 0
 
 
 def test_missing_log_variables_fail_at_start_naming_them() -> None:

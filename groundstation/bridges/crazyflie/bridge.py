@@ -13,10 +13,19 @@ variable                   unit         Telemetry field
 ``gyro.x/y/z``             deg/s        ``gyro_rps`` (× π/180), body frame
 ``stateEstimate.qw..qz``   –            ``quat_wxyz`` (body → world, normalised)
 ``motor.m1..m4``           0..65535     ``thrust_n`` via ``thrust_map``, summed
-``pwm.m1_pwm..m4_pwm``     0..65535     (the same; the duty after battery compensation)
+``pwm.m1_pwm..m4_pwm``     0..65535     (the same; firmware of about 2021–2022 only)
 ``pm.vbat``                V            ``vbat_v``
 ``supervisor.info``        bit field    ``armed`` (bit 1, "is armed")
 =========================  ===========  =========================================
+
+Which battery compensation the motor variable carries decides ``[calibration]
+thrust_vbat_slope_per_v`` (docs/real-lab.md, "compensating once"). Current firmware logs
+``motor.m1..m4`` *after* the battery compensation (the stabilizer runs batteryCompensation,
+then powerDistributionCap, then setMotorRatios, and ``motor.m*`` is the ratio written to the
+motor timers) and has no ``pwm`` group: fit the slope. Firmware of about 2021–2022 logged
+``motor.m1..m4`` as the power distribution's request *before* the compensation that
+``motorsSetRatio`` applied (keep the slope 0) and ``pwm.m1_pwm..m4_pwm`` as the duty after it
+(fit the slope).
 
 The Crazyflie's body frame is the contract's (x forward, y left, z up) and its accelerometer
 reads about +1 g on z level at rest, so no axis changes sign.
@@ -40,6 +49,7 @@ __all__ = [
     "GYRO",
     "G_MPS2",
     "MAX_BLOCK_BYTES",
+    "NOT_LOGGED_CONSEQUENCE",
     "Aligned",
     "Aligner",
     "CommandGate",
@@ -75,15 +85,28 @@ SUPERVISOR_IS_ARMED_BIT = 1
 """cflib ``supervisor.BIT_IS_ARMED``; the firmware's ``supervisor.info`` documents the same."""
 
 
+NOT_LOGGED_CONSEQUENCE: Mapping[str, str] = {
+    VBAT: "Telemetry carries no vbat_v, so the service applies no battery term "
+    "([calibration] thrust_vbat_slope_per_v is ignored)",
+    SUPERVISOR_INFO: "Telemetry says armed: true (the contract's default) whatever the motors "
+    "do, so the service tells the floor from thrust and motion only",
+}
+"""What the service loses when the firmware does not log an optional variable."""
+
+
 class MissingVariables(ValueError):
     """The firmware's log TOC lacks variables the configuration needs (all named)."""
 
-    def __init__(self, missing: Sequence[str], uri: str) -> None:
+    def __init__(self, missing: Sequence[str], uri: str, hint: str = "") -> None:
         self.missing = tuple(missing)
         super().__init__(
             f"{uri}: the firmware does not log {', '.join(self.missing)} "
-            "(check [crazyflie] motor_variables / attitude_source / armed_source, or the "
-            "firmware version)"
+            + (
+                f"({hint})"
+                if hint
+                else "(check [crazyflie] motor_variables / attitude_source / armed_source, or "
+                "the firmware version)"
+            )
         )
 
 
@@ -101,6 +124,9 @@ class VariablePlan:
     armed: bool
     """``supervisor.info`` is logged."""
     vbat: bool
+    not_logged: tuple[str, ...] = ()
+    """Optional variables the firmware lacks (``pm.vbat``, ``supervisor.info`` with
+    ``armed_source = "auto"``); :data:`NOT_LOGGED_CONSEQUENCE` says what that costs."""
 
 
 def plan_blocks(
@@ -169,9 +195,21 @@ def plan_variables(section: CrazyflieSection, toc: Mapping[str, str], uri: str) 
         needed.append(SUPERVISOR_INFO)
     missing = [v for v in needed if v not in toc]
     if missing:
-        raise MissingVariables(missing, uri)
+        hint = ""
+        if section.motor_variables == "pwm" and all(m in toc for m in MOTORS["motor"]):
+            hint = (
+                'current firmware has no pwm group: set [crazyflie] motor_variables = "motor" '
+                "(there the duty after battery compensation: fit [calibration] "
+                "thrust_vbat_slope_per_v; docs/real-lab.md, compensating once)"
+            )
+        raise MissingVariables(missing, uri, hint)
     armed = section.armed_source != "none" and SUPERVISOR_INFO in toc
     vbat = VBAT in toc
+    not_logged = tuple(
+        v
+        for v, lacking in ((VBAT, not vbat), (SUPERVISOR_INFO, section.armed_source == "auto"))
+        if lacking and v not in toc
+    )
     slow_vars = [v for v, on in ((VBAT, vbat), (SUPERVISOR_INFO, armed)) if on]
     # Motor commands are 0..65535 (firmware doc) but stored as uint32: fetch them as uint16
     # so that attitude and motors share one packet.
@@ -179,7 +217,7 @@ def plan_variables(section: CrazyflieSection, toc: Mapping[str, str], uri: str) 
     groups = [g for g in (ACC, GYRO, attitude, motors) if g]
     fast = plan_blocks("tel", groups, toc, section.log_period_ms, narrow)
     slow = plan_blocks("slow", [slow_vars], toc, section.slow_period_ms) if slow_vars else []
-    return VariablePlan(tuple(fast), tuple(slow), motors, attitude, armed, vbat)
+    return VariablePlan(tuple(fast), tuple(slow), motors, attitude, armed, vbat, not_logged)
 
 
 def thrust_n(pwms: Sequence[float], thrust_map: Sequence[float]) -> float:

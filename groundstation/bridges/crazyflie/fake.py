@@ -11,8 +11,10 @@ bridge process without a drone. Options ride on the URI's query::
 ``hover``: level, still, the tether pulling 0.05 N down; ``tug``: the same pulled 0.2 N down.
 After ``stop_motors`` the motors read 0 and the armed bit clears (the drone sits on the floor).
 ``record`` appends one JSON line per call; ``drop_after_s`` loses the link once after that many
-seconds of playback and refuses to reconnect for ``down_s``; ``missing`` drops variables from
-the TOC; ``ooo`` repeats an old timestamp every 25th period (out-of-order packets).
+seconds of playback and refuses to reconnect for ``down_s``; ``firmware`` picks the log TOC of
+:data:`FIRMWARE_TOCS` (``current``, the default, or ``2022``); ``missing`` drops variables
+from it; ``refuse`` refuses (as the firmware's ``ENOMEM``) every log block holding one of the
+named variables; ``ooo`` repeats an old timestamp every 25th period (out-of-order packets).
 """
 
 from __future__ import annotations
@@ -32,22 +34,34 @@ from groundstation.bridges.crazyflie.link import (
     DataHandler,
     LinkError,
     LogBlock,
+    LogBlockRefused,
     LostHandler,
 )
 
-__all__ = ["FAKE_SCENARIOS", "FAKE_TOC", "FakeLink", "pwm_for_thrust"]
+__all__ = ["FAKE_SCENARIOS", "FAKE_TOC", "FIRMWARE_TOCS", "FakeLink", "pwm_for_thrust"]
 
-FAKE_TOC: Mapping[str, str] = {
+_COMMON_TOC: Mapping[str, str] = {
     **{f"acc.{a}": "float" for a in "xyz"},
     **{f"gyro.{a}": "float" for a in "xyz"},
     **{f"stateEstimate.q{a}": "float" for a in "wxyz"},
     **{f"motor.m{i}": "uint32_t" for i in range(1, 5)},
-    **{f"pwm.m{i}_pwm": "uint32_t" for i in range(1, 5)},
     "pm.vbat": "float",
     "supervisor.info": "uint16_t",
 }
-"""A Crazyflie 2.x firmware's log TOC, reduced to what the bridge may ask for (C types as in
-the firmware: ``motor.m*`` are ``uint32_t``, ``supervisor.info`` ``uint16_t``)."""
+FIRMWARE_TOCS: Mapping[str, Mapping[str, str]] = {
+    # motors.c logs ``motor.m*`` (the ratios written to the timers, after the stabilizer's
+    # battery compensation); there is no ``pwm`` group.
+    "current": dict(_COMMON_TOC),
+    # ``motor.m*`` from the power distribution (the request, before the compensation in
+    # motorsSetRatio) and ``pwm.m*_pwm`` from motors.c (the duty after it).
+    "2022": {**_COMMON_TOC, **{f"pwm.m{i}_pwm": "uint32_t" for i in range(1, 5)}},
+}
+"""Crazyflie 2.x log TOCs, reduced to what the bridge may ask for (C types as in the firmware:
+``motor.m*`` and ``pwm.m*_pwm`` are ``uint32_t``, ``supervisor.info`` ``uint16_t``): current
+firmware, and firmware of about 2021–2022 (the bridge's docstring and docs/real-lab.md say
+which battery compensation each motor variable carries)."""
+FAKE_TOC: Mapping[str, str] = FIRMWARE_TOCS["current"]
+"""The fake's default TOC: current firmware."""
 
 FAKE_SCENARIOS: Mapping[str, float] = {"hover": 0.05, "tug": 0.20}
 """Scenario → downward pull of the tether on the drone, N."""
@@ -71,7 +85,8 @@ class FakeLink:
         uri: ``fake://SCENARIO[?options]`` (only used by :meth:`start_player`).
         mass_kg: the fake drone's mass.
         thrust_map: the map the bridge uses, inverted to produce motor values.
-        toc: the TOC to report (default :data:`FAKE_TOC` less ``missing``).
+        toc: the TOC to report (default: the ``firmware`` option's, :data:`FAKE_TOC` without
+            it, less ``missing``).
         seed: noise seed.
         realtime: play the scenario on a thread once logging starts (the CLI's fake).
     """
@@ -92,10 +107,14 @@ class FakeLink:
         self.scenario = parsed.netloc or "hover"
         if self.scenario not in FAKE_SCENARIOS:
             raise LinkError(f"fake scenario {self.scenario!r}: one of {sorted(FAKE_SCENARIOS)}")
+        firmware = query.get("firmware", "current")
+        if firmware not in FIRMWARE_TOCS:
+            raise LinkError(f"fake firmware {firmware!r}: one of {sorted(FIRMWARE_TOCS)}")
         missing = [m for m in query.get("missing", "").split(",") if m]
-        self.toc = dict(toc if toc is not None else FAKE_TOC)
+        self.toc = dict(toc if toc is not None else FIRMWARE_TOCS[firmware])
         for name in missing:
             self.toc.pop(name, None)
+        self.refuse = frozenset(m for m in query.get("refuse", "").split(",") if m)
         self.record_path = Path(query["record"]) if "record" in query else None
         self.drop_after_s = float(query["drop_after_s"]) if "drop_after_s" in query else None
         self.down_s = float(query.get("down_s", "1.0"))
@@ -130,13 +149,18 @@ class FakeLink:
             self.opens += 1
         return dict(self.toc)
 
-    def start_logging(self, blocks: Sequence[LogBlock], on_data: DataHandler) -> None:
+    def start_logging(
+        self, blocks: Sequence[LogBlock], on_data: DataHandler, timeout_s: float = 10.0
+    ) -> None:
         for block in blocks:
             for var in block.variables:
                 if var not in self.toc:
                     raise LinkError(f"log block {block.name}: Variable {var} not in TOC")
             if block.size_bytes > 26 or block.period_ms % 10:
                 raise LinkError(f"log block {block.name} too large or bad period")
+            if self.refuse.intersection(block.variables):
+                self._record("refused", block.name)
+                raise LogBlockRefused(self.uri, block, "No more memory available")
         self._record("start_logging", *[b.name for b in blocks])
         with self._lock:
             self._blocks = tuple(blocks)
@@ -216,6 +240,7 @@ class FakeLink:
             "supervisor.info": float(info),
         }
         for i in range(1, 5):
+            # The same value for both: the fake models no battery compensation.
             out[f"motor.m{i}"] = float(round(pwm))
             out[f"pwm.m{i}_pwm"] = float(round(pwm))
         return {k: v for k, v in out.items() if k in self.toc}

@@ -24,6 +24,7 @@ __all__ = [
     "Link",
     "LinkError",
     "LogBlock",
+    "LogBlockRefused",
     "LostHandler",
 ]
 
@@ -67,6 +68,25 @@ class LogBlock:
         return sum(TYPE_SIZES[t] for t in self.fetch_as)
 
 
+class LogBlockRefused(LinkError):
+    """The firmware answered a log block's creation or start with an error.
+
+    Not worth retrying (the same blocks would be refused again): the bridge stops and says
+    which block, which variables and the firmware's reason.
+    """
+
+    def __init__(self, uri: str, block: LogBlock, reason: str) -> None:
+        self.block = block
+        self.reason = reason
+        super().__init__(
+            f"{uri}: the firmware refused log block {block.name} "
+            f"({', '.join(block.variables)}; {block.size_bytes} bytes every "
+            f"{block.period_ms} ms): {reason}. Retrying would be refused again: check the "
+            "firmware's log limits (blocks, variables, memory) and [crazyflie] rate_hz / "
+            "slow_period_ms"
+        )
+
+
 class Link(Protocol):
     """What the bridge needs from a Crazyflie."""
 
@@ -83,8 +103,15 @@ class Link(Protocol):
         """
         ...
 
-    def start_logging(self, blocks: Sequence[LogBlock], on_data: DataHandler) -> None:
-        """Create and start the log blocks (raises :class:`LinkError` if one is refused)."""
+    def start_logging(
+        self, blocks: Sequence[LogBlock], on_data: DataHandler, timeout_s: float = 10.0
+    ) -> None:
+        """Create and start the log blocks; return once the firmware has started every one.
+
+        Raises:
+            LogBlockRefused: the firmware refused a block (the message names it and why).
+            LinkError: no answer within ``timeout_s``, or the link failed.
+        """
         ...
 
     def send_position_setpoint(self, x_m: float, y_m: float, z_m: float, yaw_deg: float) -> None:
@@ -188,10 +215,26 @@ class CflibLink:
                 toc[f"{group}.{name}"] = str(element.ctype)
         return toc
 
-    def start_logging(self, blocks: Sequence[LogBlock], on_data: DataHandler) -> None:
+    def start_logging(
+        self, blocks: Sequence[LogBlock], on_data: DataHandler, timeout_s: float = 10.0
+    ) -> None:
         from cflib.crazyflie.log import LogConfig
 
         cf = self._require()
+        # cflib reports the firmware's answer to each block asynchronously: error_cb when the
+        # creation is refused, started_cb(False) when the start is. Wait for every answer so a
+        # refusal fails the connection with its reason instead of a silent data timeout.
+        outcomes: dict[str, str | None] = {}
+        answered = threading.Condition()
+
+        def settle(name: str, refusal: str | None) -> bool:
+            with answered:
+                if name in outcomes:
+                    return False
+                outcomes[name] = refusal
+                answered.notify_all()
+                return True
+
         for block in blocks:
             conf = LogConfig(name=block.name, period_in_ms=block.period_ms)
             for var, fetch_as in zip(block.variables, block.fetch_as, strict=True):
@@ -200,8 +243,15 @@ class CflibLink:
             def data_cb(timestamp: int, data: dict[str, float], logconf: Any) -> None:
                 on_data(logconf.name, int(timestamp), data)
 
-            def error_cb(logconf: Any, msg: str) -> None:
-                _log.error("log block %s refused by the firmware: %s", logconf.name, msg)
+            def error_cb(logconf: Any, msg: str, name: str = block.name) -> None:
+                if not settle(name, str(msg)):  # after it started: only say so
+                    _log.error("log block %s: error from the firmware: %s", name, msg)
+
+            def started_cb(_: Any, started: bool, name: str = block.name, c: Any = conf) -> None:
+                if started:
+                    settle(name, None)
+                else:
+                    settle(name, f"start refused (error {c.err_no})")
 
             try:
                 cf.log.add_config(conf)
@@ -209,8 +259,24 @@ class CflibLink:
                 raise LinkError(f"log block {block.name} {list(block.variables)}: {exc}") from None
             conf.data_received_cb.add_callback(data_cb)
             conf.error_cb.add_callback(error_cb)
+            conf.started_cb.add_callback(started_cb)
             conf.start()
             self._configs.append(conf)
+        by_name = {b.name: b for b in blocks}
+        with answered:
+            answered.wait_for(
+                lambda: len(outcomes) == len(blocks) or any(outcomes.values()), timeout_s
+            )
+            done = dict(outcomes)
+        for name, refusal in done.items():
+            if refusal is not None:
+                raise LogBlockRefused(self.uri, by_name[name], refusal)
+        waiting = [b.name for b in blocks if b.name not in done]
+        if waiting:
+            raise LinkError(
+                f"{self.uri}: the firmware did not start log block(s) {', '.join(waiting)} "
+                f"within {timeout_s:g} s"
+            )
 
     def send_position_setpoint(self, x_m: float, y_m: float, z_m: float, yaw_deg: float) -> None:
         self._require().commander.send_position_setpoint(x_m, y_m, z_m, yaw_deg)

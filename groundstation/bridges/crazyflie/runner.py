@@ -2,7 +2,8 @@
 
 Link and bus callbacks only validate and queue; one thread (the caller's, in :meth:`run`)
 aligns log blocks, publishes Telemetry, streams setpoints and handles Stop, so the order of
-events is the order they are acted on. Bus keys (``{drone}`` is the drone id):
+events is the order they are acted on. Setpoints go out every :data:`SETPOINT_PERIOD_S`,
+whatever the log rate. Bus keys (``{drone}`` is the drone id):
 
 * publishes ``tether/{drone}/telemetry`` (contract) and ``tether/{drone}/bridge`` (added:
   status, once per ``status_period_s`` and on every change of connection or latch);
@@ -28,6 +29,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from groundstation.bridges.crazyflie.bridge import (
+    NOT_LOGGED_CONSEQUENCE,
     Aligner,
     CommandGate,
     MissingVariables,
@@ -38,7 +40,7 @@ from groundstation.bridges.crazyflie.bridge import (
     plan_variables,
     yaw_deg_from_quat,
 )
-from groundstation.bridges.crazyflie.link import Link, LinkError
+from groundstation.bridges.crazyflie.link import Link, LinkError, LogBlockRefused
 from groundstation.bus import Bus, Sample, Subscription
 from groundstation.config import CrazyflieSection
 from groundstation.messages import (
@@ -50,11 +52,18 @@ from groundstation.messages import (
     TakeoffIn,
 )
 
-__all__ = ["CrazyflieBridge", "bridge_keys"]
+__all__ = ["SETPOINT_PERIOD_S", "CrazyflieBridge", "bridge_keys"]
 
 _log = logging.getLogger("groundstation.crazyflie")
 
 _BACKOFF_START_S = 0.25
+SETPOINT_PERIOD_S = 0.02
+"""The setpoint in force is (re-)sent every 20 ms, whatever ``rate_hz``: the firmware's
+commander watchdog levels the drone 0.5 s after the last setpoint and cuts the motors after
+2 s, and a log period may be as long as 2 s (``rate_hz = 0.5``)."""
+DATA_TIMEOUT_PERIODS = 3
+"""An open link is taken as lost after ``data_timeout_s``, but never before this many of the
+most frequent block's periods have passed without data (a slow log rate is not a loss)."""
 REACH_MARGIN_M = 0.05
 """A take-off target stays this much inside the tether's length from the base."""
 
@@ -134,6 +143,8 @@ class CrazyflieBridge:
         self._pending_stop = False
         self._commanding = False
         self._holding_logged = False
+        self._next_tick_s = 0.0
+        self._data_timeout_s = section.data_timeout_s
         self._subs: list[Subscription] = []
 
     # ------------------------------------------------------------------ callbacks
@@ -167,7 +178,8 @@ class CrazyflieBridge:
         """Connect, bridge, reconnect after a loss, until ``stop``; then stop and disconnect.
 
         Returns:
-            0, or 2 when the firmware lacks a needed log variable (the message names them).
+            0, or 2 when the firmware lacks a needed log variable or refuses a log block (the
+            message names them; retrying would not help).
         """
         for name in ("setpoint", "stop", "rearm", "takeoff", "land"):
             self._subs.append(self.bus.subscribe(self.keys[name], self._on_bus))
@@ -181,7 +193,7 @@ class CrazyflieBridge:
                     try:
                         self._connect()
                         backoff_s = _BACKOFF_START_S
-                    except MissingVariables as exc:
+                    except (MissingVariables, LogBlockRefused) as exc:
                         _log.error("%s", exc)
                         return 2
                     except LinkError as exc:
@@ -196,7 +208,7 @@ class CrazyflieBridge:
                             break
                         backoff_s = min(2.0 * backoff_s, self.section.reconnect_max_s)
                         continue
-                next_status = self._serve_period(stop, next_status)
+                next_status = self._serve_tick(stop, next_status)
         finally:
             self._shutdown()
         return 0
@@ -220,12 +232,15 @@ class CrazyflieBridge:
             self.link.start_logging(
                 [*plan.fast, *plan.slow],
                 lambda block, ts, values: self._put("data", (block, ts, values), epoch),
+                self.section.connect_timeout_s,
             )
         except LinkError:
             self.link.close()
             raise
+        shortest_s = min(b.period_ms for b in (*plan.fast, *plan.slow)) / 1000.0
+        self._data_timeout_s = max(self.section.data_timeout_s, DATA_TIMEOUT_PERIODS * shortest_s)
         self.connected = True
-        self._last_data_s = self._connected_s = self._clock()
+        self._last_data_s = self._connected_s = self._next_tick_s = self._clock()
         self._logged.discard("connect_failed")
         self._logged.discard("lost")
         if self._pending_stop:
@@ -240,14 +255,24 @@ class CrazyflieBridge:
             "supervisor.info" if plan.armed else "not reported",
             "pm.vbat" if plan.vbat else "not reported",
         )
+        for var in plan.not_logged:
+            self._once(
+                f"not_logged:{var}",
+                "%s: the firmware does not log %s: %s",
+                self.link.uri,
+                var,
+                NOT_LOGGED_CONSEQUENCE[var],
+            )
         self._publish_status()
 
-    def _serve_period(self, stop: threading.Event, next_status: float) -> float:
-        """Handle events until the next setpoint tick, then send it."""
-        period_s = self.section.log_period_ms / 1000.0
-        deadline = self._clock() + period_s
+    def _serve_tick(self, stop: threading.Event, next_status: float) -> float:
+        """Handle events until the next setpoint tick, then send the setpoint in force.
+
+        Ticks come every :data:`SETPOINT_PERIOD_S` on a fixed schedule, not once per log
+        period: at a low ``rate_hz`` the firmware's watchdog would otherwise take over.
+        """
         while not stop.is_set():
-            remaining = deadline - self._clock()
+            remaining = self._next_tick_s - self._clock()
             if remaining <= 0:
                 break
             try:
@@ -258,8 +283,11 @@ class CrazyflieBridge:
             if not self.connected:
                 return next_status
         now = self._clock()
-        if self.connected and now - self._last_data_s > self.section.data_timeout_s:
-            self._on_lost(f"no log data for {self.section.data_timeout_s:g} s")
+        self._next_tick_s += SETPOINT_PERIOD_S
+        if self._next_tick_s <= now:  # fell behind (a busy host): keep the cadence from now
+            self._next_tick_s = now + SETPOINT_PERIOD_S
+        if self.connected and now - self._last_data_s > self._data_timeout_s:
+            self._on_lost(f"no log data for {self._data_timeout_s:g} s")
         if self.connected:
             self._send_setpoint(now)
         if now >= next_status:
@@ -479,7 +507,7 @@ class CrazyflieBridge:
 
     def status(self) -> dict[str, Any]:
         """What ``tether/{drone}/bridge`` carries."""
-        aligner = self._aligner
+        aligner, plan = self._aligner, self._plan
         return {
             "uri": self.link.uri,
             "connected": self.connected,
@@ -491,6 +519,7 @@ class CrazyflieBridge:
             "dropped_setpoints": dict(self.gate.dropped),
             "out_of_order": aligner.out_of_order if aligner else 0,
             "unmatched": aligner.unmatched if aligner else 0,
+            "not_logged": {v: NOT_LOGGED_CONSEQUENCE[v] for v in plan.not_logged} if plan else {},
         }
 
     def _publish_status(self) -> None:
