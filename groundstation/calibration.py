@@ -83,9 +83,9 @@ PARAMETERS: tuple[str, ...] = (
 """The parameter vector, in order. ``base_d*`` is an offset added to the recorded base."""
 
 _SCALES = np.array([0.05, 0.02, 0.02, 0.2, 0.2, 0.2, 0.1, 0.01, 0.05, 0.05, 0.05])
-_SCALES.setflags(write=False)
 """Typical magnitude of each parameter: a combination whose standard error exceeds half of
 it (:data:`UNDETERMINED_RATIO`) is taken as undetermined by the data."""
+_SCALES.setflags(write=False)  # after its docstring, which would otherwise describe nothing
 
 UNDETERMINED_RATIO = 0.5
 _PRIOR_RATIO = 10.0
@@ -461,6 +461,11 @@ class RestCalibrator:
     def offset(self) -> RestOffset | None:
         """The offset in force (None: none since the last disarm, or never still enough)."""
         return self._offset
+
+    @property
+    def armed(self) -> bool | None:
+        """The last sample's ``armed`` (None before any sample)."""
+        return self._armed_prev
 
     @property
     def window_samples(self) -> int:

@@ -592,11 +592,22 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_crazyflie)
 
     p = sub.add_parser(
-        "calibrate", help="fit thrust scale, thrust axis, accelerometer bias from recordings"
+        "calibrate",
+        help="fit thrust scale, thrust axis, accelerometer bias from recordings",
+        description="Fit each drone's [calibration] from recordings with motion capture and "
+        "write the configuration plus [drones.<id>.calibration] (docs/calibration.md). "
+        "Without --drone every drone in the recordings is calibrated, and said so; when the "
+        "configuration has [drones.<id>] tables, a recorded drone without one is an error "
+        "(name it with --drone to fit it with the shared tables).",
     )
     p.add_argument("files", metavar="FILE.mcap", nargs="+", help="recordings with motion capture")
     p.add_argument("--config", metavar="PATH", help="TOML configuration (the output's base)")
-    p.add_argument("--drone", metavar="ID", help="calibrate this drone only")
+    p.add_argument(
+        "--drone",
+        metavar="ID",
+        help="calibrate this drone only (default: every drone in the recordings, each of "
+        "which needs a [drones.<id>] table when the configuration has any)",
+    )
     p.add_argument("--out", required=True, metavar="PATH.toml", help="configuration to write")
     p.add_argument(
         "--fit-tether", action="store_true", help="also fit the tether's ω and the base position"

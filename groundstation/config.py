@@ -272,6 +272,12 @@ class CalibrationSection(_Section):
     rest: bool = True
     """Estimate the accelerometer's x/y offset while the drone sits disarmed and still on the
     floor, and apply it until the next disarm (real Crazyflies re-level at every power-on)."""
+    rest_required: bool = False
+    """(added) Written true by ``groundstation calibrate`` when it left the x/y accelerometer
+    bias to the rest calibration (kept as configured) and fitted the thrust axis on top of
+    the rest offsets: a drone that arms with no rest offset in force then flies with an x/y
+    bias nobody calibrated; the service warns once and ``status`` says so
+    (``rest_calibration.missing_at_arming``). Needs ``rest = true``."""
     source: str = "none"
     """Where these numbers come from (file and time, written by ``groundstation calibrate``),
     reported in Estimate and ``status``; ``none`` when nothing was calibrated."""
@@ -292,6 +298,15 @@ class CalibrationSection(_Section):
         if not (0.0 < lo <= hi < 60.0):
             raise ValueError(f"{list(value)!r}: must be [lo, hi] volts with 0 < lo <= hi < 60")
         return value
+
+    @model_validator(mode="after")
+    def _rest_required_needs_rest(self) -> CalibrationSection:
+        if self.rest_required and not self.rest:
+            raise ValueError(
+                "rest_required = true with rest = false: the calibration relies on the rest "
+                "offset, which rest = false turns off (calibrate again with rest = false)"
+            )
+        return self
 
 
 class WebSection(_Section):

@@ -500,7 +500,9 @@ class Status(_Out):
     """Rest calibration (``[calibration] rest``): None when off; else ``{"in_force": false}``,
     or the accelerometer's x/y offset found while the drone sat still and disarmed, applied
     until the next disarm: ``in_force``, ``offset_mps2`` [x, y], ``std_mps2``, ``duration_s``,
-    ``stamp_s``."""
+    ``stamp_s``. With ``[calibration] rest_required`` also ``required: true`` and
+    ``missing_at_arming``: the drone armed without a rest offset in force (until the next
+    disarm), so its x/y accelerometer bias is not the calibrated one."""
 
 
 class MocapPoseIn(_In):

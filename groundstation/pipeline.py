@@ -196,6 +196,11 @@ class DroneRuntime:
     """The rest calibration (``[calibration] rest``): the accelerometer's x/y offset found
     while the drone sat still and disarmed, added to the configured bias until the next
     disarm."""
+    rest_missing: bool = False
+    """``[calibration] rest_required`` and the drone armed without a rest offset in force
+    (until the next disarm): its x/y accelerometer bias is not what was calibrated."""
+    rest_missing_told: bool = False
+    """The one ``warning`` Event for arming without the required rest offset was sent."""
     estimate_key: str = field(init=False, default="")
     """``tether/{drone}/estimate`` (made once, not per message)."""
     base_cache: tuple[np.ndarray, tuple[float, float, float]] | None = None
@@ -732,12 +737,12 @@ class Pipeline:
         """
         runtime.received += 1
         accel = msg.accel_mps2
-        if runtime.rest is not None:
-            # Rest calibration: the offset found at rest is extra accelerometer bias.
-            rest = runtime.rest.update(msg.stamp_s, accel, msg.quat_wxyz, msg.armed, msg.gyro_rps)
-            if rest is not None:
-                ox, oy, _ = rest.offset_body_mps2.tolist()
-                accel = (accel[0] - ox, accel[1] - oy, accel[2])
+        rest = runtime.rest.offset if runtime.rest is not None else None
+        if rest is not None:
+            # Rest calibration: the offset found at rest is extra accelerometer bias (the one
+            # in force; this sample enters the rest window only once accepted, below).
+            ox, oy, _ = rest.offset_body_mps2.tolist()
+            accel = (accel[0] - ox, accel[1] - oy, accel[2])
         # Malformed content first (whatever its seq), then the stream's order.
         try:
             obs = observe_tension(
@@ -789,6 +794,8 @@ class Pipeline:
         runtime.stale = False
         runtime.accepted += 1
         runtime.telemetry_rate.add(now_s)
+        if runtime.rest is not None:
+            self._feed_rest(runtime, msg, now_s)
 
         # Ground or air, with hysteresis: between ground_thrust_ratio and the weight the
         # floor may still carry the drone (its push is no tension) until lift-off is seen.
@@ -979,6 +986,44 @@ class Pipeline:
             self._emit(runtime.drone, "stop", "service", now_s, self.self_id, decision.stop_reason)
         return out
 
+    def _feed_rest(self, runtime: DroneRuntime, msg: Telemetry, now_s: float) -> None:
+        """Feed an accepted sample to the rest calibration; warn when a calibration that
+        relies on it arms without a rest offset.
+
+        Only after the seq/stamp checks: a repeated or out-of-order message must not enter
+        the still window (a repeat's stamp alone restarts it). With ``[calibration]
+        rest_required`` (``groundstation calibrate`` kept the x/y bias as configured because
+        the rest offset replaces it) a drone that arms with no rest offset in force flies with
+        an x/y bias nobody calibrated: ``status`` says so until the next disarm, and the
+        ``warning`` Event is sent the first time only.
+        """
+        rest = runtime.rest
+        assert rest is not None
+        was_armed = rest.armed
+        rest.update(msg.stamp_s, msg.accel_mps2, msg.quat_wxyz, msg.armed, msg.gyro_rps)
+        if not runtime.params.calibration.rest_required:
+            return
+        if not msg.armed:
+            runtime.rest_missing = False
+        elif not was_armed and rest.offset is None:
+            runtime.rest_missing = True
+            if not runtime.rest_missing_told:
+                runtime.rest_missing_told = True
+                self._emit(
+                    runtime.drone,
+                    "warning",
+                    "telemetry",
+                    now_s,
+                    self.self_id,
+                    f"{runtime.drone}: armed without a rest offset in force, but its calibration "
+                    "relies on one ([calibration] rest_required: the thrust axis was fitted with "
+                    "the x/y accelerometer bias left to the rest calibration): the x/y bias is "
+                    "the configured one, not this power-on's. Let the drone sit disarmed and "
+                    "still on the floor for 1 s before arming (status rest_calibration; told "
+                    "once)",
+                    field="armed",
+                )
+
     def _check_vbat_range(
         self, runtime: DroneRuntime, vbat_v: float | None, on_ground: bool, now_s: float
     ) -> None:
@@ -1149,7 +1194,7 @@ class Pipeline:
                 None if runtime.vbat_range_v is None else list(runtime.vbat_range_v)
             ),
             "vbat_v": runtime.last_vbat_v,
-            "rest_calibration": _rest_status(runtime.rest),
+            "rest_calibration": _rest_status(runtime),
         }
 
     def drone_ids(self) -> Iterable[str]:
@@ -1204,20 +1249,26 @@ def _follow_stamped(state: follow_mod.FollowState, stamp_s: float) -> follow_mod
     return new
 
 
-def _rest_status(rest: RestCalibrator | None) -> dict[str, Any] | None:
-    """Status of the rest calibration: off (None), or the offset in force (or none yet)."""
+def _rest_status(runtime: DroneRuntime) -> dict[str, Any] | None:
+    """Status of the rest calibration: off (None), or the offset in force (or none yet);
+    with ``[calibration] rest_required``, whether the drone armed without one."""
+    rest = runtime.rest
     if rest is None:
         return None
     off = rest.offset
-    if off is None:
-        return {"in_force": False}
-    return {
-        "in_force": True,
-        "offset_mps2": [float(v) for v in off.offset_body_mps2[:2]],
-        "std_mps2": [float(v) for v in off.std_mps2[:2]],
-        "duration_s": off.duration_s,
-        "stamp_s": off.stamp_s,
-    }
+    out: dict[str, Any] = {"in_force": False}
+    if off is not None:
+        out = {
+            "in_force": True,
+            "offset_mps2": [float(v) for v in off.offset_body_mps2[:2]],
+            "std_mps2": [float(v) for v in off.std_mps2[:2]],
+            "duration_s": off.duration_s,
+            "stamp_s": off.stamp_s,
+        }
+    if runtime.params.calibration.rest_required:
+        out["required"] = True
+        out["missing_at_arming"] = runtime.rest_missing
+    return out
 
 
 def _noise_status(filt: TensionFilter) -> dict[str, Any]:

@@ -18,6 +18,8 @@ from scipy.spatial.transform import Rotation
 
 from groundstation.calibration import CalibrationData
 from groundstation.catenary import tether_force
+from groundstation.config import Settings
+from groundstation.pipeline import Pipeline
 
 G = 9.81
 
@@ -163,19 +165,18 @@ def concat(*parts: CalibrationData) -> CalibrationData:
     )
 
 
-def write_mcap(
-    path: str,
+def recorded_messages(
     data: CalibrationData,
     *,
     drone: str = "cf1",
     mocap: bool = True,
     reel_length_m: float | None = 1.6,
     reel_base_m: tuple[float, float, float] | None = (0.0, 0.0, 0.754),
-) -> None:
-    """A recording as ``groundstation record`` writes it: Telemetry (and a Reel) as JSON."""
+) -> list:
+    """The RecordedMessages ``groundstation record`` would write: Telemetry (and a Reel)."""
     import json
 
-    from groundstation.recording.reader import RecordedMessage, copy_messages
+    from groundstation.recording.reader import RecordedMessage
 
     msgs = []
     t_ns = 1_700_000_000_000_000_000
@@ -201,4 +202,60 @@ def write_mcap(
             tel["vbat_v"] = float(data.vbat_v[i])
         t = t_ns + int((float(data.stamp_s[i]) + 1.0) * 1e9)
         msgs.append(RecordedMessage(f"tether/{drone}/telemetry", json.dumps(tel).encode(), t, t))
-    copy_messages(msgs, __import__("pathlib").Path(path))
+    return msgs
+
+
+def write_mcap(
+    path: str,
+    data: CalibrationData,
+    *,
+    drone: str = "cf1",
+    mocap: bool = True,
+    reel_length_m: float | None = 1.6,
+    reel_base_m: tuple[float, float, float] | None = (0.0, 0.0, 0.754),
+) -> None:
+    """A recording as ``groundstation record`` writes it: Telemetry (and a Reel) as JSON."""
+    from pathlib import Path
+
+    from groundstation.recording.reader import copy_messages
+
+    msgs = recorded_messages(
+        data, drone=drone, mocap=mocap, reel_length_m=reel_length_m, reel_base_m=reel_base_m
+    )
+    copy_messages(msgs, Path(path))
+
+
+def served_position_errors(
+    settings: Settings, data: CalibrationData, drone: str = "cf1"
+) -> tuple[list[float], Pipeline]:
+    """``serve``'s pipeline on ``data`` *without* motion capture (the Reel gives length and
+    base): the distance of each airborne Estimate's position from the true one, m, and the
+    pipeline (for its status)."""
+    import json
+
+    from groundstation.bus import Sample
+
+    pipe = Pipeline(settings)
+    reel = {"stamp_s": 0.0, "length_m": float(data.length_m[0])}
+    reel["base_m"] = data.base_world_m[0].tolist()
+    pipe.handle(Sample(f"tether/{drone}/reel", json.dumps(reel).encode()), 0.0)
+    errors = []
+    for i in range(len(data)):
+        tel = {
+            "seq": i,
+            "stamp_s": float(data.stamp_s[i]),
+            "accel_mps2": data.accel_body_mps2[i].tolist(),
+            "quat_wxyz": data.quat_wxyz[i].tolist(),
+            "thrust_n": float(data.thrust_n[i]),
+            "armed": bool(data.armed[i]),
+            "gyro_rps": data.gyro_rps[i].tolist(),
+        }
+        sample = Sample(f"tether/{drone}/telemetry", json.dumps(tel).encode())
+        for out in pipe.handle(sample, float(data.stamp_s[i])):
+            if not out.key.endswith("/estimate"):
+                continue
+            est = json.loads(out.payload)
+            p = data.position_world_m[i]
+            if est["position_m"] is not None and data.armed[i] and np.all(np.isfinite(p)):
+                errors.append(float(np.linalg.norm(np.subtract(est["position_m"], p))))
+    return errors, pipe

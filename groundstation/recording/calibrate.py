@@ -40,6 +40,7 @@ from groundstation.recording.reader import iter_messages
 
 __all__ = [
     "CalibrateInputError",
+    "DroneCalibration",
     "DroneRecording",
     "format_fit",
     "read_recordings",
@@ -49,6 +50,10 @@ __all__ = [
 
 MIN_HOVER_S = 3.0
 """Steady hover under motion capture each recording must hold, s."""
+
+MIN_REST_COVERAGE = 0.9
+"""Share of the hover samples that must carry a rest offset for the fit to leave the x/y
+bias to the rest calibration (and fit the thrust axis on top of the rest offsets)."""
 
 
 class CalibrateInputError(RecordingError):
@@ -173,9 +178,11 @@ def read_recordings(
             cols = {drone: cols[drone]}
         for d, c in cols.items():
             if c.with_mocap == 0:
+                others = sorted(o for o in cols if o != d)
                 raise CalibrateInputError(
                     f"{str(path)!r}: drone {d!r} has no motion capture "
                     "(no Telemetry carries position_m)"
+                    + (f"; --drone ID calibrates one of {', '.join(others)}" if others else "")
                 )
             per_drone[d].append((index, str(path), c))
             invalid[d] += bad
@@ -222,33 +229,61 @@ def read_recordings(
 
 
 def _rest_offsets(data: CalibrationData, bias: Sequence[float]) -> np.ndarray:
-    """The rest offset the service would apply to each sample (NaN where none)."""
+    """The rest offset the service would apply to each sample (NaN where none): the one in
+    force when the sample arrives, as the pipeline applies it."""
     out = np.full((len(data), 3), math.nan)
     for seg in np.unique(data.segment):
         cal = RestCalibrator(bias_body_mps2=bias)
         for i in np.flatnonzero(data.segment == seg).tolist():
+            off = cal.offset
+            if off is not None:
+                out[i] = off.offset_body_mps2
             gyro = data.gyro_rps[i]
-            off = cal.update(
+            cal.update(
                 float(data.stamp_s[i]),
                 data.accel_body_mps2[i],
                 data.quat_wxyz[i],
                 bool(data.armed[i]),
                 gyro if np.all(np.isfinite(gyro)) else None,
             )
-            if off is not None:
-                out[i] = off.offset_body_mps2
     return out
+
+
+@dataclass(frozen=True)
+class DroneCalibration:
+    """One drone's fit, and what its written ``[calibration]`` says about the rest."""
+
+    fit: CalibrationFit
+    rest: bool
+    """``rest`` to write."""
+    rest_required: bool
+    """``rest_required`` to write: the x/y bias was left to the rest calibration."""
+    rest_note: tuple[str, ...] = ()
+    """What the rest settings mean for this drone (printed, and written as comments)."""
+
+
+_AXIS = ("about_x_rad", "about_y_rad")
+_REST_HOW = (
+    "start each calibration recording with the drone on the floor, disarmed and still for at "
+    "least 1 s, and calibrate again"
+)
 
 
 def calibrate_drone(
     rec: DroneRecording, settings: Settings, *, fit_tether: bool = False
-) -> CalibrationFit:
+) -> DroneCalibration:
     """Fit one drone's calibration, starting from its configured one.
 
     With ``[calibration] rest = true`` the rest offsets the service would apply are applied
-    here too; where they cover the hover samples, the configured x/y bias has no effect at
-    run time (the rest measures x/y at every power-on), so it is kept and the thrust axis is
-    fitted instead.
+    here too; where they cover the hover samples (:data:`MIN_REST_COVERAGE`), the configured
+    x/y bias has no effect at run time (the rest measures x/y at every power-on), so it is
+    kept, the thrust axis is fitted instead, and ``rest_required`` is written. Where they do
+    not, the x/y bias is fitted; if the data then leave the thrust axis to it (fixed at 0,
+    the x/y bias absorbing ``F·sin(a)/m``), ``rest = false`` is written: a rest offset at run
+    time would replace that bias and lose the axis (63 cm instead of 2.7 cm in the audit's
+    case, tests/test_calibrate_cli.py). When the axis is fitted anyway (spread of thrust,
+    still samples in the fit), the fitted x/y bias is this power-on's own and the rest
+    calibration may replace it: ``rest`` stays as configured.
 
     Raises:
         CalibrateInputError: too little hover in a file.
@@ -281,10 +316,12 @@ def calibrate_drone(
     offsets = None
     fix: dict[str, str] = {}
     rest_xy = True
+    coverage = 0.0
     if cal.rest:
         off = _rest_offsets(rec.data, cal.accel_bias_mps2)
         covered = np.all(np.isfinite(off[hover]), axis=1)
-        if covered.size and covered.mean() >= 0.9:
+        coverage = float(covered.mean()) if covered.size else 0.0
+        if coverage >= MIN_REST_COVERAGE:
             offsets = np.nan_to_num(off)
             rest_xy = False
             why = (
@@ -293,7 +330,7 @@ def calibrate_drone(
             )
             fix = {"bias_x_mps2": why, "bias_y_mps2": why}
     try:
-        return fit_calibration(
+        fit = fit_calibration(
             rec.data,
             mass,
             weight_n_per_m=rec.weight_n_per_m,
@@ -310,6 +347,37 @@ def calibrate_drone(
     except CalibrationError as exc:
         files = ", ".join(repr(f) for f in rec.files)
         raise CalibrateInputError(f"{files}: drone {rec.drone!r}: {exc}") from None
+    if not cal.rest:
+        return DroneCalibration(fit, rest=False, rest_required=False)
+    if not rest_xy:
+        return DroneCalibration(
+            fit,
+            rest=True,
+            rest_required=True,
+            rest_note=(
+                "rest = true, rest_required = true: the x/y accelerometer bias is left to the "
+                "rest calibration and the thrust axis fitted on top of it; before each flight "
+                "let the drone sit disarmed and still on the floor for 1 s (the service warns "
+                "when it arms without a rest offset)",
+            ),
+        )
+    fixed = {f.name for f in fit.fixed}
+    absorbed = [name for name in _AXIS if name in fixed]
+    if not absorbed:
+        return DroneCalibration(fit, rest=True, rest_required=False)
+    return DroneCalibration(
+        fit,
+        rest=False,
+        rest_required=False,
+        rest_note=(
+            f"rest = false (configured true): {', '.join(absorbed)} fixed at 0, so the fitted "
+            "x/y bias carries the thrust axis; a rest offset at run time would replace that "
+            "bias and lose the axis",
+            f"a rest offset covers {100 * coverage:.0f} % of the hovers (at least "
+            f"{100 * MIN_REST_COVERAGE:.0f} % needed to fit the axis on top of the rest "
+            f"offsets); to calibrate the axis and keep the rest calibration, {_REST_HOW}",
+        ),
+    )
 
 
 # ------------------------------------------------------------------------------- output
@@ -397,7 +465,8 @@ def _vbat_range(fit: CalibrationFit) -> list[float] | None:
     return [math.floor(lo * 1e3) / 1e3, math.ceil(hi * 1e3) / 1e3]
 
 
-def _calibration_table(fit: CalibrationFit, rest: bool, source: str) -> dict[str, Any]:
+def _calibration_table(cal: DroneCalibration, source: str) -> dict[str, Any]:
+    fit = cal.fit
     v = fit.values
     vbat_range = _vbat_range(fit)
     return {
@@ -412,7 +481,8 @@ def _calibration_table(fit: CalibrationFit, rest: bool, source: str) -> dict[str
         "thrust_vbat_ref_v": fit.vbat_ref_v,
         # Where the thrust map holds: the service flags flight outside it (issue 10).
         **({} if vbat_range is None else {"thrust_vbat_range_v": vbat_range}),
-        "rest": rest,
+        "rest": cal.rest,
+        "rest_required": cal.rest_required,
         "source": source,
     }
 
@@ -502,6 +572,40 @@ def _compose(
     return "\n".join(head) + toml_dumps(merged, comments)
 
 
+def _which_drones(
+    recs: Mapping[str, DroneRecording], settings: Settings, drone: str | None
+) -> list[str]:
+    """Lines saying which drones are calibrated and with which tables.
+
+    Raises:
+        CalibrateInputError: without ``drone``, a recorded drone that the configuration's
+            ``[drones.<id>]`` tables do not describe while they describe others.
+    """
+    configured = sorted(settings.drones)
+    shared = [d for d in sorted(recs) if configured and d not in settings.drones]
+    if drone is None and shared:
+        files = sorted({f for d in shared for f in recs[d].files})
+        raise CalibrateInputError(
+            f"{', '.join(repr(f) for f in files)}: telemetry from drone(s) "
+            f"{', '.join(shared)}, which the configuration does not describe (it has "
+            f"[drones.<id>] tables for {', '.join(configured)} only): the tether and base "
+            "would be the shared tables', maybe another drone's; pass --drone ID to calibrate "
+            "one drone explicitly"
+        )
+    lines = []
+    if drone is None:
+        lines.append(
+            f"calibrating every drone in the recordings: {', '.join(sorted(recs))} "
+            "(--drone ID: one only)"
+        )
+    for d in shared:
+        lines.append(
+            f"{d}: no [drones.{d}] in the configuration: fitted with the shared [drone], "
+            "[tether], [base] and [calibration]"
+        )
+    return lines
+
+
 def run_calibrate(
     settings: Settings,
     config_path: str | None,
@@ -515,24 +619,31 @@ def run_calibrate(
 ) -> int:
     """Fit, print, write; returns the exit status (0). Nothing is written on error.
 
+    Which drones: ``drone`` alone, else every drone in the recordings (said so), each with
+    its ``[drones.<id>]``; when the configuration has such tables, a recorded drone without
+    one is an error (its tether and base would be guessed from the shared tables): ``drone``
+    names it explicitly.
+
     Raises:
         CalibrateInputError, RecordingError, ConfigError: unusable input (names the file).
     """
     recs = read_recordings(files, settings, drone)
-    fits = {d: calibrate_drone(r, settings, fit_tether=fit_tether) for d, r in recs.items()}
+    for line in _which_drones(recs, settings, drone):
+        echo(line)
+    cals = {d: calibrate_drone(r, settings, fit_tether=fit_tether) for d, r in recs.items()}
     stamp = now().strftime("%Y-%m-%dT%H:%M:%SZ")
     names = ", ".join(Path(f).name for f in files)
     patch: dict[str, Any] = {"drones": {}}
     comments: dict[str, list[str]] = {}
-    for d in sorted(fits):
-        fit = fits[d]
+    for d in sorted(cals):
+        fit = cals[d].fit
         rec = recs[d]
         echo(format_fit(d, fit, rec.files))
+        for note in cals[d].rest_note:
+            echo(f"  {note}")
         params = settings.for_drone(d)
         source = f"groundstation calibrate {stamp} from {names}"
-        tables: dict[str, Any] = {
-            "calibration": _calibration_table(fit, params.calibration.rest, source)
-        }
+        tables: dict[str, Any] = {"calibration": _calibration_table(cals[d], source)}
         head = [
             f"groundstation calibrate, {stamp}, from {names}:",
             f"{fit.hover_s:.1f} s of hover under motion capture, {fit.rest_samples} still"
@@ -546,6 +657,7 @@ def run_calibrate(
             head.append(f"  {name} = {fit.values[name]:.6g} ± {std:.2g}")
         for f in fit.fixed:
             head.append(f"  {f.name} fixed at {f.value:g}: {f.reason}")
+        head.extend(cals[d].rest_note)
         comments[f"drones.{d}.calibration"] = head
         if "weight_n_per_m" in fit.fitted:
             tables["tether"] = {"weight_n_per_m": round(fit.values["weight_n_per_m"], 6)}
