@@ -53,9 +53,14 @@ DOC_PATH = Path(__file__).resolve().parent.parent / "docs" / "filter_benchmark.m
 # one); "fast" holds tau = 0.13 s, the time constant a fixed filter needs for the tug target.
 FILTERS: dict[str, TensionFilterParams] = {
     "adaptive": TensionFilterParams(),
-    "fixed-hover": TensionFilterParams(change_threshold=1e300, drift_min_time_constant_s=6.0),
+    "fixed-hover": TensionFilterParams(
+        change_threshold=1e300, drift_min_time_constant_s=6.0, hover_wander_n2_per_s=0.0
+    ),
     "fixed-fast": TensionFilterParams(
-        hover_time_constant_s=0.13, change_threshold=1e300, drift_min_time_constant_s=0.13
+        hover_time_constant_s=0.13,
+        change_threshold=1e300,
+        drift_min_time_constant_s=0.13,
+        hover_wander_n2_per_s=0.0,
     ),
 }
 

@@ -585,7 +585,8 @@ def test_noise_level_and_colour_are_estimated_on_line(accel_noise: float, rho: f
     sigma_n = MASS_KG * accel_noise
     v = ar1_noise(rng, n, sigma_n, rho)
     dts = jittered_dt(rng, n)
-    filt = TensionFilter()
+    # A fixed hover time constant (TAU_S): what this test checks is the noise and P.
+    filt = TensionFilter(TensionFilterParams(hover_wander_n2_per_s=0.0))
     for k in range(n):
         est = filt.update(HOVER_TENSION_N + v[k], float(dts[k]))
     np.testing.assert_allclose(est.noise_std_n, sigma_n, rtol=0.12)
@@ -594,6 +595,34 @@ def test_noise_level_and_colour_are_estimated_on_line(accel_noise: float, rho: f
     r = sigma_n**2 * (1 + rho) / (1 - rho)
     limit = math.sqrt(r * float(np.mean(dts)) / (2 * TAU_S))  # sqrt(r dt / (2 tau))
     assert np.all(np.abs(est.std_n / (math.sqrt(2) * limit) - 1.0) < 0.25), est.std_n / limit
+
+
+@pytest.mark.parametrize(
+    ("accel_noise", "rho", "dt_s", "tau_s"),
+    [
+        (0.3, 0.0, 0.004, 6.0),
+        (0.5, 0.3, 0.010, 9.5),
+        (1.0, 0.3, 0.010, 19.0),
+        (2.0, 0.3, 0.010, 40.0),
+    ],
+)
+def test_hover_time_constant_grows_with_the_noise(
+    accel_noise: float, rho: float, dt_s: float, tau_s: float
+) -> None:
+    """tau = sqrt(r dt / q) within [6, 40] s: the ideal profile's 6 s, longer memory in
+    larger noise (r = s2 (1 + rho) / (1 - rho) for AR(1) noise)."""
+    filt = TensionFilter()
+    sigma_n = MASS_KG * accel_noise
+    r = sigma_n**2 * (1 + rho) / (1 - rho)
+    if rho == 0.0:
+        r += THRUST_NOISE_N**2 / 3.0  # the mean over the axes: thrust noise along z
+    tau = filt.hover_time_constant((r, r, r), dt_s)
+    assert tau == pytest.approx(tau_s, rel=0.05)
+    # q = 0 (or no spacing yet): the configured floor
+    assert TensionFilter(TensionFilterParams(hover_wander_n2_per_s=0.0)).hover_time_constant(
+        (r, r, r), dt_s
+    ) == pytest.approx(TAU_S)
+    assert filt.hover_time_constant((r, r, r), math.nan) == pytest.approx(TAU_S)
 
 
 @pytest.mark.parametrize("accel_noise", [0.5, 1.0, 2.0])
