@@ -427,6 +427,18 @@ class RealisticSection(_Section):
     0.06–0.39)."""
     accel_noise_lag1: float = Field(0.2, ge=0.0, lt=1.0)
     """Lag-1 autocorrelation of the noise per IMU sample (issue 9: up to 0.3)."""
+    draw_levels: bool = False
+    """Draw ``accel_noise_mps2``, ``accel_noise_lag1`` and ``battery_soc_start`` per flight,
+    uniform in their ``*_range`` keys, from ``[sim] seed`` and the drone's index (a stream of
+    their own: the other drawn errors stay as they are); off: the fixed values above (every
+    benchmark's, so its numbers do not move)."""
+    accel_noise_range_mps2: tuple[float, float] = (0.7, 2.0)
+    """Range of the drawn vibration noise, m/s² (issue 9: 0.7–2.0 on real flights)."""
+    accel_noise_lag1_range: tuple[float, float] = (0.0, 0.3)
+    """Range of the drawn lag-1 autocorrelation (issue 9: up to 0.3)."""
+    battery_soc_range: tuple[float, float] = (0.6, 1.0)
+    """Range of the drawn state of charge at t = 0 (0.6: ~3.74 V at hover, where the
+    thrust map reads ~1.17 times its value at 4.05 V)."""
     accel_noise_ar: float = Field(0.6, ge=0.0, lt=1.0)
     """AR(1) coefficient of the coloured part (must be >= accel_noise_lag1)."""
     accel_noise_floor_mps2: float = Field(0.02, ge=0.0)
@@ -518,6 +530,14 @@ class RealisticSection(_Section):
                 f"accel_noise_ar {self.accel_noise_ar!r} must be >= accel_noise_lag1 "
                 f"{self.accel_noise_lag1!r}"
             )
+        ranges = {
+            "accel_noise_range_mps2": (self.accel_noise_range_mps2, 0.0, math.inf),
+            "accel_noise_lag1_range": (self.accel_noise_lag1_range, 0.0, self.accel_noise_ar),
+            "battery_soc_range": (self.battery_soc_range, 0.0, 1.0),
+        }
+        for key, ((lo, hi), least, most) in ranges.items():
+            if not least <= lo <= hi <= most:
+                raise ValueError(f"{key} ({lo!r}, {hi!r}) must be ordered within [{least}, {most}]")
         nominal = 1.0 / self.imu_rate_hz
         if not self.imu_spacing_min_s <= nominal <= self.imu_spacing_max_s:
             raise ValueError(

@@ -528,3 +528,34 @@ def test_truth_calibration_is_a_valid_calibration_table() -> None:
     assert CalibrationSection(**ideal.truth_calibration("cf1")).thrust_scale == pytest.approx(
         1.0 / 1.1
     )
+
+
+def test_draw_levels_draws_noise_lag1_and_charge_per_flight_within_their_ranges() -> None:
+    """``draw_levels``: a seeded per-flight draw in the ranges; the other draws do not move."""
+    fixed = RealisticSection()
+    drawn = RealisticSection(draw_levels=True)
+    levels = []
+    for seed in range(8):
+        a, b = _drone(fixed, seed=seed), _drone(drawn, seed=seed)
+        ea, eb = a.drawn_errors(), b.drawn_errors()
+        assert (ea["accel_noise_mps2"], ea["accel_noise_lag1"]) == (1.0, 0.2)
+        assert ea["battery_soc_start"] == 1.0
+        assert 0.7 <= eb["accel_noise_mps2"] <= 2.0
+        assert 0.0 <= eb["accel_noise_lag1"] <= 0.3
+        assert 0.6 <= eb["battery_soc_start"] <= 1.0
+        # misalignment, scale, bias, thrust map, mocap rate, yaw: the same stream as before
+        for key in ("misalignment_rad", "accel_bias_mps2", "thrust_report_error", "yaw0_rad"):
+            assert ea[key] == eb[key], key
+        assert b.sensors.accel_noise_mps2 == eb["accel_noise_mps2"]
+        assert b.battery.soc == eb["battery_soc_start"]
+        levels.append(eb["accel_noise_mps2"])
+        again = _drone(drawn, seed=seed).drawn_errors()
+        assert again["accel_noise_mps2"] == eb["accel_noise_mps2"]  # seeded
+    assert len(set(levels)) == 8
+
+
+def test_draw_ranges_are_checked() -> None:
+    with pytest.raises(ValueError, match="accel_noise_lag1_range"):
+        RealisticSection(accel_noise_lag1_range=(0.1, 0.7))  # above accel_noise_ar 0.6
+    with pytest.raises(ValueError, match="battery_soc_range"):
+        RealisticSection(battery_soc_range=(0.9, 0.5))

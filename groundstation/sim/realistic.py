@@ -48,6 +48,25 @@ def sensor_params(cfg: RealisticSection) -> SensorParams:
     return SensorParams(**{f.name: getattr(cfg, f.name) for f in fields(SensorParams)})
 
 
+def draw_levels(
+    cfg: RealisticSection, sensors: SensorParams, rng: np.random.Generator
+) -> SensorParams:
+    """This flight's vibration level, its lag-1 and the battery's start charge, each uniform
+    in its ``[sim.realistic]`` range (``draw_levels``); always three draws, in this order."""
+    u = rng.uniform(size=3)
+    (n0, n1), (l0, l1), (s0, s1) = (
+        cfg.accel_noise_range_mps2,
+        cfg.accel_noise_lag1_range,
+        cfg.battery_soc_range,
+    )
+    return replace(
+        sensors,
+        accel_noise_mps2=float(n0 + (n1 - n0) * u[0]),
+        accel_noise_lag1=float(l0 + (l1 - l0) * u[1]),
+        battery_soc_start=float(s0 + (s1 - s0) * u[2]),
+    )
+
+
 class RealisticDrone:
     """One drone of the ``realistic`` profile (see the module docstring).
 
@@ -88,7 +107,11 @@ class RealisticDrone:
         self.cfg = cfg
         self.sensors = sensor_params(cfg)
         ss = np.random.SeedSequence(seed)
-        flight_ss, noise_ss, timing_ss, mocap_ss = ss.spawn(4)
+        # A fifth stream for the drawn levels: spawn(5)'s first four are spawn(4)'s, so the
+        # other draws do not move when draw_levels is switched.
+        flight_ss, noise_ss, timing_ss, mocap_ss, levels_ss = ss.spawn(5)
+        if cfg.draw_levels:
+            self.sensors = draw_levels(cfg, self.sensors, np.random.default_rng(levels_ss))
         flight_rng = np.random.default_rng(flight_ss)
         self._noise_rng = np.random.default_rng(noise_ss)
         self._timing_rng = np.random.default_rng(timing_ss)
@@ -242,8 +265,9 @@ class RealisticDrone:
                 "mocap_timing",
             )
         }
-        out["accel_noise_mps2"] = self.cfg.accel_noise_mps2 if self.cfg.vibration else 0.0
-        out["accel_noise_lag1"] = self.cfg.accel_noise_lag1 if self.cfg.vibration else 0.0
+        out["accel_noise_mps2"] = self.sensors.accel_noise_mps2 if self.cfg.vibration else 0.0
+        out["accel_noise_lag1"] = self.sensors.accel_noise_lag1 if self.cfg.vibration else 0.0
+        out["battery_soc_start"] = self.sensors.battery_soc_start
         return out
 
     # ------------------------------------------------------------------ physics
