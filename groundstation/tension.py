@@ -1064,24 +1064,55 @@ class TensionFilter:
     restarts the filter altogether after a second of silence). Everything else is in
     seconds, so 50-500 Hz and 6-27 ms jitter need no tuning.
 
-    **DC offsets: why calibration, not a bias state.** At hover every constant sensor
-    error is a constant tension error, and none of them can be averaged away:
-    a 3 deg accelerometer misalignment (per boot on a Crazyflie) reads 0.51 m/s^2, 15 mN on
-    30 g, where the real horizontal tension at the paper's spots is 8-27 mN; a 2 deg
-    thrust axis offset is 11 mN on 0.33 N; a 10 % thrust-map error is 33 mN of vertical
-    tension, 0.66 m of s2 at omega = 0.05 N/m. A bias state (x = (T, b)) is unobservable
-    from IMU + thrust alone while the drone holds still: T and b enter the observation as
-    the sum T + b, so the filter would only split a constant arbitrarily. The one
-    independent reference at hover is the attitude: p'' averages to zero, so
-    ``-R b F - m g`` (attitude x thrust) is the tension without the accelerometer, and
-    ``m (R f + g)`` is its accelerometer DC content. That separates an accelerometer bias
-    from the tension only when the attitude is not itself levelled on the same
-    accelerometer, which is what an onboard attitude estimator does (its gravity
-    reference is that accelerometer), and it leaves the thrust scale and axis, the largest
-    errors, untouched. So the offsets are corrected in the observation from
-    ``[calibration]`` (:class:`ObservationCalibration`, fitted by ``groundstation
-    calibrate`` where motion capture gives the tension), and this filter handles what can
-    be learned on line: the noise, its colour, the rate.
+    **DC offsets: calibration and the rest offset, not a bias state.** At hover every
+    constant sensor error is a constant tension error, and none of them can be averaged
+    away: a 3 deg accelerometer misalignment (per boot on a Crazyflie: the firmware
+    re-levels at power-on) reads 0.51 m/s^2, 15 mN on 30 g, where the real horizontal
+    tension at the paper's spots is 8-27 mN; a 2 deg thrust axis offset is 11 mN on
+    0.33 N; a 10 % thrust-map error is 33 mN of vertical tension, 0.66 m of s2 at
+    omega = 0.05 N/m. A bias state (x = (T, b)) is unobservable from this one observation
+    while the drone holds still: T and b enter it as the sum T + b, so the filter would
+    only split a constant arbitrarily. What does separate them is a second route to the
+    tension. At hover p'' averages to zero, so with the attitude R there are two:
+    ``m (R f + g)`` (the accelerometer, no thrust) and ``-R F t - m g`` (attitude x
+    thrust, no accelerometer). Their difference at DC is the accelerometer's offset minus
+    the thrust's errors: one equation for two sets of unknowns. Where the attitude is
+    independent of the accelerometer (the motion-capture body of issue 9's flights; the
+    realistic simulator's reported attitude, which is the true one) the difference is
+    informative, but weighing the two routes only moves the per-boot accelerometer error
+    into the thrust's: solving for the accelerometer offset needs the thrust scale and
+    axis known to the accuracy wanted (2 % of scale is 6.6 mN of T_z, 1 deg of axis 5.8 mN
+    sideways), i.e. calibrated; and with the onboard attitude (levelled on that same
+    accelerometer) the difference does not see the misalignment at all. So each error is
+    taken where it can be measured without the others: the airframe's thrust scale, its
+    battery slope and thrust axis, and an accelerometer bias from ``[calibration]``
+    (:class:`ObservationCalibration`, fitted once by ``groundstation calibrate`` where
+    motion capture gives the tension); the per-boot accelerometer x/y offset by the rest
+    calibration at every boot (``[calibration] rest``,
+    :class:`groundstation.calibration.RestCalibrator`: the disarmed, still drone on the
+    floor feels exactly ``R^T (0, 0, g)``, no thrust involved, so the misalignment's
+    offset is read before every take-off; it assumes the floor is as level as the
+    attitude says, 0.17 m/s^2 per degree otherwise); and this filter handles what can be
+    learned on line: the noise, its colour, the rate, the memory.
+
+    *Detection against false alarms* (the long-window step test above). What a lower
+    ``long_false_alarms_per_h`` costs, by the formulas above (``scan_threshold`` over
+    that test's windows; a 30 mN step, r = 2 s2 as in the realistic simulator's noise,
+    100 Hz, 10 s of reference before the step; the time is where the test detects it
+    about half the time)::
+
+        false alarms per hour   0.005   0.05    0.7     5       30
+        h at 1 m/s^2            43.5    38.3    32.1    27.4    22.9
+        detection at 1 m/s^2    1.00 s  0.87 s  0.72 s  0.61 s  0.50 s
+        h at 2 m/s^2            40.4    35.1    28.8    24.0    19.3
+        detection at 2 m/s^2    5.0 s   4.1 s   3.2 s   2.5 s   1.9 s
+
+    0.005 per hour because a false detection is not harmless: with following on it moves
+    the drone, with ``land_below_m`` it can stop the motors. 0.005 per hour is one per
+    200 h of hover per drone (1700 seven-minute battery packs), and with eight drones one
+    per 25 h of flying; 0.7 per hour (h = 32) would be one every 11 minutes of an
+    eight-drone hover, for a detection 28 % sooner (0.72 s against 1.00 s at 1 m/s^2).
+    Measured detections follow the 0.005 column (docs/realistic_benchmark.md, 30 mN tug).
 
     **Initialisation.** The first observation initialises the state (x = y, P = R),
     unlike the paper, whose filter started from T = 0: with H = 0 and s2 = 0 the
