@@ -13,12 +13,12 @@ hovers the drone at spots 0.25 m above the base's exit (z = 1.0 m, base at 0.754
 ω = 0.05 N/m) at azimuth 40°, from straight above the base (r = 0, plumb) to 97 % of L (nearly
 taut). The realistic profile runs twice: with the error classes a calibration removes
 (``CALIBRATED_OFF``: thrust map, battery, misalignment, accelerometer scale and bias, thrust
-axis) switched off, i.e. a calibrated drone, and with every class on (uncalibrated: this
-branch's pipeline has no ``[calibration]`` applied). Each simulated sample goes, in lock-step,
-through one :class:`Pipeline` per row below, which differ only in ``[localization]``; the
-published ``position_m`` is compared with the simulator's truth for the same sample, after a
-2 s warm-up. Motion capture is published (the ``mocap`` row needs it; no other row reads it
-for localization).
+axis) switched off, i.e. a calibrated drone, and with every class on (uncalibrated: the
+pipelines are given no ``[calibration]``, though they would apply one). Each simulated sample
+goes, in lock-step, through one :class:`Pipeline` per row below, which differ only in
+``[localization]``; the published ``position_m`` is compared with the simulator's truth for
+the same sample, after a 2 s warm-up. Motion capture is published (the ``mocap`` row needs
+it; no other row reads it for localization).
 
 Rows (``[localization] azimuth`` / ``elevation``):
 

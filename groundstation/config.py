@@ -229,14 +229,18 @@ class LocalizationSection(_Section):
     """``auto`` fuses the tension's direction and the reel's exit azimuth by their
     uncertainty; ``tension``, ``reel`` or ``mocap`` uses that one alone (``mocap`` with
     ``elevation = false`` is the paper's method: β from Telemetry ``position_m``, r and z from
-    the tension). A source asked for but absent or stale leaves the azimuth undetermined."""
+    the tension; ``mocap`` alone still fuses a reel's exit elevation into r and z, which the
+    paper did not). A source asked for but absent or stale leaves the azimuth undetermined."""
     elevation: bool = True
     """Fuse the reel's ``exit_elevation_rad`` with the tension (the base slope constrains
-    the catenary)."""
+    the catenary); false for the paper's method (with ``azimuth = "mocap"``)."""
     reel_stale_after_s: float = Field(0.5, gt=0.0)
     """Exit angles older than this (receive time) are not used, s."""
     exit_azimuth_std_rad: float = Field(0.03, gt=0.0)
-    """σ of ``exit_azimuth_rad`` when the Reel message gives none, rad."""
+    """σ of the tether's direction across it at the exit, for an ``exit_azimuth_rad`` the Reel
+    message gives no σ for, rad: the azimuth's σ is this over max(cos(exit elevation), 0.02)
+    (near plumb the azimuth is noise), with the elevation of the same or the last fresh Reel;
+    without an elevation this as is."""
     exit_elevation_std_rad: float = Field(0.03, gt=0.0)
     """σ of ``exit_elevation_rad`` when the Reel message gives none, rad."""
     mocap_std_m: float = Field(0.002, gt=0.0)

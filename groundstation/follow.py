@@ -44,8 +44,10 @@ Behaviour, in the order :func:`follow_step` applies it:
    when there is one; without motion capture the tether-based position is itself derived
    from the tension (F_cat there *is* the estimate, so nothing would ever read as pull):
    the quiet-hover position before the pull (averaged, frozen while following), and the
-   goal while following (the drone tracks it). Where the catenary has no answer (taut
-   chord, an end below the floor) the last ``F_cat`` is kept. Without ``weight_n_per_m``
+   goal while following (the drone tracks it). Within ``OWN_TAUT_MARGIN_M`` (5 cm) of
+   taut ``F_cat`` is taken at that margin (a few cm of position or length error there is
+   tens to hundreds of mN of catenary force). Where the catenary has no answer (an end
+   below the floor) the last ``F_cat`` is kept. Without ``weight_n_per_m``
    ``F_cat`` is 0 and ``b`` alone is the reference (the slowly tracked quiet tension).
 5. **Tug-to-land.** The first activation with ``land_below_m`` set arms landing. Once
    armed, a position below ``land_below_m`` issues exactly one Stop, and the machine
@@ -79,6 +81,7 @@ from numpy.typing import ArrayLike, NDArray
 from groundstation import catenary
 
 __all__ = [
+    "OWN_TAUT_MARGIN_M",
     "QUIET_BAND_RATIO",
     "REFERENCE_TIME_CONSTANT_S",
     "FollowDecision",
@@ -99,6 +102,20 @@ QUIET_TIME_CONSTANT_S = 0.5
 REFERENCE_TIME_CONSTANT_S = 2.0
 """Tracking time of the offset ``b`` between the estimate and the catenary's tension while
 not following, s (step 4a): quick beside drift (thrust scale, battery), slow beside a tug."""
+
+OWN_TAUT_MARGIN_M = 0.05
+"""Step 4a takes the catenary's force no closer to taut than this (chord at most
+``length_m`` minus it), m. Near taut that force is no model of the tether's own tension:
+at 97 % of L = 1.6 m (omega = 0.05 N/m; 4.8 cm from taut) it is 0.105 N, and 2, 3, 4 cm
+further out it is 29, 60, 136 mN more, beyond that there is no catenary at all. The
+position (a motion-capture marker off the tether's attachment, a base measured by hand)
+and the length (stretch, the reel's count) are known to a few cm, and the motion capture
+jitters by a mm, which there moves the force by up to tens of mN: with the force taken at
+the measured position, 3-5 cm of error switched following on with nobody pulling
+(tests/test_follow.py). Pulled back to 5 cm from taut the force saturates (at 0.103 N
+there), and ``b`` covers what is left. The price: a drone that moves deeper toward taut
+after switch-on sees the tether's own rise there as pull; following it takes the drone
+back from taut."""
 
 QUIET_BAND_RATIO = 0.5
 """``b`` tracks only while the pull is below this fraction of the release level (0.04 N by
@@ -323,11 +340,18 @@ def _tether_own_force(
 ) -> FloatArray | None:
     """The catenary's force on a drone at rest at ``reference_world_m`` (step 4a), or None.
 
-    None without ``weight_n_per_m``, or where the catenary has no finite answer (a chord at
-    or beyond the length, an end below the floor, bad inputs).
+    Within ``OWN_TAUT_MARGIN_M`` of taut the reference is first pulled back along the chord
+    to that margin (:data:`OWN_TAUT_MARGIN_M`). None without ``weight_n_per_m``, or where
+    the catenary has no finite answer (an end below the floor, bad inputs).
     """
     if weight_n_per_m is None:
         return None
+    base = np.asarray(base_world_m, dtype=np.float64)
+    chord = reference_world_m - base
+    chord_m = math.sqrt(float(chord @ chord))
+    max_chord_m = length_m - OWN_TAUT_MARGIN_M
+    if max_chord_m > 0.0 and chord_m > max_chord_m:
+        reference_world_m = base + chord * (max_chord_m / chord_m)
     try:
         force = catenary.tether_force(
             base_world_m, reference_world_m, length_m, weight_n_per_m, floor_z_m

@@ -217,7 +217,9 @@ class Reel(_In):
     """(added) World-frame azimuth of the tether's horizontal direction where it leaves the
     base, pointing from the base toward the drone, radians (atan2(y, x))."""
     exit_azimuth_std_rad: Finite | None = Field(default=None, gt=0.0)
-    """(added) Standard deviation of ``exit_azimuth_rad``."""
+    """(added) Standard deviation of ``exit_azimuth_rad``. Absent: ``[localization]
+    exit_azimuth_std_rad`` over max(cos(``exit_elevation_rad``), 0.02), the elevation of this
+    or the last fresh message (near plumb the azimuth is noise); without one, as is."""
     exit_elevation_rad: Finite | None = Field(default=None, ge=-1.5708, le=1.5708)
     """(added) The tether's angle above horizontal where it leaves the base, radians."""
     exit_elevation_std_rad: Finite | None = Field(default=None, gt=0.0)
@@ -230,8 +232,11 @@ class FollowCommand(_In):
     enabled: bool
     """Follow mode on or off (required)."""
     threshold_n: Finite | None = Field(default=None, gt=0.0)
-    """Tension norm above which the drone follows the pull, newtons; absent keeps the current
-    setting. The service refuses values below ``[service] follow_threshold_min_n``."""
+    """Pull above which the drone follows it, newtons: the tension beyond the tether's own
+    (what the tether pulls with in quiet hover at the drone's position), not the tension's
+    norm, so 0.10 N means a hand pulling with 0.10 N at any reach, near taut too; absent keeps
+    the current setting. The service refuses values below ``[service]
+    follow_threshold_min_n``."""
     land_below_m: Finite | None = None
     """Tug-to-land height, metres (world z); absent keeps the current setting."""
     land: bool | None = None
@@ -258,7 +263,7 @@ class FollowInfo(_Out):
     active: bool
     """The pull is above the threshold: the goal follows it."""
     threshold_n: float
-    """Threshold in use, newtons."""
+    """Pull threshold in use (the tension beyond the tether's own), newtons."""
     land_below_m: float | None = None
     """(added) Tug-to-land height, or None when tug-to-land is off."""
     landing_armed: bool = False

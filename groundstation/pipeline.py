@@ -57,7 +57,13 @@ from groundstation.tension import (
     observe_tension,
 )
 
-__all__ = ["DroneRuntime", "Parsed", "Pipeline", "calibration_from_config"]
+__all__ = [
+    "DroneRuntime",
+    "Parsed",
+    "Pipeline",
+    "calibration_from_config",
+    "exit_azimuth_default_std_rad",
+]
 
 _INPUT_MODELS: dict[str, type[Telemetry] | type[Reel] | type[FollowCommand] | type[TetherParams]]
 _INPUT_MODELS = {
@@ -146,6 +152,9 @@ class DroneRuntime:
     rested: bool = False
     """Seen certainly on the ground (disarmed, low thrust) since the last lift-off: the filter
     then restarts from the lift-off prior."""
+    filter_prior: bool | None = None
+    """The filter was reset for this stay on the ground with (True) or without (False) the
+    lift-off prior; None: not since its last step or reset elsewhere."""
     exit_azimuth: AngleObservation | None = None
     """The reel's last exit azimuth (with its σ) and when it was received."""
     exit_azimuth_received_s: float = -math.inf
@@ -228,6 +237,35 @@ def _fresh_mocap(runtime: DroneRuntime, stamp_s: float) -> tuple[float, float, f
 def _no_trusted_position(runtime: DroneRuntime, mocap: tuple[float, float, float] | None) -> bool:
     """Nothing follow may fly to: no fresh motion capture and no calibration in force."""
     return mocap is None and runtime.calibration_source == "none"
+
+
+EXIT_AZIMUTH_MIN_COS = 0.02
+"""Floor of ``cos(elevation)`` in :func:`exit_azimuth_default_std_rad` (at most 50 times the
+configured σ: some 1.5 rad for 0.03 rad, i.e. no azimuth)."""
+
+
+def exit_azimuth_default_std_rad(std_rad: float, elevation_rad: float | None) -> float:
+    """σ of a Reel ``exit_azimuth_rad`` sent without ``exit_azimuth_std_rad``, rad.
+
+    ``[localization] exit_azimuth_std_rad`` is the σ of the tether's *direction* at the
+    exit, across it; the azimuth of that direction is the angle of its horizontal
+    projection, which shrinks as ``cos(elevation)``: the same sideways error is
+    ``std / cos(elevation)`` of azimuth, and near plumb (elevation ±90°) any azimuth is
+    noise. So ``std / max(cos(elevation), EXIT_AZIMUTH_MIN_COS)`` with the exit elevation
+    known (this Reel message's, or the last one received within ``reel_stale_after_s``).
+    Without an elevation it stays ``std``, as for a tether leaving level: a reel that sends
+    an azimuth without elevation and may point up steeply should send its own σ.
+
+    Args:
+        std_rad: The configured σ, rad.
+        elevation_rad: The exit elevation, rad, or None when unknown.
+
+    Returns:
+        The σ to fuse the exit azimuth with, rad.
+    """
+    if elevation_rad is None or not math.isfinite(elevation_rad):
+        return std_rad
+    return std_rad / max(math.cos(elevation_rad), EXIT_AZIMUTH_MIN_COS)
 
 
 def calibration_from_config(
@@ -406,17 +444,24 @@ class Pipeline:
             if msg.base_m is not None:
                 runtime.base_world_m = np.array(msg.base_m, dtype=float)
             loc = self.settings.localization
-            if msg.exit_azimuth_rad is not None:
-                runtime.exit_azimuth = AngleObservation(
-                    msg.exit_azimuth_rad, msg.exit_azimuth_std_rad or loc.exit_azimuth_std_rad
-                )
-                runtime.exit_azimuth_received_s = parsed.received_s
             if msg.exit_elevation_rad is not None:
                 runtime.exit_elevation = AngleObservation(
                     msg.exit_elevation_rad,
                     msg.exit_elevation_std_rad or loc.exit_elevation_std_rad,
                 )
                 runtime.exit_elevation_received_s = parsed.received_s
+            if msg.exit_azimuth_rad is not None:
+                std = msg.exit_azimuth_std_rad
+                if std is None:
+                    std = exit_azimuth_default_std_rad(
+                        loc.exit_azimuth_std_rad,
+                        runtime.exit_elevation.value_rad
+                        if runtime.exit_elevation is not None
+                        and runtime.exit_elevation_received_s >= now_s - loc.reel_stale_after_s
+                        else None,
+                    )
+                runtime.exit_azimuth = AngleObservation(msg.exit_azimuth_rad, std)
+                runtime.exit_azimuth_received_s = parsed.received_s
             return []
         if isinstance(msg, TetherParams):
             changes: dict[str, Any] = {}
@@ -782,6 +827,7 @@ class Pipeline:
             runtime.seq_gaps += msg.seq - runtime.last_seq - 1
         if resumed:
             runtime.filter.reset()
+            runtime.filter_prior = None
         dt_s = (
             0.0 if runtime.last_stamp_s is None or resumed else msg.stamp_s - runtime.last_stamp_s
         )
@@ -807,9 +853,6 @@ class Pipeline:
             thrust_n=obs.thrust_n,  # calibrated
             mass_kg=runtime.params.drone.mass_kg,
             vertical_accel_mps2=contact_mod.vertical_accel_mps2(msg.accel_mps2, msg.quat_wxyz),
-            upward_force_n=float(obs.tension_world_n[2])
-            if obs.tension_world_n is not None
-            else None,
             height_m=msg.position_m[2] if msg.position_m is not None else None,
             floor_z_m=runtime.params.base.floor_z_m,
         )
@@ -831,12 +874,23 @@ class Pipeline:
             # observation instead.
             if runtime.contact.reason in ("disarmed", "low_thrust"):
                 runtime.rested = True
-            if runtime.rested:
-                runtime.filter.reset(prior_world_n=(0.0, 0.0, 0.0), prior_std_n=LIFTOFF_PRIOR_STD_N)
-            else:
-                runtime.filter.reset()
+            # Reset once on the ground (again if the prior changes), not per sample: the
+            # noise estimate learns the propellers' vibration from the floor's samples in
+            # between (TensionFilter.learn_noise), so the restart at lift-off weighs its
+            # first samples with the flight's noise rather than the prior's.
+            if runtime.filter.initialized or runtime.filter_prior != runtime.rested:
+                if runtime.rested:
+                    runtime.filter.reset(
+                        prior_world_n=(0.0, 0.0, 0.0), prior_std_n=LIFTOFF_PRIOR_STD_N
+                    )
+                else:
+                    runtime.filter.reset()
+                runtime.filter_prior = runtime.rested
+            if obs.tension_world_n is not None:
+                runtime.filter.learn_noise(obs.tension_world_n, dt_s)
         else:
             runtime.rested = False
+            runtime.filter_prior = None
             est = runtime.filter.update(
                 obs.tension_world_n, dt_s, thrust_axis_world=obs.thrust_axis_world
             )
@@ -852,6 +906,7 @@ class Pipeline:
                 # drone's next message is filtered (in a batch, before its localization).
                 self.count_drop(runtime.drone, "non_finite_estimate", "filter produced NaN/inf")
                 runtime.filter.reset()
+                runtime.filter_prior = None
                 return (runtime, msg, now_s, tension, std, on_ground, converged, False, None, *tail)
             if converged:
                 # Exit angles only while fresh: the reel reports at its own rate.

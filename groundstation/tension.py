@@ -1203,6 +1203,41 @@ class TensionFilter:
         self._ring.count = 0
         self._hist.clear()
 
+    def learn_noise(self, tension_obs_world_n: ArrayLike, dt_s: float) -> None:
+        """Learns the observation noise from a sample whose mean is no tension.
+
+        On the floor with the propellers spinning (thrust at or above ``[filter]
+        ground_thrust_ratio``) the observation's mean is the floor's push, not tension, but
+        its noise is the flight's vibration. The noise estimate measures it from successive
+        differences and second differences of block means, blind to a slowly moving mean
+        (a thrust ramp), so it can learn there. Without this the first flight's filter
+        restarts at lift-off from the floor prior (5 mN) weighing its first samples with
+        the prior noise (0.3 m/s^2: 9 mN per sample) where the realistic profile has
+        2 m/s^2 (60 mN): the first dozen samples moved the estimate by 35-50 mN of
+        horizontal noise (the tether, resting on the floor, pulled with 4 mN).
+
+        Consecutive calls continue one chain of differences, and the first :meth:`update`
+        after them continues it too (lift-off is no jump in the noise); :meth:`reset`
+        breaks it, as does a call with ``dt_s`` 0 or longer than ``gap_s``. The state is
+        not touched. Does nothing with ``estimate_noise=False``.
+
+        Args:
+            tension_obs_world_n: Raw observation, world frame, N, shape (3,).
+            dt_s: Time since the previous sample, s, >= 0.
+
+        Raises:
+            InvalidObservationError: If the observation is not a finite 3-vector.
+            InvalidTimeStepError: If ``dt_s`` is negative or not finite.
+        """
+        p = self.params
+        y = _vector3(tension_obs_world_n, "tension_obs_world_n").tolist()
+        dt = _check_dt(dt_s)
+        if not p.estimate_noise:
+            return
+        if not 0.0 < dt <= p.gap_s:
+            self._noise.break_chain()
+        self._noise.push(y, dt, p.noise_time_constant_s, p.noise_warmup_samples)
+
     @property
     def initialized(self) -> bool:
         """Whether an observation has initialised the state since start or reset."""
