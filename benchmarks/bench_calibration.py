@@ -853,7 +853,9 @@ def write_doc(
         "`thrust_vbat_range_v`); `held-out V`: the held-out estimates' Telemetry; `flagged`: the",
         "share of those estimates the service flagged `calibration_extrapolated` with the",
         "written configuration; `slope`: the fitted `thrust_vbat_slope_per_v` ± its standard",
-        "error against the drawn truth, or fixed at 0 (undetermined).",
+        "error, or fixed at 0 (undetermined), and in brackets the truth: the least-squares line",
+        "of the simulator's map over the hovers' voltages (as in the z table below), and the",
+        "tangent at 4.05 V that `Simulator.drawn_errors` reports.",
         "",
         "| case | held-out spots | calibrated V | held-out V | flagged | slope 1/V (truth) |",
         "| --- | --- | --- | --- | --- | --- |",
@@ -867,10 +869,11 @@ def write_doc(
             if fold["slope_fitted"]:
                 slope = (
                     f"{fold['values']['vbat_slope_per_v']:.3f} ± "
-                    f"{fold['std']['vbat_slope_per_v']:.3f} ({slope_true:.3f})"
+                    f"{fold['std']['vbat_slope_per_v']:.3f} (line"
+                    f" {fold['truth']['vbat_slope_per_v']:.3f}, tangent {slope_true:.3f})"
                 )
             else:
-                slope = f"fixed at 0 ({slope_true:.3f})"
+                slope = f"fixed at 0 (tangent {slope_true:.3f})"
             flagged = (
                 "n/a" if math.isnan(fold["extrapolated"]) else f"{100 * fold['extrapolated']:.0f} %"
             )
