@@ -811,6 +811,22 @@ def _render_reading(res: dict[str, Any]) -> list[str]:
             "some spots (e.g. -5 mN of T_z at (0.5, -0.6, 1.0), seed 104, 2 m/s^2; cause not "
             "isolated), so the hover figures are not pure noise.",
         ]
+    if "tug" in res:
+        L.append(
+            "- The hover time constant against the tug (measured with `--only tug --levels L "
+            "--tug-seeds 8 --fixed-tau` at b70b80a: the same flights with the earlier fixed 6"
+            " s): detections are the step test's and do not depend on it (the same first dete"
+            "ctions per seed at 2 m/s^2). t90 at 1 m/s^2 was 2.34 s with 6 s against 1.98 s n"
+            "ow; at 2 m/s^2 **3.67 s with 6 s, beyond the 5 s pull now**: in the seeds with n"
+            "o detection within the pull the estimate follows the step only at the hover gain"
+            ", and a 40 s memory takes 30 mN in more slowly than 6 s. That is the price of th"
+            "e hover target at 2 m/s^2 (and of the near-plumb p95): an undetected step's slow"
+            "er uptake. The same memory costs a drone that moves from spot to spot without a "
+            "detected change: with calibration = truth the calibration benchmark's 12 s dwell"
+            "s at 1 m/s^2 read 14.8 cm against 11.4 cm with 6 s (docs/calibration.md). Agains"
+            "t the page at 83e6afa (7 of 8 detected at 2 m/s^2) seeds 304 and 305 now go unde"
+            "tected with either time constant: a change elsewhere since, not isolated."
+        )
     L.append("")
     return L
 
