@@ -345,8 +345,9 @@ READING = """## Reading the tables
   The likely cause, not yet measured: there the lumped-mass tether's exit angle, which the
   base sensor reads, differs from the quasi-static catenary's by more than the sensor's
   0.02 rad σ says (its swing and stretch near the base), so the fusion weighs a model
-  error as information. Not solved here: a larger configured `exit_elevation_std_rad`, or `elevation = false`, is the
-  setting for a calibrated drone near taut.
+  error as information. Not solved here: for a calibrated drone near taut, give the elevation
+  a larger σ (the Reel's `exit_elevation_std_rad`, or `[localization]
+  exit_elevation_std_rad` where the Reel sends none), or set `elevation = false`.
 """
 
 

@@ -13,7 +13,9 @@ floor, in the same run. Windows are 30 s or longer (``--quick`` excepted, marked
 a 10 s window used to end just before the client's first full garbage collection; now the
 client's collector is off in the window (collections that still happen are counted), and
 ticks the client published late are reported. The service's CPU time (per thread) and RSS
-are read from /proc. Writes docs/service_benchmark.md.
+are read from /proc. Prints a page (``--out PATH`` also writes it); the published figures
+are section (c) of docs/RESULTS.md, which ``python -m benchmarks.results`` measures with
+the same rig.
 """
 
 from __future__ import annotations
@@ -121,7 +123,7 @@ def main() -> None:
     parser.add_argument("--dashboard", action="store_true", help="also run with the dashboard")
     parser.add_argument("--no-floor", action="store_true", help="skip the echo floor")
     parser.add_argument("--quick", action="store_true", help="8 drones, 10 s (prints only)")
-    parser.add_argument("--out", default=str(REPO / "docs" / "service_benchmark.md"))
+    parser.add_argument("--out", help="also write the page here (published: docs/RESULTS.md (c))")
     args = parser.parse_args()
     if args.quick:
         args.drones, args.seconds = [8], 10.0
@@ -141,7 +143,7 @@ def main() -> None:
             rows.append(row)
     command = "python -m benchmarks.bench_service " + " ".join(sys.argv[1:])
     text = to_markdown(rows, args.seconds, command.strip())
-    if not args.quick:
+    if args.out and not args.quick:
         Path(args.out).write_text(text)
     print(text)
 
