@@ -58,6 +58,8 @@ from groundstation.tension import (
 )
 
 __all__ = [
+    "FOLLOW_OFF",
+    "FOLLOW_ON",
     "DroneRuntime",
     "Parsed",
     "Pipeline",
@@ -76,6 +78,11 @@ LIFTOFF_PRIOR_STD_N = (0.005, 0.005, 0.005)
 """Prior standard deviation of the tension at lift-off, N (per world axis)."""
 MAX_DRONES = 256
 """Drones tracked at most; more ids are dropped (kind ``too_many_drones``), bounding memory."""
+
+FOLLOW_ON = "follow on"
+"""The ``reason`` of the follow Event that an operator's command switched follow on."""
+FOLLOW_OFF = "follow off"
+"""... and switched it off (the service's own switch-off has ``input`` "service")."""
 _KEY_CACHE_SIZE = 4 * MAX_DRONES
 """Parsed keys remembered (each drone has four input kinds)."""
 _MAX_GAP_S = 1.0
@@ -381,6 +388,16 @@ class Pipeline:
         reason = exc.detail if kind in _COMMAND_KINDS else f"{exc.detail} (further ones counted)"
         self._emit(drone, "rejected", kind, now_s, sample.source, reason, field=exc.field)
 
+    def _warn(self, runtime: DroneRuntime, now_s: float, text: str, *, field: str) -> None:
+        """A ``warning`` Event about this drone's telemetry (the callers send each once)."""
+        self._emit(runtime.drone, "warning", "telemetry", now_s, self.self_id, text, field=field)
+
+    def _reel_fresh(self, received_s: float, now_s: float) -> bool:
+        """An exit angle received at ``received_s`` is still in use at ``now_s``: the reel
+        reports at its own rate, and angles older than ``[localization]
+        reel_stale_after_s`` are not used."""
+        return received_s >= now_s - self.settings.localization.reel_stale_after_s
+
     def _emit(
         self,
         drone: str,
@@ -457,7 +474,7 @@ class Pipeline:
                         loc.exit_azimuth_std_rad,
                         runtime.exit_elevation.value_rad
                         if runtime.exit_elevation is not None
-                        and runtime.exit_elevation_received_s >= now_s - loc.reel_stale_after_s
+                        and self._reel_fresh(runtime.exit_elevation_received_s, now_s)
                         else None,
                     )
                 runtime.exit_azimuth = AngleObservation(msg.exit_azimuth_rad, std)
@@ -744,7 +761,7 @@ class Pipeline:
             if getattr(after, name) != getattr(before, name):
                 changes[name] = getattr(after, name)
         if before.enabled != after.enabled:
-            reason = "follow on" if after.enabled else "follow off"
+            reason = FOLLOW_ON if after.enabled else FOLLOW_OFF
         else:
             reason = "re-tuned" if len(changes) > 1 else "no change"
         self._emit(runtime.drone, "follow", "follow", now_s, parsed.source, reason, changes=changes)
@@ -782,11 +799,11 @@ class Pipeline:
         """
         runtime.received += 1
         accel = msg.accel_mps2
-        rest = runtime.rest.offset if runtime.rest is not None else None
-        if rest is not None:
+        offset = runtime.rest.offset if runtime.rest is not None else None
+        if offset is not None:
             # Rest calibration: the offset found at rest is extra accelerometer bias (the one
             # in force; this sample enters the rest window only once accepted, below).
-            ox, oy, _ = rest.offset_body_mps2.tolist()
+            ox, oy, _ = offset.offset_body_mps2.tolist()
             accel = (accel[0] - ox, accel[1] - oy, accel[2])
         # Malformed content first (whatever its seq), then the stream's order.
         try:
@@ -910,8 +927,6 @@ class Pipeline:
                 return (runtime, msg, now_s, tension, std, on_ground, converged, False, None, *tail)
             if converged:
                 # Exit angles only while fresh: the reel reports at its own rate.
-                loc = self.settings.localization
-                fresh_s = now_s - loc.reel_stale_after_s
                 loc_in = (
                     est.tension_world_n,
                     est.cov_n2,
@@ -919,9 +934,12 @@ class Pipeline:
                     runtime.length_m,
                     runtime.base_world_m,
                     runtime.params.base.floor_z_m,
-                    runtime.exit_azimuth if runtime.exit_azimuth_received_s >= fresh_s else None,
+                    runtime.exit_azimuth
+                    if self._reel_fresh(runtime.exit_azimuth_received_s, now_s)
+                    else None,
                     runtime.exit_elevation
-                    if loc.elevation and runtime.exit_elevation_received_s >= fresh_s
+                    if self.settings.localization.elevation
+                    and self._reel_fresh(runtime.exit_elevation_received_s, now_s)
                     else None,
                     msg.position_m,
                 )
@@ -1064,12 +1082,9 @@ class Pipeline:
             runtime.rest_missing = True
             if not runtime.rest_missing_told:
                 runtime.rest_missing_told = True
-                self._emit(
-                    runtime.drone,
-                    "warning",
-                    "telemetry",
+                self._warn(
+                    runtime,
                     now_s,
-                    self.self_id,
                     f"{runtime.drone}: armed without a rest offset in force, but its calibration "
                     "relies on one ([calibration] rest_required: the thrust axis was fitted with "
                     "the x/y accelerometer bias left to the rest calibration): the x/y bias is "
@@ -1101,12 +1116,9 @@ class Pipeline:
         runtime.calibration_extrapolated = outside
         if outside and not runtime.extrapolation_told:
             runtime.extrapolation_told = True
-            self._emit(
-                runtime.drone,
-                "warning",
-                "telemetry",
+            self._warn(
+                runtime,
                 now_s,
-                self.self_id,
                 f"{runtime.drone}: battery {vbat_v:.3f} V outside the range the thrust map was "
                 f"calibrated over ({rng[0]:.3f}–{rng[1]:.3f} V, [calibration] "
                 "thrust_vbat_range_v): thrust, tension and position are extrapolated "

@@ -37,7 +37,7 @@ from groundstation.bus import (
 )
 from groundstation.config import Settings
 from groundstation.messages import Event, InvalidMessage, StopIn
-from groundstation.pipeline import Parsed, Pipeline
+from groundstation.pipeline import FOLLOW_OFF, FOLLOW_ON, Parsed, Pipeline
 
 __all__ = ["EVENTS_PER_S", "Service", "never_capped"]
 
@@ -331,7 +331,7 @@ def never_capped(event: Event) -> bool:
     if event.kind == "stop":
         return True
     return event.kind == "follow" and (
-        event.input == "service" or event.reason in ("follow on", "follow off")
+        event.input == "service" or event.reason in (FOLLOW_ON, FOLLOW_OFF)
     )
 
 
