@@ -5,8 +5,11 @@ Run:  python -m benchmarks.bench_bursts            # 30 s windows, writes docs/s
 
 The rig is :mod:`benchmarks.service_rig` (router, system under test, load client; the
 client's garbage collector out of the window, late ticks reported). Each case runs twice in
-the same run, once against ``groundstation serve --headless`` and once against the bare echo
-(:mod:`benchmarks.echo_service`), through the same router with the same client code:
+the same run against ``groundstation serve --headless``, the bare echo
+(:mod:`benchmarks.echo_service`) and the contract floor (:mod:`benchmarks.floor_service`:
+validation, observation, one filterpy step and the Estimate per message, nothing else: what
+any service that keeps the contract and the filterpy rule pays at least), through the same
+router with the same client code:
 
 * ``steady``: 8 drones × 250 Hz.
 * ``bursts``: the same, but the upstream pauses 100 ms once a second and then releases the
@@ -47,7 +50,7 @@ def run(
     backlog: int,
     pause_s: float,
     every_s: float,
-    suts: tuple[str, ...] = ("echo", "service"),
+    suts: tuple[str, ...] = ("echo", "floor", "service"),
 ) -> dict[str, Any]:
     load0 = os.getloadavg()
     schedules = {
@@ -143,6 +146,7 @@ def to_markdown(res: dict[str, Any], command: str) -> str:
         + f" (target under bursts ≤ {P99_RATIO_TARGET:g}×: "
         + ("met" if burst_ratio <= P99_RATIO_TARGET else "**not met**")
         + ")."
+        + _floor_ratios(res)
         + baseline,
         "",
         "## Sustained capacity (a backlog, back to back)",
@@ -160,6 +164,18 @@ def to_markdown(res: dict[str, Any], command: str) -> str:
             f"| {worker} | {json.dumps(c['threads_cpu_s'])} |"
         )
     c = res["capacity/service"]
+    if "capacity/floor" in res:
+        f = res["capacity/floor"]
+        lines += [
+            "",
+            f"Contract floor (validation, observation, one filterpy step, the Estimate; "
+            f"`benchmarks/floor_service.py`): **{f['msgs_per_s']:.0f} msg/s** at "
+            f"{f['cpu_us_per_msg']:.0f} µs of process CPU per message (target "
+            f"≤ {1e6 / CAPACITY_TARGET_HZ:.0f} µs: "
+            + ("within" if f["cpu_us_per_msg"] <= 1e6 / CAPACITY_TARGET_HZ else "above")
+            + "). It is a lower bound for any service that keeps the contract (one Estimate "
+            "per accepted Telemetry) and steps filterpy once per message.",
+        ]
     off0, off1 = res["offline_before"], res["offline_after"]
     offline = min(off0["cpu_us_per_msg"], off1["cpu_us_per_msg"])
     lines += [
@@ -177,6 +193,20 @@ def to_markdown(res: dict[str, Any], command: str) -> str:
         "",
     ]
     return "\n".join(lines)
+
+
+def _floor_ratios(res: dict[str, Any]) -> str:
+    """p99 of the contract floor over the echo's, per case (where the run has the floor)."""
+    if "floor" not in res["suts"]:
+        return ""
+    return (
+        " Contract floor / echo: "
+        + ", ".join(
+            f"{case} {res[f'{case}/floor']['p99_ms'] / res[f'{case}/echo']['p99_ms']:.1f}×"
+            for case in ("steady", "bursts")
+        )
+        + "."
+    )
 
 
 def _batched_offline(off0: dict[str, float], off1: dict[str, float]) -> str:
@@ -217,7 +247,7 @@ def main() -> None:
     if args.quick:
         args.seconds, args.backlog = 10.0, 3000
     t0 = time.monotonic()
-    suts: tuple[str, ...] = ("echo", "service")
+    suts: tuple[str, ...] = ("echo", "floor", "service")
     if args.baseline:
         os.environ["BENCH_BASELINE_TREE"] = str(Path(args.baseline).resolve())
         suts += ("baseline",)

@@ -53,8 +53,10 @@ REPO = Path(__file__).resolve().parents[1]
 ROUTER = REPO / "tests" / "integration" / "router.py"
 RATE_HZ = 250.0
 PERIOD_S = 1.0 / RATE_HZ
-SUTS = ("service", "echo", "baseline")
-"""Systems under test: ``groundstation serve --headless``, the bare echo floor, and ``serve``
+SUTS = ("service", "echo", "floor", "baseline")
+"""Systems under test: ``groundstation serve --headless``, the bare echo floor, the contract
+floor (:mod:`benchmarks.floor_service`: validation, observation, one filterpy step and the
+Estimate per message, nothing else), and ``serve``
 from another source tree (``BENCH_BASELINE_TREE``: e.g. ``git archive <commit>`` unpacked),
 for a before/after comparison in one run."""
 
@@ -184,6 +186,8 @@ class Rig:
                 env["PYTHONPATH"] = str(cwd)
         elif self.sut == "echo":
             args = [sys.executable, "-m", "benchmarks.echo_service", self.endpoint]
+        elif self.sut == "floor":
+            args = [sys.executable, "-m", "benchmarks.floor_service", self.endpoint]
         else:
             raise ValueError(f"sut must be one of {SUTS}, got {self.sut!r}")
         if self.profile:

@@ -1,0 +1,119 @@
+"""The contract floor: the least any service honouring the contract and the house rules does.
+
+Run:  python -m benchmarks.floor_service ENDPOINT
+
+A zenoh client of the router at ENDPOINT that answers each ``tether/{drone}/telemetry`` with
+an :class:`~groundstation.messages.Estimate` on ``tether/{drone}/estimate`` (the contract: one
+per accepted Telemetry), computed inside the subscriber callback (no queue, no worker) by the
+steps no implementation can skip:
+
+* the payload validated (``Telemetry.parse``, pydantic: the contract's "bad input gets a
+  clear error");
+* the tension observed from the IMU and the thrust (``tension.observe_tension``,
+  ``eq:NE_tether``);
+* one predict + update of a filterpy ``KalmanFilter`` per drone (the house rule: filterpy
+  for the Kalman filter), its Q and R set once, with the same ``inv`` hook as
+  ``TensionFilter``;
+* the Estimate encoded (``messages.encode_estimate``) and published.
+
+Everything else the service does is left out: no noise learning, no change or step test,
+no drift adaptation, no contact state, no localization (``position_m`` null), no follow, no
+reel, no status. So this is a lower bound on the cost per message of *any* estimator that
+keeps the contract and steps filterpy once per message: the load benchmarks
+(:mod:`benchmarks.bench_bursts`) measure it beside the bare echo and the service, through
+the same router with the same client, in the same run.
+"""
+
+from __future__ import annotations
+
+import signal
+import sys
+import threading
+from types import FrameType
+
+import numpy as np
+from filterpy.kalman import KalmanFilter
+
+from groundstation.bus import Sample
+from groundstation.config import ZenohSection
+from groundstation.messages import FollowInfo, InvalidMessage, Telemetry, encode_estimate
+from groundstation.tension import _inv3, observe_tension
+from groundstation.zenoh_bus import ZenohBus
+
+MASS_KG = 0.030
+"""The drone's mass in the load benchmarks' telemetry (``service_rig.telemetry_payloads``)."""
+_FOLLOW = FollowInfo(enabled=False, active=False, threshold_n=0.1, reason="floor rig").model_dump()
+
+
+def _new_filter(r_n2: float = 4e-4, q_n2: float = 1e-8) -> KalmanFilter:
+    kf = KalmanFilter(dim_x=3, dim_z=3)
+    kf.F = np.eye(3)
+    kf.H = np.eye(3)
+    kf.Q = np.eye(3) * q_n2
+    kf.R = np.eye(3) * r_n2
+    kf.P = np.eye(3) * r_n2
+    kf.inv = _inv3
+    return kf
+
+
+def estimate_bytes(kf: KalmanFilter, payload: bytes) -> bytes | None:
+    """One Telemetry payload → the Estimate's JSON (None for a rejected payload)."""
+    try:
+        msg = Telemetry.parse(payload)
+    except InvalidMessage:
+        return None
+    obs = observe_tension(msg.accel_mps2, msg.quat_wxyz, msg.thrust_n, MASS_KG, msg.armed)
+    kf.predict()
+    if obs.tension_world_n is not None:
+        kf.update(np.asarray(obs.tension_world_n, dtype=float))
+    x = kf.x.ravel().tolist()
+    p = kf.P
+    std = [float(p[0, 0]) ** 0.5, float(p[1, 1]) ** 0.5, float(p[2, 2]) ** 0.5]
+    return encode_estimate(
+        seq=msg.seq,
+        stamp_s=msg.stamp_s,
+        tension_n=x,
+        tension_std_n=std,
+        horizontal_n=(x[0] ** 2 + x[1] ** 2) ** 0.5,
+        vertical_n=-x[2],
+        position_m=None,
+        follow=_FOLLOW,
+        on_ground=obs.on_ground,
+        converged=True,
+    )
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = sys.argv[1:] if argv is None else argv
+    if len(args) != 1:
+        print(__doc__.splitlines()[2], file=sys.stderr)
+        return 2
+    stop = threading.Event()
+
+    def on_signal(signum: int, frame: FrameType | None) -> None:
+        stop.set()
+
+    signal.signal(signal.SIGTERM, on_signal)
+    signal.signal(signal.SIGINT, on_signal)
+    filters: dict[str, KalmanFilter] = {}
+    with ZenohBus(ZenohSection(mode="client", connect=(args[0],))) as bus:
+        publish = bus.publish
+
+        def on_telemetry(sample: Sample) -> None:
+            prefix = sample.key[: -len("telemetry")]
+            kf = filters.get(prefix)
+            if kf is None:
+                kf = filters[prefix] = _new_filter()
+            out = estimate_bytes(kf, sample.payload)
+            if out is not None:
+                publish(prefix + "estimate", out)
+
+        bus.subscribe("tether/*/telemetry", on_telemetry)
+        print("floor: running", flush=True)
+        while not stop.wait(0.2):
+            pass
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
