@@ -177,12 +177,13 @@ def service(
     floor_drones: tuple[int, ...] = (8,),
     burst_drones: int = 8,
     backlog: int = 6000,
-    capacity_suts: tuple[str, ...] = ("echo", "service"),
+    capacity_suts: tuple[str, ...] = ("echo", "floor", "service"),
 ) -> ServiceResult:
     """``run_case`` per drone count; then, if every count delivered, larger counts (doubling
     up to ``extend_to``) to find where it saturates; then the dashboard cases; the echo
-    floor at ``floor_drones``; bursts (100 ms pauses once a second) against the service and
-    the floor; the drain rate with a ``backlog`` (all :mod:`benchmarks.service_rig`)."""
+    floor at ``floor_drones``; bursts (100 ms pauses once a second) against the service, the
+    echo floor and the contract floor (:mod:`benchmarks.floor_service`); the drain rate with a
+    ``backlog`` (all :mod:`benchmarks.service_rig`)."""
     from benchmarks import service_rig as sr  # imports zenoh: only when needed
     from benchmarks.bench_service import run_case
 
@@ -214,7 +215,7 @@ def service(
     schedule = sr.Schedule.bursts(seconds)
     payloads = sr.telemetry_payloads(burst_drones, len(schedule.release_s), seed=burst_drones)
     bursts, capacity = {}, {}
-    for sut in ("echo", "service"):
+    for sut in ("echo", "floor", "service"):
         with sr.rig(sut) as rig:
             bursts[sut] = sr.drive(rig.endpoint, burst_drones, schedule, payloads, rig.pid)
         if progress:
