@@ -25,6 +25,7 @@ __all__ = [
     "Subscription",
     "describe_endpoints",
     "keyexpr_matches",
+    "patterns_overlap",
 ]
 
 _log = logging.getLogger(__name__)
@@ -156,6 +157,36 @@ def keyexpr_matches(keyexpr: str, key: str) -> bool:
     Chunks may also carry ``$*`` (or ``*``) inside them (``lab-a-$*``), as in zenoh.
     """
     return _match(keyexpr.replace("$*", "*").split("/"), key.split("/"))
+
+
+def patterns_overlap(a: str, b: str) -> bool:
+    """Whether two drone-id patterns (one key chunk each, ``*`` or zenoh's ``$*`` for any
+    run of characters, e.g. ``lab-a-*``) match at least one common drone id.
+
+    Two glob patterns share a match iff their characters can be walked together, a ``*`` on
+    either side standing for any run of the other's characters (stars included).
+    """
+    p, q = a.replace("$*", "*"), b.replace("$*", "*")
+    seen: set[tuple[int, int]] = set()
+    stack = [(0, 0)]
+    while stack:
+        i, j = stack.pop()
+        if (i, j) in seen:
+            continue
+        seen.add((i, j))
+        if i == len(p) and j == len(q):
+            return True
+        if i < len(p) and p[i] == "*":
+            stack.append((i + 1, j))  # the star matches nothing more
+            if j < len(q):
+                stack.append((i, j + 1))  # the star takes q's next character (or star)
+        if j < len(q) and q[j] == "*":
+            stack.append((i, j + 1))
+            if i < len(p):
+                stack.append((i + 1, j))
+        if i < len(p) and j < len(q) and p[i] == q[j] != "*":
+            stack.append((i + 1, j + 1))
+    return False
 
 
 def _chunk_matches(pattern: str, chunk: str) -> bool:

@@ -263,7 +263,7 @@ def _stop_child(child: Any, timeout_s: float = 1.5) -> None:
 
 
 def cmd_serve(args: argparse.Namespace) -> int:
-    from groundstation.service import Service
+    from groundstation.service import OwnershipConflict, Service
     from groundstation.zenoh_bus import ZenohBus
 
     settings = _load(args)
@@ -275,7 +275,11 @@ def cmd_serve(args: argparse.Namespace) -> int:
         service = Service(settings, bus)
         child = None
         try:
-            service.start()
+            try:
+                service.start()
+            except OwnershipConflict as exc:
+                print(f"groundstation serve: {exc}", file=sys.stderr, flush=True)
+                return 2
             if endpoint is not None:
                 child = _spawn_dashboard(args, settings, endpoint)
             print(f"groundstation serve: running (instance {service.instance})", flush=True)

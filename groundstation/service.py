@@ -5,6 +5,12 @@ as the drop kind ``queue_overflow``); estimation runs on the service's own worke
 Health per drone is answered by the queryable ``tether/{drone}/status``; the service holds
 the liveliness token ``groundstation/service/{instance}``.
 
+One owner per drone: a service also holds ``groundstation/owner/{instance}/{drones}``
+(``[service] drones`` as a key chunk, ``*`` for all), and refuses to start
+(:class:`OwnershipConflict`) while another service on the bus holds a pattern that matches
+a drone id of its own: two services estimating one drone would both command it (two
+setpoint streams, two tug-to-land decisions).
+
 The operator action log: every command the service refuses or applies (follow on/off,
 thresholds, tether parameters), follow switched off by a silent drone, and every Stop (its
 own and anyone's on ``tether/{drone}/cmd/stop``) is one line in the log and one
@@ -34,16 +40,28 @@ from groundstation.bus import (
     Subscription,
     describe_endpoints,
     keyexpr_matches,
+    patterns_overlap,
 )
 from groundstation.config import Settings
 from groundstation.messages import Event, InvalidMessage, StopIn
 from groundstation.pipeline import FOLLOW_OFF, FOLLOW_ON, Parsed, Pipeline
 
-__all__ = ["EVENTS_PER_S", "Service", "never_capped"]
+__all__ = ["EVENTS_PER_S", "OWNER_TOKENS", "OwnershipConflict", "Service", "never_capped"]
 
 _log = logging.getLogger("groundstation.service")
 _actions = logging.getLogger("groundstation.actions")
 _INPUT_KINDS = ("telemetry", "reel", "follow", "params")
+OWNER_TOKENS = "groundstation/owner/*/*"
+"""Liveliness tokens ``groundstation/owner/{instance}/{drones}``: which service owns which
+drone ids (``{drones}`` a key chunk such as ``lab-a-$*``, or ``*``)."""
+OWNER_QUERY_S = 1.0
+"""How long :meth:`Service.start` waits for the other services' owner tokens, s."""
+
+
+class OwnershipConflict(RuntimeError):
+    """Another service on the bus already owns drone ids that this one would own."""
+
+
 EVENTS_PER_S = 20.0
 """Events published per drone and second at most (a burst of twice that is allowed); the
 rest are counted in ``status`` as ``events_suppressed``."""
@@ -114,10 +132,16 @@ class Service:
     # ------------------------------------------------------------------ lifecycle
 
     def start(self) -> None:
-        """Subscribe, declare the status queryable and the liveliness token, start the worker."""
+        """Subscribe, declare the status queryable and the liveliness tokens, start the worker.
+
+        Raises:
+            OwnershipConflict: another service on the bus owns drone ids this one would
+                (``[service] drones`` patterns that overlap); nothing was started.
+        """
         if self._worker is not None:
             return
         drones = self.settings.service.drones_keyexpr_chunk
+        self._check_ownership(drones)
         if self.settings.service.record:
             from groundstation.recording import Recorder
 
@@ -130,12 +154,36 @@ class Service:
         self._handles.append(self.bus.subscribe(f"tether/{drones}/cmd/rearm", self._on_rearm))
         self._handles.append(self.bus.queryable(f"tether/{drones}/status", self._on_status))
         self._handles.append(self.bus.liveliness_token(f"groundstation/service/{self.instance}"))
+        self._handles.append(
+            self.bus.liveliness_token(f"groundstation/owner/{self.instance}/{drones}")
+        )
         _log.info(
             "serving drones tether/%s/* (instance %s, stale after %.2f s)",
             drones,
             self.instance,
             self.settings.service.stale_after_s,
         )
+
+    def _check_ownership(self, drones: str) -> None:
+        """Refuse to start while another service owns any drone id ``drones`` matches.
+
+        Reads the other services' owner tokens once (a service started at the same instant
+        may not be seen yet; the later of two overlapping starts refuses)."""
+        others = []
+        for key in self.bus.alive(OWNER_TOKENS, timeout_s=OWNER_QUERY_S):
+            parts = key.split("/")
+            if len(parts) != 4 or parts[2] == self.instance:
+                continue
+            if patterns_overlap(parts[3], drones):
+                others.append(f"instance {parts[2]} owns 'tether/{parts[3]}'")
+        if others:
+            raise OwnershipConflict(
+                f"drones 'tether/{drones}' overlap another service on this bus: "
+                + "; ".join(others)
+                + ". Two services would both estimate and command those drones: give each "
+                "service its own slice with --drones / [service] drones (e.g. 'lab-a-*', "
+                "'lab-b-*'), or stop the other one."
+            )
 
     def close(self) -> None:
         """Stop receiving, finish the queued work, stop the worker. Idempotent."""

@@ -75,3 +75,43 @@ def test_failing_handler_does_not_stop_delivery() -> None:
     assert bus.flush()
     assert got == [Sample("k", b"1")]
     bus.close()
+
+
+def _glob_matches(pattern: str, s: str) -> bool:
+    import re
+
+    return re.fullmatch(re.escape(pattern).replace(r"\*", ".*"), s) is not None
+
+
+def test_patterns_overlap_agrees_with_brute_force() -> None:
+    # Every pattern of up to 3 characters over {a, b, *} against every other: they overlap
+    # iff some id of up to 6 characters matches both (longer ids add nothing here).
+    import itertools
+
+    from groundstation.bus import patterns_overlap
+
+    ids = ["".join(t) for k in range(7) for t in itertools.product("ab", repeat=k)]
+    pats = ["".join(t) for k in range(1, 4) for t in itertools.product("ab*", repeat=k)]
+    for p in pats:
+        for q in pats:
+            brute = any(_glob_matches(p, s) and _glob_matches(q, s) for s in ids)
+            assert patterns_overlap(p, q) == brute, (p, q)
+
+
+@pytest.mark.parametrize(
+    ("a", "b", "overlap"),
+    [
+        ("lab-a-*", "lab-b-*", False),
+        ("lab-a-*", "lab-*", True),
+        ("lab-a-$*", "*", True),
+        ("cf1", "cf1", True),
+        ("cf1", "cf2", False),
+        ("cf*", "*1", True),
+        ("a*b", "b*a", False),
+    ],
+)
+def test_patterns_overlap_on_drone_slices(a: str, b: str, overlap: bool) -> None:
+    from groundstation.bus import patterns_overlap
+
+    assert patterns_overlap(a, b) is overlap
+    assert patterns_overlap(b, a) is overlap

@@ -340,3 +340,50 @@ def test_an_operators_stop_switches_follow_off(h: Harness) -> None:
     assert unreadable.kind == "stop" and "nobody can read" in unreadable.reason
     rearm = h.command("cf1", b"{}", kind="cmd/rearm")
     assert rearm.kind == "rearm" and rearm.input == "cmd/rearm"
+
+
+def _settings_for_drones(drones: str) -> Settings:
+    settings = load_settings(None, use_env=False)
+    service = settings.service.model_copy(update={"drones": drones})
+    return settings.model_copy(update={"service": service})
+
+
+def test_a_service_refuses_drones_another_service_owns() -> None:
+    from groundstation.service import OwnershipConflict
+
+    bus = InMemoryBus()
+    a = Service(_settings_for_drones("lab-a-*"), bus, instance="a")
+    b = Service(_settings_for_drones("lab-b-*"), bus, instance="b")
+    everyone = Service(_settings_for_drones("*"), bus, instance="all")
+    labs = Service(_settings_for_drones("lab-*"), bus, instance="labs")
+    estimates: list[str] = []
+    bus.subscribe("tether/*/estimate", lambda s: estimates.append(s.key))
+    try:
+        a.start()
+        b.start()  # disjoint slices: both run
+        for late in (everyone, labs):
+            with pytest.raises(OwnershipConflict, match="instance a owns 'tether/lab-a-"):
+                late.start()
+        # The refused services hold no token and subscribed to nothing: each drone's
+        # telemetry is estimated once, by its owner.
+        assert sorted(bus.alive("groundstation/service/*")) == [
+            "groundstation/service/a",
+            "groundstation/service/b",
+        ]
+        for seq in range(3):
+            bus.publish("tether/lab-a-1/telemetry", _telemetry(seq))
+            bus.publish("tether/lab-b-1/telemetry", _telemetry(seq))
+        assert _wait(lambda: len(estimates) >= 6)
+        assert bus.flush()
+        assert (
+            sorted(estimates) == ["tether/lab-a-1/estimate"] * 3 + ["tether/lab-b-1/estimate"] * 3
+        )
+        # Once an owner is gone its slice is free again.
+        a.close()
+        b.close()
+        labs.start()
+        assert bus.alive("groundstation/owner/*/*") == ["groundstation/owner/labs/lab-$*"]
+    finally:
+        for s in (a, b, everyone, labs):
+            s.close()
+        bus.close()

@@ -194,6 +194,16 @@ def test_two_instances_split_the_drones(procs: Procs, make_probe: Any) -> None:
     assert len(seen) == 600 and set(seen.values()) == {1}, "every drone estimated exactly once"
     owners = {d: _status(probe, d)["service"] for d in drones}
     assert owners["lab-a-1"] == owners["lab-a-2"] != owners["lab-b-1"]
+    # A third instance whose slice overlaps theirs refuses to start (two services would
+    # both command those drones), says whose drones they are, and exits 2.
+    for i, slice_ in enumerate(("lab-*", "*")):
+        late = procs.groundstation(
+            f"late{i}", "serve", "--connect", ep, "--headless", "--drones", slice_
+        )
+        assert late.popen.wait(30) == 2, late.output()[-2000:]
+        out = late.output()
+        assert "overlap another service" in out and f"instance {owners['lab-a-1']} owns" in out
+        assert "Traceback" not in out
 
 
 def test_serve_records_the_bus_in_process(procs: Procs, make_probe: Any, tmp_path: Any) -> None:
