@@ -816,15 +816,15 @@ def _render_reading(res: dict[str, Any]) -> list[str]:
             "oracle's p95 on seed 200 (the oracle's best was 20-40 s); the time constant "
             "now follows the noise (groundstation/tension.py, *Process noise in seconds*).",
             "- With calibration = truth a flight's vertical tension error is its noise's "
-            "window mean: at 2 m/s^2 the mean of T_z over a 12 s window scatters by ~2.4 mN "
-            "(the long-run variance of the white + coloured vibration), so single flights "
-            "read up to +-5 mN (e.g. +4.6 mN at (0.5, -0.6, 1.0), seed 104), either sign; the "
-            "rest of the raw observation's error is below 0.1 mN "
-            "(`python -m benchmarks.vertical_bias`). Until this run calibration = truth was "
-            "the equivalent calibration at the first spot's attitude for every spot, which "
-            "added up to 0.8 mN where the hover tilt differs (a constant accelerometer bias "
-            "stands for the per-boot misalignment at one attitude only, in a real calibration "
-            "too); each flight now gets its own.",
+            "window mean: at 2 m/s^2 the raw observation's T_z error, averaged over the "
+            "hover window, scatters by 2.4 mN (sd over 24 flights, -4.5 to +4.5 mN, e.g. "
+            "+3.9 mN at (0.5, -0.6, 1.0), seed 104), and all but -0.04 to +0.13 mN of it is "
+            "the vibration noise the simulator drew (`python -m benchmarks.vertical_bias`). "
+            "Until this run calibration = truth was the equivalent calibration at the first "
+            "spot's attitude for every spot, which added -0.5 to +0.8 mN where the hover "
+            "tilt differs (a constant accelerometer bias stands for the per-boot "
+            "misalignment at one attitude only, in a real calibration too); each flight now "
+            "gets its own.",
         ]
     if "tug" in res:
         L.append(
