@@ -14,6 +14,7 @@ import json
 import signal
 import sys
 import threading
+from collections.abc import Callable
 from types import FrameType
 
 from groundstation.bus import Sample
@@ -21,10 +22,15 @@ from groundstation.config import ZenohSection
 from groundstation.zenoh_bus import ZenohBus
 
 
-def main(argv: list[str] | None = None) -> int:
+def serve_telemetry(
+    argv: list[str] | None, usage: str, name: str, answer: Callable[[str, bytes], bytes | None]
+) -> int:
+    """Answer every ``tether/{drone}/telemetry`` on ``tether/{drone}/estimate`` with
+    ``answer(drone_prefix, payload)`` (None: no answer), inside the subscriber callback, as
+    a zenoh client of the router at the one argument; until SIGTERM or SIGINT."""
     args = sys.argv[1:] if argv is None else argv
     if len(args) != 1:
-        print(__doc__.splitlines()[2], file=sys.stderr)
+        print(usage, file=sys.stderr)
         return 2
     stop = threading.Event()
 
@@ -37,14 +43,23 @@ def main(argv: list[str] | None = None) -> int:
         publish = bus.publish
 
         def on_telemetry(sample: Sample) -> None:
-            seq = json.loads(sample.payload)["seq"]
-            publish(sample.key[: -len("telemetry")] + "estimate", b'{"seq":%d}' % seq)
+            prefix = sample.key[: -len("telemetry")]
+            out = answer(prefix, sample.payload)
+            if out is not None:
+                publish(prefix + "estimate", out)
 
         bus.subscribe("tether/*/telemetry", on_telemetry)
-        print("echo: running", flush=True)
+        print(f"{name}: running", flush=True)
         while not stop.wait(0.2):
             pass
     return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    def echo(prefix: str, payload: bytes) -> bytes:
+        return b'{"seq":%d}' % json.loads(payload)["seq"]
+
+    return serve_telemetry(argv, __doc__.splitlines()[2], "echo", echo)
 
 
 if __name__ == "__main__":

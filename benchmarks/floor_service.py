@@ -28,20 +28,15 @@ the same router with the same client, in the same run.
 from __future__ import annotations
 
 import gc
-import signal
 import sys
-import threading
 import time
-from types import FrameType
 
 import numpy as np
 from filterpy.kalman import KalmanFilter
 
-from groundstation.bus import Sample
-from groundstation.config import ZenohSection
+from benchmarks.echo_service import serve_telemetry
 from groundstation.messages import FollowInfo, InvalidMessage, Telemetry, encode_estimate
 from groundstation.tension import _inv3, observe_tension
-from groundstation.zenoh_bus import ZenohBus
 
 MASS_KG = 0.030
 """The drone's mass in the load benchmarks' telemetry (``service_rig.telemetry_payloads``)."""
@@ -114,34 +109,15 @@ def main(argv: list[str] | None = None) -> int:
     if args == ["--offline"]:
         print(f"contract floor offline: {offline_us_per_msg():.1f} µs CPU per message")
         return 0
-    if len(args) != 1:
-        print(__doc__.splitlines()[2], file=sys.stderr)
-        return 2
-    stop = threading.Event()
-
-    def on_signal(signum: int, frame: FrameType | None) -> None:
-        stop.set()
-
-    signal.signal(signal.SIGTERM, on_signal)
-    signal.signal(signal.SIGINT, on_signal)
     filters: dict[str, KalmanFilter] = {}
-    with ZenohBus(ZenohSection(mode="client", connect=(args[0],))) as bus:
-        publish = bus.publish
 
-        def on_telemetry(sample: Sample) -> None:
-            prefix = sample.key[: -len("telemetry")]
-            kf = filters.get(prefix)
-            if kf is None:
-                kf = filters[prefix] = _new_filter()
-            out = estimate_bytes(kf, sample.payload)
-            if out is not None:
-                publish(prefix + "estimate", out)
+    def answer(prefix: str, payload: bytes) -> bytes | None:
+        kf = filters.get(prefix)
+        if kf is None:
+            kf = filters[prefix] = _new_filter()
+        return estimate_bytes(kf, payload)
 
-        bus.subscribe("tether/*/telemetry", on_telemetry)
-        print("floor: running", flush=True)
-        while not stop.wait(0.2):
-            pass
-    return 0
+    return serve_telemetry(args, __doc__.splitlines()[2], "floor", answer)
 
 
 if __name__ == "__main__":
