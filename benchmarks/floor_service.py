@@ -35,11 +35,10 @@ import numpy as np
 from filterpy.kalman import KalmanFilter
 
 from benchmarks.echo_service import serve_telemetry
+from benchmarks.service_rig import MASS_KG, telemetry_payloads
 from groundstation.messages import FollowInfo, InvalidMessage, Telemetry, encode_estimate
 from groundstation.tension import _inv3, observe_tension
 
-MASS_KG = 0.030
-"""The drone's mass in the load benchmarks' telemetry (``service_rig.telemetry_payloads``)."""
 _FOLLOW = FollowInfo(enabled=False, active=False, threshold_n=0.1, reason="floor rig").model_dump()
 
 
@@ -84,8 +83,6 @@ def estimate_bytes(kf: KalmanFilter, payload: bytes) -> bytes | None:
 def offline_us_per_msg(messages: int = 4000, repeats: int = 5) -> float:
     """CPU µs per message of :func:`estimate_bytes` in this thread, no bus (best repeat,
     after 1000 messages of warm-up; the garbage collector off while timing, as timeit)."""
-    from benchmarks.service_rig import telemetry_payloads
-
     rows = [row[0] for row in telemetry_payloads(1, 1000 + messages * repeats, seed=1)]
     kf = _new_filter()
     for payload in rows[:1000]:

@@ -51,6 +51,8 @@ from groundstation.zenoh_bus import ZenohBus
 
 REPO = Path(__file__).resolve().parents[1]
 ROUTER = REPO / "tests" / "integration" / "router.py"
+MASS_KG = 0.030
+"""The drone's mass in :func:`telemetry_payloads`' hover telemetry."""
 RATE_HZ = 250.0
 PERIOD_S = 1.0 / RATE_HZ
 SUTS = ("service", "echo", "floor", "baseline")
@@ -124,7 +126,7 @@ def rss_mb(pid: int) -> float:
 def telemetry_payloads(n_drones: int, steps: int, seed: int) -> list[list[bytes]]:
     """Pre-encoded hover telemetry, ``[step][drone]`` (so the client's own CPU stays small)."""
     rng = np.random.default_rng(seed)
-    mass = 0.030
+    mass = MASS_KG
     tension = np.array([-0.02, 0.0, -0.06])
     thrust_vec = -(tension + mass * np.array([0.0, 0.0, -9.81]))
     thrust = float(np.linalg.norm(thrust_vec))

@@ -28,13 +28,11 @@ import os
 import subprocess
 import sys
 import time
-from pathlib import Path
 
+from benchmarks import service_rig as sr
 from groundstation.config import ZenohSection
 from groundstation.zenoh_bus import ZenohBus
 
-REPO = Path(__file__).resolve().parents[1]
-ROUTER = REPO / "tests" / "integration" / "router.py"
 ESTIMATE = b'{"seq":%d,"stamp_s":1.0,"tension_n":[0.0123456789,0.0123456789,-0.0612345678],' + (
     b'"tension_std_n":[0.0012345678,0.0012345678,0.0012345678],"horizontal_n":0.0174,'
     b'"vertical_n":0.0612,"position_m":[0.51234567,0.61234567,1.01234567],"pad":"%s"}'
@@ -75,20 +73,18 @@ def _summary(latencies: list[float]) -> str:
 
 
 def run(n: int, every: int, slow_s: float) -> dict[str, object]:
-    from tests.integration.harness import free_port, wait_for_port
-
-    port = free_port()
+    port = sr.free_port()
     endpoint = f"tcp/127.0.0.1:{port}"
-    env = dict(os.environ, PYTHONPATH=str(REPO))
+    env = dict(os.environ, PYTHONPATH=str(sr.REPO))
     me = [sys.executable, "-m", "benchmarks.stop_under_flood"]
-    router = subprocess.Popen([sys.executable, str(ROUTER), endpoint], stdout=subprocess.DEVNULL)
+    router = subprocess.Popen([sys.executable, str(sr.ROUTER), endpoint], stdout=subprocess.DEVNULL)
     try:
-        wait_for_port(port)
+        sr.wait_port(port)
         bridge = subprocess.Popen(
             [*me, "--listen", endpoint, "--seconds", "40"],
             stdout=subprocess.PIPE,
             env=env,
-            cwd=REPO,
+            cwd=sr.REPO,
         )
         estimates = [0]
         stops: list[float] = []
@@ -107,7 +103,7 @@ def run(n: int, every: int, slow_s: float) -> dict[str, object]:
             publisher = subprocess.Popen(
                 [*me, "--publish", endpoint, "--estimates", str(n), "--every", str(every)],
                 env=env,
-                cwd=REPO,
+                cwd=sr.REPO,
             )
             publisher.wait(120)
             last = -1
