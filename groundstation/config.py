@@ -651,6 +651,18 @@ class CrazyflieSection(_Section):
     """Longest wait between reconnection attempts (the back-off doubles from 0.25 s)."""
     status_period_s: float = Field(1.0, gt=0.0)
     """Period of ``tether/{drone}/bridge`` status messages."""
+    silence_s: float = Field(0.1, gt=0.0)
+    """Ground-station silence (no Setpoint, Estimate or command for this drone, timed on
+    arrival) beyond which a flying drone holds its setpoint: ``holding`` (at least three log
+    periods: the service answers each Telemetry)."""
+    hold_s: float = Field(0.3, gt=0.0, le=5.0)
+    """How long the drone holds in silence before the bridge lands it itself (docs/real-lab.md,
+    "ground-station silence")."""
+    land_speed_mps: float = Field(0.25, gt=0.0, le=1.0)
+    """Descent speed of the bridge's own landings (silence, a landing Stop), m/s."""
+    max_setpoint_speed_mps: float = Field(1.0, gt=0.0)
+    """A Setpoint that jumps from the one in force faster than this is refused (the firmware's
+    position controller flies at most 1 m/s per axis)."""
 
     @field_validator("slow_period_ms")
     @classmethod

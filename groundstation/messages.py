@@ -344,6 +344,11 @@ class Stop(_Out):
     """Seconds (the Telemetry's stamp, or the sender's clock for an operator's Stop)."""
     reason: str
     """Why (``tug-to-land``, ``operator``, ...)."""
+    kind: Literal["emergency", "land"] = "emergency"
+    """(added) ``emergency`` (also when absent, or any other value read back): motors off now,
+    locked until a power cycle on a Crazyflie (the operator's emergency stop); ``land``: the
+    ordinary end of a landing (tug-to-land): down to the floor at a safe rate, motors off
+    there, no lock."""
 
 
 class Truth(_Out):
@@ -423,6 +428,14 @@ class StopIn(_In):
 
     stamp_s: Finite
     reason: str
+    kind: str = "emergency"
+    """(added) Read leniently: anything but ``land`` is an emergency stop (a Stop is never
+    dropped for its kind)."""
+
+    @property
+    def landing(self) -> bool:
+        """(added) The landing stop (no lock), not the emergency stop."""
+        return self.kind == "land"
 
 
 class SetpointIn(_In):

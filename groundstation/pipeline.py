@@ -1054,7 +1054,7 @@ class Pipeline:
             out.append(Sample(f"tether/{runtime.drone}/cmd/setpoint", sp.to_json()))
         if decision.stop_reason is not None:
             runtime.stops += 1
-            stop = Stop(stamp_s=msg.stamp_s, reason=decision.stop_reason)
+            stop = Stop(stamp_s=msg.stamp_s, reason=decision.stop_reason, kind="land")
             out.append(Sample(f"tether/{runtime.drone}/cmd/stop", stop.to_json()))
             self._emit(runtime.drone, "stop", "service", now_s, self.self_id, decision.stop_reason)
         return out
