@@ -55,6 +55,8 @@ __all__ = [
     "CommandGate",
     "MissingVariables",
     "MocapPose",
+    "Phase",
+    "Reach",
     "SetpointCommand",
     "Skip",
     "VariablePlan",
@@ -442,7 +444,8 @@ class SetpointCommand:
     position_m: tuple[float, float, float]
     yaw_deg: float
     motors_off: bool = False
-    """The landing ramp has ended: send a stop setpoint instead, then nothing."""
+    """A landing has ended on the floor: send a stop setpoint instead (motors off, no lock),
+    then nothing."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -462,39 +465,90 @@ class _Ramp:
         a, b = self.start_m, self.target_m
         return (a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1]), a[2] + f * (b[2] - a[2]))
 
+    def done(self, now_s: float) -> bool:
+        return now_s >= self.t0_s + self.duration_s
+
 
 LAND_SETTLE_S = 0.5
 """After the landing ramp reaches the floor, hold this long before the motors go off."""
+MIN_JUMP_DT_S = 0.02
+"""The shortest interval a setpoint jump is judged over (the setpoint period: two setpoints
+delivered together are not a jump at infinite speed)."""
 
 
-Verdict = Literal["accepted", "latched", "stale", "clock", "bad"]
+@dataclass(frozen=True, slots=True)
+class Reach:
+    """Where the tether lets the drone go: within ``length_m - margin_m`` of the base exit
+    point, world frame, metres."""
+
+    base_m: tuple[float, float, float]
+    length_m: float
+    margin_m: float = 0.05
+
+    def within(self, position_m: Sequence[float]) -> bool:
+        # |p - base| <= L - margin: a straight tether is the farthest the drone can be
+        return math.dist(self.base_m, position_m) <= self.length_m - self.margin_m
+
+
+Verdict = Literal[
+    "accepted", "latched", "stale", "clock", "bad", "landing", "out_of_reach", "too_fast"
+]
+Phase = Literal["idle", "flying", "holding", "landing", "latched"]
+"""What the gate is doing: ``idle`` (nothing sent: on the floor, or never commanded),
+``flying`` (a setpoint or take-off ramp in force, the ground station heard), ``holding``
+(the same, the ground station silent for ``silence_s``), ``landing`` (a landing ramp, then
+motors off), ``latched`` (an emergency stop)."""
+StopOutcome = Literal["latched", "landing", "motors_off"]
 
 
 @dataclass
 class CommandGate:
-    """Watchdog and stop latch between the bus's commands and the drone.
+    """Watchdog, reach check, landings and stop latch between the bus's commands and the drone.
 
-    * Nothing is sent until a Setpoint arrives: the bridge never flies on its own.
-    * Each tick re-sends the latest setpoint (the firmware levels and then cuts the motors
-      when its stream of setpoints stops, so holding means repeating). No fresh setpoint for
-      ``watchdog_s``: hold the last one, never extrapolate (``holding`` says so).
+    * Nothing is sent until a Setpoint (or a take-off) arrives: the bridge never flies on its
+      own.
+    * Each tick re-sends the setpoint in force (the firmware levels and then cuts the motors
+      when its stream of setpoints stops, so holding means repeating).
+    * Ground-station silence (:attr:`heard_s`, the last Setpoint, Estimate or command, timed
+      by the runner when it arrives): after ``silence_s`` the setpoint is held, never
+      extrapolated (``holding``); after ``hold_s`` more the gate lands the drone itself:
+      straight down to ``floor_z_m`` at ``land_speed_mps``, :data:`LAND_SETTLE_S` on the
+      floor, then motors off (a stop setpoint, which does not lock the Crazyflie).
     * Setpoints are stamped on the drone's clock. One stamped more than ``watchdog_s``
       before the latest Telemetry, or before the setpoint in force, or arriving before any
-      Telemetry, is stale; one more than ``watchdog_s`` after it is on another clock: both
-      are dropped and counted.
-    * Stop latches: no setpoint is sent or accepted until :meth:`rearm`; a link loss also
-      forgets the setpoint in force (after a reconnection the drone may be on the floor, and a
-      held setpoint would lift it).
+      Telemetry, is stale; one more than ``watchdog_s`` after it is on another clock. One
+      outside ``reach`` is out of reach; one jumping from the setpoint in force faster than
+      ``max_speed_mps`` is too fast; one arriving during a landing is dropped (a landing is
+      only replaced by a take-off or a Stop). All dropped and counted.
+    * An emergency Stop latches: no setpoint is sent or accepted until :meth:`rearm`. A
+      landing Stop lands (no latch). A link loss forgets the setpoint in force (after a
+      reconnection the drone may be on the floor, and a held setpoint would lift it).
 
     Args:
-        watchdog_s: freshness of setpoints, host seconds and drone seconds.
+        watchdog_s: freshness of setpoints against the telemetry, drone seconds.
         yaw_deg: yaw of the setpoints; None: the drone's yaw when the first setpoint arrives.
+        silence_s: ground-station silence before holding, s.
+        hold_s: holding before landing, s.
+        land_speed_mps: descent speed of the gate's own landings, m/s.
+        floor_z_m: where a landing ends, world z, m.
+        reach: the tether's reach; None: not checked.
+        max_speed_mps: fastest jump between setpoints, m/s.
     """
 
     watchdog_s: float
     yaw_deg: float | None = None
+    silence_s: float = 0.1
+    hold_s: float = 0.3
+    land_speed_mps: float = 0.25
+    floor_z_m: float = 0.0
+    reach: Reach | None = None
+    max_speed_mps: float = 1.0
+    heard_s: float = -math.inf
+    """Host clock when the ground station was last heard (set by the runner)."""
     latched: bool = False
     stop_reason: str = ""
+    landing_reason: str = ""
+    """Why the landing in progress (or the last one) began."""
     dropped: dict[str, int] = field(default_factory=dict)
     _position: tuple[float, float, float] | None = None
     _stamp_s: float = -math.inf
@@ -509,6 +563,7 @@ class CommandGate:
         now_s: float,
         telemetry_stamp_s: float | None,
         current_yaw_deg: float | None,
+        current_position_m: Sequence[float] | None = None,
     ) -> Verdict:
         """Take a Setpoint from the bus.
 
@@ -519,18 +574,26 @@ class CommandGate:
             now_s: host monotonic clock, s.
             telemetry_stamp_s: ``stamp_s`` of the latest Telemetry published, or None.
             current_yaw_deg: the drone's yaw now (held when ``yaw_deg`` is None).
+            current_position_m: the drone's measured position (motion capture), or None: a
+                first setpoint may jump from it at most ``max_speed_mps`` × ``watchdog_s``.
         """
         verdict: Verdict = "accepted"
         if self.latched:
             verdict = "latched"
         elif len(position_m) != 3 or not all(math.isfinite(v) for v in position_m):
             verdict = "bad"
+        elif self._ramp is not None and self._ramp.land:
+            verdict = "landing"
         elif telemetry_stamp_s is None:
             verdict = "stale"  # no telemetry yet: nothing to judge its age against
         elif stamp_s < self._stamp_s or stamp_s < telemetry_stamp_s - self.watchdog_s:
             verdict = "stale"
         elif stamp_s > telemetry_stamp_s + self.watchdog_s:
             verdict = "clock"  # not on the drone's clock (a wall-clock stamp?)
+        elif self.reach is not None and not self.reach.within(position_m):
+            verdict = "out_of_reach"
+        elif self._too_fast(position_m, stamp_s, now_s, current_position_m):
+            verdict = "too_fast"
         elif self._yaw is None:
             yaw = self.yaw_deg if self.yaw_deg is not None else current_yaw_deg
             if yaw is None:
@@ -538,20 +601,63 @@ class CommandGate:
             else:
                 self._yaw = yaw
         if verdict != "accepted":
-            self.dropped[verdict] = self.dropped.get(verdict, 0) + 1
+            self._drop(verdict)
             return verdict
         x, y, z = (float(v) for v in position_m)
         self._ramp = None
         self._position = (x, y, z)
         self._stamp_s = stamp_s
         self._received_s = now_s
+        self.heard_s = max(self.heard_s, now_s)
         return verdict
 
-    def on_stop(self, reason: str) -> None:
-        """Latch: nothing more is sent until :meth:`rearm`."""
-        self.latched = True
-        self.stop_reason = reason
+    def _too_fast(
+        self,
+        position_m: Sequence[float],
+        stamp_s: float,
+        now_s: float,
+        current_position_m: Sequence[float] | None,
+    ) -> bool:
+        """The jump from the setpoint in force (or, for a first one, from the drone's
+        measured position) is faster than ``max_speed_mps``."""
+        origin = self.position_in_force(now_s)
+        if origin is not None:
+            # judged over the longer of the host's and the drone's intervals, at least one
+            # setpoint period: |Δp| > v_max · Δt
+            dt_s = max(now_s - self._received_s, stamp_s - self._stamp_s, MIN_JUMP_DT_S)
+        elif current_position_m is not None and len(current_position_m) == 3:
+            origin = (
+                float(current_position_m[0]),
+                float(current_position_m[1]),
+                float(current_position_m[2]),
+            )
+            dt_s = self.watchdog_s
+        else:
+            return False
+        return math.dist(origin, position_m) > self.max_speed_mps * dt_s
+
+    def on_stop(self, reason: str, now_s: float = 0.0, landing: bool = False) -> StopOutcome:
+        """An emergency Stop latches: nothing more is sent until :meth:`rearm`. A landing Stop
+        lands from the setpoint in force (motors off on the floor, no latch), or switches the
+        motors off at once when nothing is in force.
+
+        Returns:
+            ``latched``; ``landing`` (a landing ramp began); ``motors_off`` (send a stop
+            setpoint now).
+        """
+        if not landing:
+            self.latched = True
+            self.stop_reason = reason
+            self._forget()
+            return "latched"
+        if self.latched:
+            return "latched"  # an emergency stop is in force: a landing Stop lifts nothing
+        if self._ramp is not None and self._ramp.land:
+            return "landing"  # already on the way down
+        if self._begin_landing(now_s, f"Stop ({reason})"):
+            return "landing"
         self._forget()
+        return "motors_off"
 
     def rearm(self) -> None:
         """The operator lifts the latch; a new setpoint is needed before anything is sent."""
@@ -562,9 +668,25 @@ class CommandGate:
     def on_link_lost(self) -> None:
         self._forget()
 
+    def silent_s(self, now_s: float) -> float:
+        """Seconds since the ground station was last heard."""
+        return now_s - max(self.heard_s, self._received_s)
+
     def holding(self, now_s: float) -> bool:
-        """A setpoint is in force but none arrived for ``watchdog_s``."""
-        return self._position is not None and now_s - self._received_s > self.watchdog_s
+        """Flying on a setpoint, the ground station silent for more than ``silence_s``."""
+        return self.phase(now_s) == "holding"
+
+    def phase(self, now_s: float) -> Phase:
+        """What the gate is doing now (see :data:`Phase`)."""
+        if self.latched:
+            return "latched"
+        if self._position is None or self._yaw is None:
+            return "idle"
+        if self._ramp is not None and self._ramp.land:
+            return "landing"
+        if self.silent_s(now_s) > self.silence_s:
+            return "holding"
+        return "flying"
 
     def ramp(
         self,
@@ -574,14 +696,15 @@ class CommandGate:
         now_s: float,
         current_yaw_deg: float | None,
         land: bool = False,
+        reason: str = "operator",
     ) -> Literal["accepted", "latched", "bad"]:
         """Fly a straight line at ``speed_mps`` (take-off, landing), then hold its end.
 
-        A landing ramp ends with the motors off (after :data:`LAND_SETTLE_S`). A Setpoint
-        accepted meanwhile replaces the ramp; Stop and link loss end it.
+        A landing ramp ends with the motors off (after :data:`LAND_SETTLE_S`) and is replaced
+        only by a take-off or a Stop. A Setpoint accepted during a take-off replaces it.
         """
         if self.latched:
-            self.dropped["latched"] = self.dropped.get("latched", 0) + 1
+            self._drop("latched")
             return "latched"
         pts = (*start_m, *target_m)
         yaw = (
@@ -590,10 +713,10 @@ class CommandGate:
             else (self.yaw_deg if self.yaw_deg is not None else current_yaw_deg)
         )
         if len(pts) != 6 or not all(math.isfinite(v) for v in pts) or yaw is None:
-            self.dropped["bad"] = self.dropped.get("bad", 0) + 1
+            self._drop("bad")
             return "bad"
         if not 0.0 < speed_mps <= 1.0:
-            self.dropped["bad"] = self.dropped.get("bad", 0) + 1
+            self._drop("bad")
             return "bad"
         a = (float(start_m[0]), float(start_m[1]), float(start_m[2]))
         b = (float(target_m[0]), float(target_m[1]), float(target_m[2]))
@@ -602,6 +725,9 @@ class CommandGate:
         self._ramp = _Ramp(a, b, now_s, dist / speed_mps, land)
         self._position = a
         self._received_s = now_s
+        self.heard_s = max(self.heard_s, now_s)
+        if land:
+            self.landing_reason = reason
         return "accepted"
 
     def position_in_force(self, now_s: float) -> tuple[float, float, float] | None:
@@ -611,17 +737,37 @@ class CommandGate:
         return self._position
 
     def tick(self, now_s: float) -> SetpointCommand | None:
-        """The setpoint to send now, or None."""
+        """The setpoint to send now, or None. Begins the silence landing when it is due."""
         if self.latched or self._position is None or self._yaw is None:
             return None
+        if (self._ramp is None or not self._ramp.land) and self.silent_s(
+            now_s
+        ) > self.silence_s + self.hold_s:
+            self._begin_landing(now_s, f"ground station silent for {self.silent_s(now_s):.2f} s")
         ramp = self._ramp
         if ramp is not None:
             if ramp.land and now_s > ramp.t0_s + ramp.duration_s + LAND_SETTLE_S:
                 self._forget()
                 return SetpointCommand(ramp.target_m, 0.0, motors_off=True)
-            self._received_s = now_s  # a ramp is fresh by construction
-            return SetpointCommand(ramp.at(now_s), self._yaw)
+            if not ramp.land and ramp.done(now_s):
+                # A finished take-off is the setpoint in force. A ramp is not a fresh command:
+                # the ground station must be heard during it and after it, as for a setpoint.
+                self._ramp = None
+                self._position = ramp.target_m
+            else:
+                return SetpointCommand(ramp.at(now_s), self._yaw)
         return SetpointCommand(self._position, self._yaw)
+
+    def _begin_landing(self, now_s: float, reason: str) -> bool:
+        start = self.position_in_force(now_s)
+        if start is None or self._yaw is None:
+            return False
+        target = (start[0], start[1], min(start[2], self.floor_z_m))
+        self.ramp(start, target, self.land_speed_mps, now_s, self._yaw, land=True, reason=reason)
+        return True
+
+    def _drop(self, verdict: str) -> None:
+        self.dropped[verdict] = self.dropped.get(verdict, 0) + 1
 
     def _forget(self) -> None:
         self._ramp = None

@@ -8,8 +8,18 @@ bridge process without a drone. Options ride on the URI's query::
 
     fake://hover?record=/tmp/cmds.jsonl&drop_after_s=2&down_s=1&missing=pm.vbat&ooo=1
 
-``hover``: level, still, the tether pulling 0.05 N down; ``tug``: the same pulled 0.2 N down.
-After ``stop_motors`` the motors read 0 and the armed bit clears (the drone sits on the floor).
+``hover``: level, the tether pulling 0.05 N down, flying at ``start_m`` on the drone's own
+(onboard) controller until the first low-level setpoint; ``tug``: the same pulled 0.2 N down;
+``floor``: on the floor, motors off, until a setpoint spins them up.
+
+What the firmware does with what it receives (:class:`FirmwareModel`, on the host's monotonic
+clock): position setpoints are followed at the position controller's speed limit (1 m/s per
+axis, ``PID_POS_VEL_*_MAX``); the commander watchdog levels the drone 0.5 s after the last
+setpoint (x/y no longer controlled, z held) and 2 s after it switches the motors off and locks
+the supervisor; the supervisor's emergency stop (``stop_motors``) switches the motors off and
+locks until a power cycle (an arming request does not unlock); a stop setpoint switches the
+motors off without a lock; motors off above the floor is a fall (the speed at the floor is
+kept in ``impacts_mps``); the battery sags with flight time and under load.
 ``record`` appends one JSON line per call; ``drop_after_s`` loses the link once after that many
 seconds of playback and refuses to reconnect for ``down_s``; ``firmware`` picks the log TOC of
 :data:`FIRMWARE_TOCS` (``current``, the default, or ``2022``); ``missing`` drops variables
@@ -23,6 +33,7 @@ import json
 import math
 import threading
 import time
+from collections import deque
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -38,7 +49,14 @@ from groundstation.bridges.crazyflie.link import (
     LostHandler,
 )
 
-__all__ = ["FAKE_SCENARIOS", "FAKE_TOC", "FIRMWARE_TOCS", "FakeLink", "pwm_for_thrust"]
+__all__ = [
+    "FAKE_SCENARIOS",
+    "FAKE_TOC",
+    "FIRMWARE_TOCS",
+    "FakeLink",
+    "FirmwareModel",
+    "pwm_for_thrust",
+]
 
 _COMMON_TOC: Mapping[str, str] = {
     **{f"acc.{a}": "float" for a in "xyz"},
@@ -63,8 +81,130 @@ which battery compensation each motor variable carries)."""
 FAKE_TOC: Mapping[str, str] = FIRMWARE_TOCS["current"]
 """The fake's default TOC: current firmware."""
 
-FAKE_SCENARIOS: Mapping[str, float] = {"hover": 0.05, "tug": 0.20}
+FAKE_SCENARIOS: Mapping[str, float] = {"hover": 0.05, "tug": 0.20, "floor": 0.05}
 """Scenario → downward pull of the tether on the drone, N."""
+
+COMMANDER_LEVEL_S = 0.5
+"""Firmware ``COMMANDER_WDT_TIMEOUT_STABILIZE``: no setpoint for this long, the drone levels."""
+COMMANDER_SHUTDOWN_S = 2.0
+"""Firmware ``COMMANDER_WDT_TIMEOUT_SHUTDOWN``: no setpoint for this long, motors off (and, in
+current firmware, the supervisor locks)."""
+POS_VEL_MAX_MPS = 1.0
+"""Firmware ``PID_POS_VEL_{X,Y,Z}_MAX``: the position controller's speed limit per axis."""
+G_MPS2 = 9.81
+_STEP_S = 0.002
+
+
+class FirmwareModel:
+    """What a Crazyflie's firmware does with the setpoints it receives (module docstring).
+
+    Args:
+        start_m: where the drone is, world frame, m.
+        flying: it flies there on its own (onboard) controller until the first setpoint.
+        floor_z_m: the floor.
+        clock: host monotonic clock, s.
+    """
+
+    def __init__(
+        self,
+        start_m: Sequence[float] = (0.0, 0.0, 0.5),
+        *,
+        flying: bool = True,
+        floor_z_m: float = 0.0,
+        clock: Any = time.monotonic,
+    ) -> None:
+        self._clock = clock
+        self.floor_z_m = floor_z_m
+        self.position_m = np.array(start_m, dtype=float)
+        self.vz_mps = 0.0
+        self.motors_on = flying
+        self.locked = False
+        self.target_m: np.ndarray | None = None
+        self.last_setpoint_s: float | None = None
+        self.mode = "onboard" if flying else "off"
+        """``onboard``, ``position``, ``level``, ``off``."""
+        self.impacts_mps: list[float] = []
+        """Vertical speed at each arrival on the floor with the motors off (a fall), m/s."""
+        self.track: deque[tuple[float, float, float, float]] = deque(maxlen=100_000)
+        """``(t_s, x_m, y_m, z_m)`` at each update (the latest 100 000)."""
+        self.flight_s = 0.0
+        self._t = clock()
+        self._lock = threading.Lock()
+
+    def vbat_v(self) -> float:
+        """Battery: 4.15 V at rest, 0.2 V less under hover load, 0.01 V less per flight
+        minute (a 250 mAh cell over a 7-minute flight)."""
+        load = 0.2 if self.motors_on else 0.0
+        return 4.15 - load - 0.01 * self.flight_s / 60.0
+
+    def advance(self) -> None:
+        """Bring the state to the clock's now."""
+        with self._lock:
+            now = self._clock()
+            while self._t < now:
+                dt = min(_STEP_S, now - self._t)
+                self._t += dt
+                self._step(dt)
+            x, y, z = self.position_m
+            self.track.append((now, float(x), float(y), float(z)))
+
+    def _step(self, dt: float) -> None:
+        if self.motors_on and self.last_setpoint_s is not None:
+            age = self._t - self.last_setpoint_s
+            if age > COMMANDER_SHUTDOWN_S:
+                self.motors_on, self.locked, self.mode = False, True, "off"
+            elif age > COMMANDER_LEVEL_S:
+                self.mode = "level"
+        if not self.motors_on:
+            z = self.position_m[2]
+            if z > self.floor_z_m or self.vz_mps > 0:
+                self.vz_mps -= G_MPS2 * dt
+                self.position_m[2] = z + self.vz_mps * dt
+                if self.position_m[2] <= self.floor_z_m:
+                    self.impacts_mps.append(-self.vz_mps)
+                    self.position_m[2] = self.floor_z_m
+                    self.vz_mps = 0.0
+            return
+        self.flight_s += dt
+        if self.target_m is None:
+            self.vz_mps = 0.0
+            return  # the onboard controller holds
+        step = self.target_m - self.position_m
+        if self.mode == "level":
+            step[:2] = 0.0  # x/y no longer controlled; z still held
+        step = np.clip(step, -POS_VEL_MAX_MPS * dt, POS_VEL_MAX_MPS * dt)
+        self.position_m = self.position_m + step
+        if self.position_m[2] < self.floor_z_m:
+            self.position_m[2] = self.floor_z_m  # pushing into the floor
+        self.vz_mps = float(step[2]) / dt
+
+    def on_position_setpoint(self, x_m: float, y_m: float, z_m: float) -> None:
+        self.advance()
+        if self.locked:
+            return
+        self.target_m = np.array([x_m, y_m, z_m], dtype=float)
+        self.last_setpoint_s = self._clock()
+        self.motors_on, self.mode = True, "position"
+
+    def on_stop_setpoint(self) -> None:
+        self.advance()
+        self.motors_on, self.mode, self.target_m = False, "off", None
+        self.last_setpoint_s = None
+
+    def on_emergency_stop(self) -> None:
+        self.advance()
+        self.motors_on, self.locked, self.mode, self.target_m = False, True, "off", None
+        self.last_setpoint_s = None
+
+    def power_cycle(self) -> None:
+        """The only way out of Locked."""
+        self.advance()
+        self.locked = False
+
+    @property
+    def on_floor(self) -> bool:
+        return bool(self.position_m[2] <= self.floor_z_m + 1e-9)
+
 
 _ARMED_INFO = 0b1011  # can be armed, is armed, can fly
 _DISARMED_INFO = 0b0001
@@ -100,6 +240,7 @@ class FakeLink:
         toc: Mapping[str, str] | None = None,
         seed: int = 0,
         realtime: bool = False,
+        start_m: Sequence[float] = (0.0, 0.0, 0.5),
     ) -> None:
         self.uri = uri
         parsed = urlparse(uri)
@@ -124,7 +265,10 @@ class FakeLink:
         self.thrust_map = tuple(thrust_map)
         self.commands: list[tuple[str, tuple[Any, ...]]] = []
         self.opens = 0
-        self.motors_stopped = False
+        self.firmware = FirmwareModel(
+            start_m if self.scenario != "floor" else (start_m[0], start_m[1], 0.0),
+            flying=self.scenario != "floor",
+        )
         self._rng = np.random.default_rng(seed)
         self._lock = threading.Lock()
         self._on_lost: LostHandler | None = None
@@ -169,23 +313,34 @@ class FakeLink:
             self.start_player()
 
     def send_position_setpoint(self, x_m: float, y_m: float, z_m: float, yaw_deg: float) -> None:
+        self.firmware.on_position_setpoint(x_m, y_m, z_m)
         self._record("send_position_setpoint", x_m, y_m, z_m, yaw_deg)
 
     def stop_motors(self) -> None:
-        self.motors_stopped = True
+        self.firmware.on_emergency_stop()
         self._record("stop_motors")
 
     def send_stop_setpoint(self) -> None:
+        self.firmware.on_stop_setpoint()
         self._record("send_stop_setpoint")
 
     def arm(self) -> None:
-        self.motors_stopped = False
+        # An arming request: the supervisor stays Locked after an emergency stop.
         self._record("arm")
+
+    @property
+    def motors_stopped(self) -> bool:
+        """The motors are off (a stop, a watchdog, or never started)."""
+        return not self.firmware.motors_on
 
     def send_extpos(self, position_m: Sequence[float], quat_wxyz: Sequence[float] | None) -> None:
         self._record("send_extpos", *position_m)
 
     def close(self) -> None:
+        with self._lock:
+            if self._open:
+                # cflib's close_link() sends a zero setpoint on an open link: motors off.
+                self.firmware.on_stop_setpoint()
         self._stop_player.set()
         player = self._player
         if player is not None and player is not threading.current_thread():
@@ -218,8 +373,10 @@ class FakeLink:
         """One sample of every TOC variable for the scenario (firmware units)."""
         pull_n = FAKE_SCENARIOS[self.scenario]
         noise = self._rng.normal(0.0, 1.0, 6)
-        if self.motors_stopped:
-            pwm, info = 0.0, _DISARMED_INFO
+        fw = self.firmware
+        fw.advance()
+        if not fw.motors_on:
+            pwm, info = 0.0, _DISARMED_INFO if fw.locked else _ARMED_INFO
         else:
             # At rest the specific force is (thrust + tether) / m = g up, so the thrust
             # carries the weight and the pull.
@@ -236,7 +393,7 @@ class FakeLink:
             "stateEstimate.qx": 0.0,
             "stateEstimate.qy": 0.0,
             "stateEstimate.qz": 0.0,
-            "pm.vbat": 3.95,
+            "pm.vbat": fw.vbat_v(),
             "supervisor.info": float(info),
         }
         for i in range(1, 5):
@@ -290,7 +447,19 @@ class FakeLink:
     def _record(self, name: str, *args: Any) -> None:
         self.commands.append((name, args))
         if self.record_path is not None:
-            line = json.dumps({"t": time.monotonic(), "cmd": name, "args": list(args)})
+            fw = self.firmware
+            line = json.dumps(
+                {
+                    "t": time.monotonic(),
+                    "cmd": name,
+                    "args": list(args),
+                    # the firmware's state after the command (the CLI tests' ground truth)
+                    "position_m": [float(v) for v in fw.position_m],
+                    "motors_on": fw.motors_on,
+                    "locked": fw.locked,
+                    "falls": len(fw.impacts_mps),
+                }
+            )
             with self.record_path.open("a") as fh:
                 fh.write(line + "\n")
 

@@ -7,13 +7,22 @@ whatever the log rate. Bus keys (``{drone}`` is the drone id):
 
 * publishes ``tether/{drone}/telemetry`` (contract) and ``tether/{drone}/bridge`` (added:
   status, once per ``status_period_s`` and on every change of connection or latch);
-* reads ``tether/{drone}/cmd/setpoint`` and ``tether/{drone}/cmd/stop`` (contract),
+* reads ``tether/{drone}/cmd/setpoint`` and ``tether/{drone}/cmd/stop`` (contract; a Stop of
+  ``kind`` ``land`` lands without the latch), ``tether/{drone}/estimate`` (contract: only as
+  the ground station's heartbeat),
   ``tether/{drone}/cmd/rearm`` (added: lifts the stop latch and asks the supervisor to arm,
   any JSON object),
   ``tether/{drone}/cmd/takeoff`` ``{"height_m": h, "speed_mps": v}`` and
   ``tether/{drone}/cmd/land`` ``{"speed_mps": v}`` (added: straight vertical ramps of position
   setpoints from the motion-capture position; landing ends with the motors off) and the
   configured motion-capture key.
+
+Safety (docs/real-lab.md, "what the bridge does when something goes wrong"): the ground station
+is heard when a Setpoint, an Estimate or a command for this drone *arrives* (timed on the bus's
+thread); silence holds, then lands (:class:`~.bridge.CommandGate`). Log data is timed when it
+arrives (cflib's thread), so a stalled bridge thread is no link loss; and a silent link is
+never closed as a recovery while the bridge commands the drone (cflib's ``close_link`` sends a
+zero setpoint: motors off in flight).
 """
 
 from __future__ import annotations
@@ -34,6 +43,9 @@ from groundstation.bridges.crazyflie.bridge import (
     CommandGate,
     MissingVariables,
     MocapPose,
+    Phase,
+    Reach,
+    SetpointCommand,
     Skip,
     VariablePlan,
     build_telemetry,
@@ -53,6 +65,15 @@ from groundstation.messages import (
 )
 
 __all__ = ["SETPOINT_PERIOD_S", "CrazyflieBridge", "bridge_keys"]
+
+_VERDICT_WHY = {
+    "out_of_reach": ": beyond the tether's reach from the base",
+    "too_fast": ": a jump faster than [crazyflie] max_setpoint_speed_mps",
+    "landing": ": the drone is landing (a take-off or a Stop replaces a landing)",
+    "stale": ": computed from old telemetry",
+    "clock": ": not stamped on the drone's clock",
+}
+"""Why a setpoint was dropped, for the log (once per kind)."""
 
 _log = logging.getLogger("groundstation.crazyflie")
 
@@ -79,6 +100,7 @@ def bridge_keys(drone: str) -> dict[str, str]:
         "rearm": f"{base}/cmd/rearm",
         "takeoff": f"{base}/cmd/takeoff",
         "land": f"{base}/cmd/land",
+        "estimate": f"{base}/estimate",
     }
 
 
@@ -126,7 +148,23 @@ class CrazyflieBridge:
         self.floor_z_m = floor_z_m
         self.reach = reach
         self._events: queue.Queue[_Event] = queue.Queue()
-        self.gate = CommandGate(section.watchdog_s, section.yaw_deg)
+        self.gate = CommandGate(
+            section.watchdog_s,
+            section.yaw_deg,
+            silence_s=section.silence_s,
+            hold_s=section.hold_s,
+            land_speed_mps=section.land_speed_mps,
+            floor_z_m=floor_z_m,
+            reach=Reach(reach[0], reach[1], REACH_MARGIN_M) if reach is not None else None,
+            max_speed_mps=section.max_setpoint_speed_mps,
+        )
+        self._heard_s = -math.inf
+        """Host clock when the ground station was last heard, written on the bus's thread."""
+        self._arrived_s = 0.0
+        """Host clock when log data last arrived, written on the link's thread."""
+        self._phase: Phase = "idle"
+        self._motors_off = False
+        self._link_silent = False
         self.seq = 0
         self.connected = False
         self.counts: dict[str, int] = {}
@@ -137,12 +175,10 @@ class CrazyflieBridge:
         self._slow: dict[str, float] = {}
         self._mocap: MocapPose | None = None
         self._last_stamp_s: float | None = None
-        self._last_data_s = 0.0
         self._connected_s = 0.0
         self._last_yaw_deg: float | None = None
         self._pending_stop = False
         self._commanding = False
-        self._holding_logged = False
         self._next_tick_s = 0.0
         self._data_timeout_s = section.data_timeout_s
         self._subs: list[Subscription] = []
@@ -155,6 +191,11 @@ class CrazyflieBridge:
     def _on_bus(self, sample: Sample) -> None:
         key = sample.key
         try:
+            if key == self.keys["estimate"]:
+                # The heartbeat only (one per accepted Telemetry): not parsed, at 100 Hz.
+                if sample.payload[:1] == b"{":
+                    self._heard_s = self._clock()
+                return
             if key == self.keys["setpoint"]:
                 self._put("setpoint", SetpointIn.parse(sample.payload))
             elif key == self.keys["stop"]:
@@ -169,6 +210,10 @@ class CrazyflieBridge:
                 self._put("land", LandIn.parse(sample.payload))
             elif key == self.mocap_key:
                 self._put("mocap", MocapPoseIn.parse(sample.payload))
+                return  # motion capture is not the ground station
+            else:
+                return
+            self._heard_s = self._clock()  # timed on arrival: a busy bridge thread is no silence
         except (InvalidMessage, ValueError) as exc:
             self._put("bad_input", f"{key}: {exc}")
 
@@ -181,7 +226,7 @@ class CrazyflieBridge:
             0, or 2 when the firmware lacks a needed log variable or refuses a log block (the
             message names them; retrying would not help).
         """
-        for name in ("setpoint", "stop", "rearm", "takeoff", "land"):
+        for name in ("setpoint", "stop", "rearm", "takeoff", "land", "estimate"):
             self._subs.append(self.bus.subscribe(self.keys[name], self._on_bus))
         if self.mocap_key:
             self._subs.append(self.bus.subscribe(self.mocap_key, self._on_bus))
@@ -230,17 +275,20 @@ class CrazyflieBridge:
         self._last_stamp_s = None
         try:
             self.link.start_logging(
-                [*plan.fast, *plan.slow],
-                lambda block, ts, values: self._put("data", (block, ts, values), epoch),
-                self.section.connect_timeout_s,
+                [*plan.fast, *plan.slow], self._data_handler(epoch), self.section.connect_timeout_s
             )
         except LinkError:
             self.link.close()
             raise
         shortest_s = min(b.period_ms for b in (*plan.fast, *plan.slow)) / 1000.0
         self._data_timeout_s = max(self.section.data_timeout_s, DATA_TIMEOUT_PERIODS * shortest_s)
+        # The service answers each Telemetry: at a slow log rate its silence is longer.
+        self.gate.silence_s = max(
+            self.section.silence_s, DATA_TIMEOUT_PERIODS * self.section.log_period_ms / 1000.0
+        )
         self.connected = True
-        self._last_data_s = self._connected_s = self._next_tick_s = self._clock()
+        self._link_silent = False
+        self._arrived_s = self._connected_s = self._next_tick_s = self._clock()
         self._logged.discard("connect_failed")
         self._logged.discard("lost")
         if self._pending_stop:
@@ -265,6 +313,15 @@ class CrazyflieBridge:
             )
         self._publish_status()
 
+    def _data_handler(self, epoch: int) -> Callable[[str, int, Mapping[str, float]], None]:
+        """The link's data callback: time the arrival (the link's liveness), then queue."""
+
+        def on_data(block: str, raw_ms: int, values: Mapping[str, float]) -> None:
+            self._arrived_s = self._clock()
+            self._put("data", (block, raw_ms, values), epoch)
+
+        return on_data
+
     def _serve_tick(self, stop: threading.Event, next_status: float) -> float:
         """Handle events until the next setpoint tick, then send the setpoint in force.
 
@@ -286,14 +343,40 @@ class CrazyflieBridge:
         self._next_tick_s += SETPOINT_PERIOD_S
         if self._next_tick_s <= now:  # fell behind (a busy host): keep the cadence from now
             self._next_tick_s = now + SETPOINT_PERIOD_S
-        if self.connected and now - self._last_data_s > self._data_timeout_s:
-            self._on_lost(f"no log data for {self._data_timeout_s:g} s")
+        if self.connected:
+            self._check_link(now)
         if self.connected:
             self._send_setpoint(now)
         if now >= next_status:
             self._publish_status()
             next_status = now + self.section.status_period_s
         return next_status
+
+    def _check_link(self, now: float) -> None:
+        """No log data for ``data_timeout_s`` (timed on arrival): a lost link, unless the
+        bridge is commanding the drone. Then the link is not closed (cflib's ``close_link``
+        sends a zero setpoint, which the firmware takes as motors off: a drop from height);
+        setpoints keep going out, and the ground station, which hears no telemetry, falls
+        silent: the gate holds and lands, and the link is given up once the motors are off."""
+        silent = now - self._arrived_s > self._data_timeout_s
+        if silent and self._commanding:
+            if not self._link_silent:
+                self._link_silent = True
+                self._count("link_silent")
+                _log.warning(
+                    "no log data from %s for %.2f s while flying: link kept open (closing it "
+                    "would cut the motors), setpoints still sent",
+                    self.link.uri,
+                    now - self._arrived_s,
+                )
+                self._publish_status()
+            return
+        if silent:
+            self._on_lost(f"no log data for {self._data_timeout_s:g} s")
+        elif self._link_silent:
+            self._link_silent = False
+            _log.warning("log data from %s again", self.link.uri)
+            self._publish_status()
 
     def _drain_commands(self) -> None:
         """While disconnected, still act on commands (a Stop latches; setpoints are dropped)."""
@@ -320,26 +403,43 @@ class CrazyflieBridge:
             if not self.connected:
                 self._count("setpoint_disconnected")
                 return
+            now = self._clock()
+            seen = self._mocap
+            current = (
+                seen.position_m
+                if seen is not None and now - seen.received_s <= self.section.mocap_stale_s
+                else None
+            )
             verdict = self.gate.on_setpoint(
-                sp.position_m, sp.stamp_s, self._clock(), self._last_stamp_s, self._last_yaw_deg
+                sp.position_m, sp.stamp_s, now, self._last_stamp_s, self._last_yaw_deg, current
             )
             if verdict != "accepted":
                 self._count(f"setpoint_{verdict}")
-                self._once(f"setpoint_{verdict}", "setpoint dropped (%s)", verdict)
-            else:
-                self._holding_logged = False
+                self._once(
+                    f"setpoint_{verdict}",
+                    "setpoint %s dropped (%s)%s",
+                    [round(v, 3) for v in sp.position_m],
+                    verdict,
+                    _VERDICT_WHY.get(verdict, ""),
+                )
+                if verdict in ("out_of_reach", "too_fast"):
+                    self._publish_status()  # a refusal the operator must see at once
         elif kind == "stop":
             stop_msg: StopIn = event.payload
+            if stop_msg.landing:
+                self._landing_stop(stop_msg.reason)
+                return
             was_latched = self.gate.latched
             self.gate.on_stop(stop_msg.reason)
             self._commanding = False  # the stop is the last command
+            self._motors_off = True
             self._count("stops")
             if self.connected:
                 self._send("stop_motors")
             else:
                 self._pending_stop = True
             _log.warning(
-                "Stop (%s): motors stopped, latched until tether/%s/cmd/rearm",
+                "emergency Stop (%s): motors stopped, latched until tether/%s/cmd/rearm",
                 stop_msg.reason,
                 self.drone,
             )
@@ -362,6 +462,27 @@ class CrazyflieBridge:
         elif kind == "bad_input":
             self._count("bad_input")
             self._once(f"bad_input:{str(event.payload).split(':')[0]}", "dropped %s", event.payload)
+
+    def _landing_stop(self, reason: str) -> None:
+        """A Stop of kind ``land``: down to the floor, motors off there, no latch."""
+        self._count("landing_stops")
+        outcome = self.gate.on_stop(reason, self._clock(), landing=True)
+        if outcome == "latched":
+            _log.warning("landing Stop (%s) ignored: an emergency stop is in force", reason)
+        elif outcome == "landing":
+            _log.warning(
+                "landing Stop (%s): landing at %.2f m/s, motors off on the floor (no latch)",
+                reason,
+                self.gate.land_speed_mps,
+            )
+        else:
+            # Nothing in force: the bridge is not flying the drone. Motors off, no lock.
+            self._commanding = False
+            self._motors_off = True
+            if self.connected:
+                self._send("send_stop_setpoint")
+            _log.warning("landing Stop (%s): nothing in force, motors off (no latch)", reason)
+        self._publish_status()
 
     def _ramp(self, kind: str, cmd: TakeoffIn | LandIn) -> None:
         now = self._clock()
@@ -412,7 +533,6 @@ class CrazyflieBridge:
         plan, aligner = self._plan, self._aligner
         if plan is None or aligner is None:
             return
-        self._last_data_s = self._clock()
         if any(block == b.name for b in plan.slow):
             self._slow.update(values)
             return
@@ -457,26 +577,53 @@ class CrazyflieBridge:
         self._publish_status()
 
     def _send_setpoint(self, now_s: float) -> None:
+        self.gate.heard_s = max(self.gate.heard_s, self._heard_s)
         cmd = self.gate.tick(now_s)
+        self._report_phase(now_s, cmd)
         if cmd is None:
             return
-        if self.gate.holding(now_s) and not self._holding_logged:
-            self._holding_logged = True
-            _log.warning(
-                "no fresh setpoint for %.2f s: holding %s",
-                self.section.watchdog_s,
-                [round(v, 3) for v in cmd.position_m],
-            )
         if cmd.motors_off:
             self._send("send_stop_setpoint")
             self._commanding = False
-            _log.info("landed: motors off")
+            self._motors_off = True
+            self._count("landings")
+            _log.warning(
+                "landed (%s): motors off on the floor (no latch)", self.gate.landing_reason
+            )
+            self._publish_status()
             return
         x, y, z = cmd.position_m
         if not self._send("send_position_setpoint", x, y, z, cmd.yaw_deg):
             return
         self._commanding = True
+        self._motors_off = False
         self._count("setpoints_sent")
+
+    def _report_phase(self, now_s: float, cmd: SetpointCommand | None) -> None:
+        """Log and publish each change of what the gate does (hold, landing, ...)."""
+        phase = self.gate.phase(now_s)
+        if phase == self._phase:
+            return
+        before, self._phase = self._phase, phase
+        where = [round(v, 3) for v in cmd.position_m] if cmd is not None else None
+        if phase == "holding":
+            self._count("holds")
+            _log.warning(
+                "ground station silent for %.2f s: holding %s (landing after %.2f s more)",
+                self.gate.silent_s(now_s),
+                where,
+                self.gate.hold_s,
+            )
+        elif phase == "landing":
+            _log.warning(
+                "landing (%s) from %s at %.2f m/s",
+                self.gate.landing_reason,
+                where,
+                self.gate.land_speed_mps,
+            )
+        else:
+            _log.info("bridge: %s -> %s", before, phase)
+        self._publish_status()
 
     def _shutdown(self) -> None:
         for sub in self._subs:
@@ -514,6 +661,11 @@ class CrazyflieBridge:
             "latched": self.gate.latched,
             "stop_reason": self.gate.stop_reason,
             "holding": self.gate.holding(self._clock()),
+            "phase": self.gate.phase(self._clock()),
+            "landing_reason": self.gate.landing_reason,
+            "motors_off": self._motors_off,
+            "link_silent": self._link_silent,
+            "silent_s": round(min(self.gate.silent_s(self._clock()), 1e6), 3),
             "telemetry": self.seq,
             "counts": dict(self.counts),
             "dropped_setpoints": dict(self.gate.dropped),
