@@ -481,6 +481,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         args.out,
         drone=args.drone,
         fit_tether=args.fit_tether,
+        model=args.model,
+        untethered=args.untethered,
     )
 
 
@@ -597,7 +599,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser(
         "calibrate",
-        help="fit thrust scale, thrust axis, accelerometer bias from recordings",
+        help="fit the airframe's thrust scale, thrust axis, battery term, rotor drag",
         description="Fit each drone's [calibration] from recordings with motion capture and "
         "write the configuration plus [drones.<id>.calibration] (docs/calibration.md). "
         "Without --drone every drone in the recordings is calibrated, and said so; when the "
@@ -614,7 +616,22 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--out", required=True, metavar="PATH.toml", help="configuration to write")
     p.add_argument(
-        "--fit-tether", action="store_true", help="also fit the tether's ω and the base position"
+        "--untethered",
+        action="store_true",
+        help="flights without the tether: the true tension is zero (the cleanest reference)",
+    )
+    p.add_argument(
+        "--model",
+        choices=["airframe", "full"],
+        default="airframe",
+        help="airframe (default): the airframe's constants (thrust scale, battery term, thrust "
+        "axis, rotor drag) across flights, each power-on's accelerometer offsets printed and "
+        "not written; full: the earlier accelerometer-based fit (bias written, --fit-tether)",
+    )
+    p.add_argument(
+        "--fit-tether",
+        action="store_true",
+        help="also fit the tether's ω and the base position (--model full)",
     )
     p.add_argument(
         "--log-level", choices=["DEBUG", "INFO", "WARNING", "ERROR"], help="log level (INFO)"

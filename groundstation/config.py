@@ -220,6 +220,18 @@ class FilterSection(_Section):
     """Below this fraction of the weight the drone is surely on the ground; at or above it,
     on the ground until lift-off is seen (groundstation.contact: motion-capture height, the
     IMU's climb, or the floor no longer carrying it)."""
+    accel_slow: bool = True
+    """(added) Replace the accelerometer's slow content by what transfers across power-ons
+    (groundstation.slow_accel, docs/estimator_design.md): its mean is learnt at rest and, in
+    the air, as the zero (or motion-capture) mean acceleration over
+    ``accel_slow_time_constant_s``. False: the accelerometer's mean is trusted as read."""
+    accel_slow_time_constant_s: float = Field(30.0, gt=0.0)
+    """(added) τ, the crossover in the air, s: below ``1/(2π·τ)`` the observation rests on
+    thrust, attitude and the thrust axis. Longer lets less of a sustained manoeuvre into the
+    bias (error ≤ m·Δv/τ); shorter learns a bias never seen at rest sooner."""
+    drag_velocity_time_constant_s: float = Field(4.0, gt=0.0)
+    """(added) Without motion capture the rotor-drag term's velocity is the accelerometer's
+    leaky integral with this time constant, s (groundstation.slow_accel)."""
 
 
 class LocalizationSection(_Section):
@@ -268,6 +280,10 @@ class CalibrationSection(_Section):
     """Change of the thrust scale per volt of ``vbat_v`` above ``thrust_vbat_ref_v``, 1/V."""
     thrust_vbat_ref_v: float = Field(3.9, gt=0.0)
     """Battery voltage at which ``thrust_scale`` holds, V."""
+    rotor_drag_n_s_per_m: float = Field(0.0, ge=0.0, le=1.0)
+    """(added) ``D_xy``: the rotors' drag per m/s of body-horizontal speed, N·s/m; the
+    observation adds ``R·D·Rᵀ·v`` back (v from motion capture, else the accelerometer's
+    leaky velocity). Written by ``groundstation calibrate``; 0: no drag term."""
     thrust_vbat_range_v: tuple[float, float] | None = None
     """(added) Battery voltage range ``[lo, hi]`` the thrust map was calibrated over, V
     (written by ``groundstation calibrate``: its hover samples' ``vbat_v``). Outside it the

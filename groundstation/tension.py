@@ -205,10 +205,13 @@ class ObservationCalibration:
         F   = thrust_n * (thrust_scale + thrust_vbat_slope_per_v * (vbat_v - thrust_vbat_ref_v))
         b   = R_x(about_x) R_y(about_y) e3
             = (sin about_y, -sin about_x cos about_y, cos about_x cos about_y)
-        T   = m R f - R b F                      # eq:NE_tether with the corrections
+        T   = m R f - R b F + R D R^T v          # eq:NE_tether with the corrections
 
-    The voltage term applies only when the sample carries ``vbat_v``. The defaults change
-    nothing (``T = m R f - R e3 F``, bit for bit the uncalibrated formula).
+    ``D = diag(D_xy, D_xy, 0)`` is the rotors' momentum drag in the body frame (the drag force
+    ``-R D R^T v`` would otherwise read as tension; :mod:`groundstation.slow_accel` says where
+    ``v`` comes from). The voltage term applies only when the sample carries ``vbat_v``, the
+    drag term only with a velocity. The defaults change nothing (``T = m R f - R e3 F``, bit
+    for bit the uncalibrated formula).
 
     Attributes:
         thrust_scale: Factor on the reported thrust (the nominal PWM->thrust map's error),
@@ -220,6 +223,8 @@ class ObservationCalibration:
         thrust_vbat_slope_per_v: Change of the thrust scale per volt above
             ``thrust_vbat_ref_v``, 1/V.
         thrust_vbat_ref_v: Battery voltage at which ``thrust_scale`` holds, V, > 0.
+        rotor_drag_n_s_per_m: ``D_xy``, the rotors' drag per body-horizontal speed,
+            N·s/m, >= 0.
     """
 
     thrust_scale: float = 1.0
@@ -227,6 +232,7 @@ class ObservationCalibration:
     accel_bias_mps2: tuple[float, float, float] = (0.0, 0.0, 0.0)
     thrust_vbat_slope_per_v: float = 0.0
     thrust_vbat_ref_v: float = 3.9
+    rotor_drag_n_s_per_m: float = 0.0
     thrust_axis_body: tuple[float, float, float] = field(init=False, repr=False)
     """``b = R_x(about_x) R_y(about_y) e3``, body frame, unit (derived)."""
 
@@ -237,6 +243,7 @@ class ObservationCalibration:
             *self.accel_bias_mps2,
             self.thrust_vbat_slope_per_v,
             self.thrust_vbat_ref_v,
+            self.rotor_drag_n_s_per_m,
         )
         if len(self.thrust_axis_rad) != 2 or len(self.accel_bias_mps2) != 3:
             raise ValueError(
@@ -245,6 +252,11 @@ class ObservationCalibration:
             )
         if not all(math.isfinite(v) for v in values):
             raise ValueError(f"ObservationCalibration values must be finite, got {self!r}")
+        if self.rotor_drag_n_s_per_m < 0.0:
+            raise ValueError(
+                "ObservationCalibration.rotor_drag_n_s_per_m must be >= 0, got "
+                f"{self.rotor_drag_n_s_per_m!r}"
+            )
         if not (self.thrust_scale > 0.0 and self.thrust_vbat_ref_v > 0.0):
             raise ValueError(
                 "ObservationCalibration.thrust_scale and thrust_vbat_ref_v must be > 0, got "
@@ -260,6 +272,7 @@ class ObservationCalibration:
             and self.thrust_axis_rad == (0.0, 0.0)
             and self.accel_bias_mps2 == (0.0, 0.0, 0.0)
             and self.thrust_vbat_slope_per_v == 0.0
+            and self.rotor_drag_n_s_per_m == 0.0
         )
 
     def thrust_factor(self, vbat_v: float | None) -> float:
@@ -309,6 +322,7 @@ def observe_tension(
     calibration: ObservationCalibration | None = None,
     vbat_v: float | None = None,
     ground_thrust_ratio: float = 0.5,
+    velocity_world_mps: tuple[float, float, float] | None = None,
 ) -> TensionObservation:
     """Raw tension observation from one IMU + thrust sample (``eq:NE_tether``).
 
@@ -343,6 +357,8 @@ def observe_tension(
             calibration's battery slope.
         ground_thrust_ratio: Below this fraction of the weight the floor carries the
             drone, in (0, 1).
+        velocity_world_mps: The drone's velocity, world frame, m/s, for the calibration's
+            rotor drag (None: no drag term).
 
     Returns:
         The observation (tension in the world frame, N) or the ground-contact reason.
@@ -365,7 +381,9 @@ def observe_tension(
     if vbat_v is not None and not (math.isfinite(vbat_v) and vbat_v > 0.0):
         raise InvalidObservationError(f"vbat_v must be finite and > 0, got {vbat_v!r}")
     bx, by, bz = 0.0, 0.0, 1.0
+    drag = 0.0
     if calibration is not None:
+        drag = calibration.rotor_drag_n_s_per_m
         thrust_n = thrust_n * calibration.thrust_factor(vbat_v)
         ax, ay, az = calibration.accel_bias_mps2
         accel = [accel[0] - ax, accel[1] - ay, accel[2] - az]
@@ -397,6 +415,11 @@ def observe_tension(
     fx = mass_kg * accel[0] - bx * thrust_n
     fy = mass_kg * accel[1] - by * thrust_n
     fz = mass_kg * accel[2] - bz * thrust_n
+    if drag > 0.0 and velocity_world_mps is not None:
+        # + D (R^T v)_xy in the body frame: the rotors' drag added back (it is no tension).
+        vx, vy, vz = velocity_world_mps
+        fx += drag * (r00 * vx + r10 * vy + r20 * vz)
+        fy += drag * (r01 * vx + r11 * vy + r21 * vz)
     tension = np.array(
         [
             r00 * fx + r01 * fy + r02 * fz,

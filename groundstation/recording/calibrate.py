@@ -18,7 +18,7 @@ import tempfile
 import tomllib
 from collections import defaultdict
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from groundstation import messages
+from groundstation.airframe import AIRFRAME_PARAMETERS, AirframeFit, fit_airframe
 from groundstation.calibration import (
     CalibrationData,
     CalibrationError,
@@ -333,7 +334,7 @@ def calibrate_drone(
         fit = fit_calibration(
             rec.data,
             mass,
-            weight_n_per_m=rec.weight_n_per_m,
+            weight_n_per_m=None if math.isnan(rec.weight_n_per_m) else rec.weight_n_per_m,
             floor_z_m=params.base.floor_z_m,
             initial=initial,
             vbat_ref_v=cal.thrust_vbat_ref_v,
@@ -606,6 +607,100 @@ def _which_drones(
     return lines
 
 
+def airframe_drone(rec: DroneRecording, settings: Settings, *, untethered: bool) -> AirframeFit:
+    """Fit one drone's airframe constants (groundstation.airframe) across its recordings.
+
+    Raises:
+        CalibrateInputError: too little usable flight.
+    """
+    params = settings.for_drone(rec.drone)
+    try:
+        return fit_airframe(
+            rec.data,
+            params.drone.mass_kg,
+            weight_n_per_m=None if untethered else rec.weight_n_per_m,
+            floor_z_m=params.base.floor_z_m,
+            vbat_ref_v=params.calibration.thrust_vbat_ref_v,
+            min_samples_s=MIN_HOVER_S,
+        )
+    except CalibrationError as exc:
+        files = ", ".join(repr(f) for f in rec.files)
+        raise CalibrateInputError(f"{files}: drone {rec.drone!r}: {exc}") from None
+
+
+def _pm_airframe(fit: AirframeFit, name: str, fmt: str) -> str:
+    std = fit.std[name]
+    value = fit.values[name]
+    if std is not None:
+        return f"{value:{fmt}} ± {std:{fmt}}"
+    return f"{value:{fmt}} (fixed)"
+
+
+def format_airframe(drone: str, fit: AirframeFit, files: Sequence[str]) -> str:
+    """The report printed for one drone: constants, then each power-on's nuisances."""
+    mn = 1e3
+    ref = "the catenary at the motion-capture position" if fit.tethered else "zero (untethered)"
+    lines = [
+        f"drone {drone}: {fit.samples} samples (n_eff {fit.n_eff:.0f} after autocorrelation) "
+        f"from {len(fit.flights)} power-on(s): {', '.join(files)}; reference tension: {ref}",
+        "  airframe constants (written):",
+        f"    thrust_scale             {_pm_airframe(fit, 'thrust_scale', '.4f')}",
+        "    thrust_axis_rad          ["
+        + ", ".join(_pm_airframe(fit, n, ".4f") for n in ("about_x_rad", "about_y_rad"))
+        + "]",
+        f"    thrust_vbat_slope_per_v  {_pm_airframe(fit, 'vbat_slope_per_v', '.4f')}"
+        f"  (about thrust_vbat_ref_v = {fit.vbat_ref_v:g} V)",
+        f"    rotor_drag_n_s_per_m     {_pm_airframe(fit, 'rotor_drag_n_s_per_m', '.4f')}",
+    ]
+    for name, why in fit.fixed.items():
+        lines.append(f"    fixed {name} = 0: {why}")
+    lines.append(
+        "  per power-on (printed, NOT written: the service learns these at each power-on):"
+    )
+    for f, path in zip(fit.flights, files, strict=False):
+        a = f.accel_offset_body_mps2
+        r = f.residual_mean_n * mn
+        vr = "" if f.vbat_range_v is None else f", battery {f.vbat_range_v[0]:.2f}–"
+        vr += "" if f.vbat_range_v is None else f"{f.vbat_range_v[1]:.2f} V"
+        lines.append(
+            f"    {Path(path).name}: accelerometer offset [{a[0]:+.3f}, {a[1]:+.3f}, "
+            f"{a[2]:+.3f}] m/s²; tension left by the constants [{r[0]:+.1f}, {r[1]:+.1f}, "
+            f"{r[2]:+.1f}] mN ({f.samples} samples{vr})"
+        )
+    spread = fit.flight_spread_n * mn
+    if len(fit.flights) > 1:
+        lines.append(
+            f"  spread across power-ons x/y/z {spread[0]:.1f}/{spread[1]:.1f}/{spread[2]:.1f} mN:"
+            " expect a new power-on to differ from the constants by about this much"
+        )
+    b, a2 = fit.rms_before_n * mn, fit.rms_after_n * mn
+    lines.append(
+        f"  tension residual RMS x/y/z, mN: nominal {b[0]:.1f} {b[1]:.1f} {b[2]:.1f}"
+        f"  calibrated {a2[0]:.1f} {a2[1]:.1f} {a2[2]:.1f}"
+    )
+    return "\n".join(lines)
+
+
+def _airframe_table(fit: AirframeFit, cal: Any, source: str) -> dict[str, Any]:
+    v = fit.values
+    rng = fit.vbat_range_v
+    vbat = None if rng is None else [math.floor(rng[0] * 1e3) / 1e3, math.ceil(rng[1] * 1e3) / 1e3]
+    # (rounded outward to the millivolt, as the full model's range)
+    return {
+        "thrust_scale": round(v["thrust_scale"], 6),
+        "thrust_axis_rad": [round(v["about_x_rad"], 6), round(v["about_y_rad"], 6)],
+        # Per power-on: learnt by the service at each power-on, never carried (issue 20).
+        "accel_bias_mps2": [0.0, 0.0, 0.0],
+        "thrust_vbat_slope_per_v": round(v["vbat_slope_per_v"], 6),
+        "thrust_vbat_ref_v": fit.vbat_ref_v,
+        "rotor_drag_n_s_per_m": round(v["rotor_drag_n_s_per_m"], 6),
+        **({} if vbat is None else {"thrust_vbat_range_v": vbat}),
+        "rest": cal.rest,
+        "rest_required": False,
+        "source": source,
+    }
+
+
 def run_calibrate(
     settings: Settings,
     config_path: str | None,
@@ -614,6 +709,8 @@ def run_calibrate(
     *,
     drone: str | None = None,
     fit_tether: bool = False,
+    model: str = "airframe",
+    untethered: bool = False,
     now: Callable[[], datetime] = lambda: datetime.now(UTC),
     echo: Callable[[str], None] = print,
 ) -> int:
@@ -630,11 +727,38 @@ def run_calibrate(
     recs = read_recordings(files, settings, drone)
     for line in _which_drones(recs, settings, drone):
         echo(line)
-    cals = {d: calibrate_drone(r, settings, fit_tether=fit_tether) for d, r in recs.items()}
     stamp = now().strftime("%Y-%m-%dT%H:%M:%SZ")
     names = ", ".join(Path(f).name for f in files)
     patch: dict[str, Any] = {"drones": {}}
     comments: dict[str, list[str]] = {}
+    if model == "airframe":
+        if fit_tether:
+            raise CalibrateInputError("--fit-tether needs --model full")
+        for d in sorted(recs):
+            rec = recs[d]
+            afit = airframe_drone(rec, settings, untethered=untethered)
+            echo(format_airframe(d, afit, rec.files))
+            source = f"groundstation calibrate {stamp} from {names}"
+            table = _airframe_table(afit, settings.for_drone(d).calibration, source)
+            patch["drones"][d] = {"calibration": table}
+            head = [
+                f"groundstation calibrate (airframe constants), {stamp}, from {names}:",
+                f"{afit.samples} samples, residual RMS x/y/z "
+                + "/".join(f"{x * 1e3:.1f}" for x in afit.rms_after_n)
+                + " mN; accel_bias_mps2 is zero on purpose: the accelerometer's offsets "
+                "belong to each power-on and the service learns them there",
+            ]
+            for name in AIRFRAME_PARAMETERS:
+                std = afit.std[name]
+                if std is not None:
+                    head.append(f"  {name} = {afit.values[name]:.6g} ± {std:.2g}")
+            for name, why in afit.fixed.items():
+                head.append(f"  {name} fixed at 0: {why}")
+            comments[f"drones.{d}.calibration"] = head
+        return _write_config(settings, config_path, patch, comments, out_path, echo)
+    if untethered:
+        recs = {d: replace(r, weight_n_per_m=math.nan) for d, r in recs.items()}
+    cals = {d: calibrate_drone(r, settings, fit_tether=fit_tether) for d, r in recs.items()}
     for d in sorted(cals):
         fit = cals[d].fit
         rec = recs[d]
@@ -666,7 +790,18 @@ def run_calibrate(
                 base = np.array(params.base.position_m) + np.array(offset)
                 tables["base"] = {"position_m": [round(float(x), 5) for x in base]}
         patch["drones"][d] = tables
+    return _write_config(settings, config_path, patch, comments, out_path, echo)
 
+
+def _write_config(
+    settings: Settings,
+    config_path: str | None,
+    patch: dict[str, Any],
+    comments: dict[str, list[str]],
+    out_path: str,
+    echo: Callable[[str], None],
+) -> int:
+    """Merge the drones' tables into the input configuration, validate, write atomically."""
     input_text = ""
     input_data: dict[str, Any] = {}
     if config_path is not None:

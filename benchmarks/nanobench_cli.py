@@ -1,0 +1,278 @@
+"""NanoBench through the command line: record → ``calibrate --untethered`` → serve without mocap.
+
+Real untethered Crazyflie 2.1 flights (../shared/data/nanobench, BSD-3; true tension zero).
+Each flight becomes a recording of Telemetry as ``groundstation record`` writes it
+(accel = imu_acc·9.80665, gyro, the onboard attitude, thrust = the nominal PWM map summed
+over motor_motor_m1..m4, vbat; mass 30 g assumed), once with the Vicon position
+(``position_m``, for calibration) and once without (to serve). ``groundstation calibrate
+--untethered`` runs on some flights; ``groundstation replay --offline`` (the service's own
+pipeline) re-estimates the others without motion capture. Per held-out flight: the median
+|T| of the Estimates in the air (the truth is zero), the share of Telemetry answered by an
+Estimate and the share of airborne rows not flagged ``on_ground``.
+
+``B6_linear_ramp_rep1`` is left out (a ground-effect hover at 0.07–0.2 m; the data README).
+
+Run:  python -m benchmarks.nanobench_cli [--out docs/nanobench_cli.md]
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+import json
+import statistics
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from groundstation.cli import main as gs_main
+from groundstation.recording.reader import RecordedMessage, copy_messages, iter_messages
+
+DATA = Path(__file__).resolve().parent.parent.parent / "shared" / "data" / "nanobench"
+G0 = 9.80665
+MASS_KG = 0.030
+DAYS = {
+    "B2_circle_slow_rep1": "2026-03-02",
+    "B3_figure8_fast_rep1": "2026-03-02",
+    "B6_linear_ramp_rep3": "2026-03-04",
+    "B2_circle_medium_rep2": "2026-03-05",
+    "B8_star_fast_rep2": "2026-03-05",
+    "B5_helix_medium_rep3": "2026-03-05",
+}
+AIR_MIN_Z_M = 0.25
+CONFIG = """\
+[drone]
+mass_kg = 0.030
+
+[calibration]
+thrust_vbat_ref_v = 3.5
+"""
+
+
+def nominal_thrust_n(pwm: np.ndarray) -> np.ndarray:
+    """The nominal per-motor PWM→thrust map of the data README, summed, N."""
+    per_motor = 2.130295e-11 * pwm**2 + 1.032633e-6 * pwm + 5.484560e-4
+    return np.where(pwm > 0, per_motor, 0.0).sum(axis=1)
+
+
+@dataclass(frozen=True)
+class Flight:
+    name: str
+    stamp_s: np.ndarray
+    airborne: np.ndarray
+    """Truth: motors on and Vicon height above AIR_MIN_Z_M."""
+    with_mocap: list[RecordedMessage]
+    without_mocap: list[RecordedMessage]
+
+
+def load(name: str, data_dir: Path = DATA) -> Flight:
+    a = np.genfromtxt(data_dir / f"{name}.csv", delimiter=",", names=True)
+    pwm = np.stack([a[f"motor_motor_m{i}"] for i in range(1, 5)], axis=1)
+    thrust = nominal_thrust_n(pwm)
+    acc = np.stack([a[f"imu_acc_{k}"] for k in "xyz"], 1) * G0
+    gyro = np.stack([a[f"imu_gyro_{k}"] for k in "xyz"], 1)
+    quat = np.stack([a[f"att_stateEstimate_q{k}"] for k in "wxyz"], 1)
+    pos = np.stack([a["px"], a["py"], a["pz"]], 1)
+    vbat = a["pwr_pm_vbat"]
+    armed = pwm.max(axis=1) > 0
+    t = a["t"]
+    ok = np.all(np.isfinite(acc), 1) & np.all(np.isfinite(quat), 1) & np.isfinite(thrust)
+    with_m: list[RecordedMessage] = []
+    without: list[RecordedMessage] = []
+    for seq, i in enumerate(np.flatnonzero(ok).tolist()):
+        body = {
+            "seq": seq,
+            "stamp_s": float(t[i]),
+            "accel_mps2": acc[i].tolist(),
+            "quat_wxyz": quat[i].tolist(),
+            "thrust_n": float(thrust[i]),
+            "gyro_rps": gyro[i].tolist(),
+            "armed": bool(armed[i]),
+            **({"vbat_v": float(vbat[i])} if np.isfinite(vbat[i]) and vbat[i] > 0 else {}),
+        }
+        t_ns = int(round(float(t[i]) * 1e9))
+        key = "tether/cf1/telemetry"
+        without.append(RecordedMessage(key, json.dumps(body).encode(), t_ns, t_ns))
+        if np.all(np.isfinite(pos[i])):
+            body["position_m"] = pos[i].tolist()
+        with_m.append(RecordedMessage(key, json.dumps(body).encode(), t_ns, t_ns))
+    air = armed & (pos[:, 2] > AIR_MIN_Z_M)
+    return Flight(name, t[ok], air[ok], with_m, without)
+
+
+def _run(argv: list[str]) -> tuple[int, str]:
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        rc = gs_main(argv)
+    return rc, out.getvalue()
+
+
+@dataclass(frozen=True)
+class Judged:
+    flight: str
+    median_abs_t_mn: float
+    answered: float
+    airborne_not_on_ground: float
+
+
+def judge(flight: Flight, config: Path, work: Path) -> Judged:
+    """Serve ``flight`` without motion capture (offline replay through the pipeline)."""
+    rec = work / f"{flight.name}-nomocap.mcap"
+    if not rec.exists():
+        copy_messages(flight.without_mocap, rec)
+    out = work / f"{flight.name}-{config.stem}-est.mcap"
+    rc, text = _run(["replay", "--offline", str(rec), "--config", str(config), "--out", str(out)])
+    if rc != 0:
+        raise RuntimeError(f"replay --offline failed ({rc}): {text}")
+    by_stamp: dict[float, dict] = {}
+    for m in iter_messages(out):
+        if m.key == "tether/cf1/estimate":
+            est = json.loads(m.payload)
+            by_stamp[round(est["stamp_s"], 6)] = est
+    norms, air_ok, air_n = [], 0, 0
+    for t, air in zip(flight.stamp_s.tolist(), flight.airborne.tolist(), strict=True):
+        est = by_stamp.get(round(t, 6))
+        if not air:
+            continue
+        air_n += 1
+        if est is None:
+            continue
+        if not est["on_ground"]:
+            air_ok += 1
+            norms.append(float(np.linalg.norm(est["tension_n"])))
+    return Judged(
+        flight.name,
+        1e3 * float(np.median(norms)) if norms else float("nan"),
+        len(by_stamp) / flight.stamp_s.size,
+        air_ok / max(air_n, 1),
+    )
+
+
+def calibrate(train: list[Flight], work: Path, tag: str, extra: list[str]) -> tuple[Path, str]:
+    base = work / "base.toml"
+    base.write_text(CONFIG)
+    files = []
+    for f in train:
+        p = work / f"{f.name}-mocap.mcap"
+        if not p.exists():
+            copy_messages(f.with_mocap, p)
+        files.append(str(p))
+    out = work / f"cal-{tag}.toml"
+    rc, text = _run(
+        ["calibrate", *files, "--untethered", "--config", str(base), "--out", str(out), *extra]
+    )
+    if rc != 0:
+        raise RuntimeError(f"calibrate failed ({rc}): {text}")
+    return out, text
+
+
+def variant_config(src: Path, dst: Path, extra_toml: str) -> Path:
+    dst.write_text(src.read_text() + "\n" + extra_toml)
+    return dst
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", help="write the markdown page here")
+    ap.add_argument("--data", default=str(DATA), help="the NanoBench directory")
+    args = ap.parse_args(argv)
+    t0 = time.time()
+    flights = {n: load(n, Path(args.data)) for n in DAYS}
+    lines: list[str] = []
+    say = lines.append
+    with tempfile.TemporaryDirectory() as tmp:
+        work = Path(tmp)
+        base = work / "base.toml"
+        base.write_text(CONFIG)
+        folds: list[tuple[str, list[str], list[str]]] = []
+        days = sorted(set(DAYS.values()))
+        for d in days:
+            held = [n for n in DAYS if DAYS[n] == d]
+            folds.append((f"day {d} held out", [n for n in DAYS if n not in held], held))
+        for n in DAYS:
+            folds.append((f"{n} held out", [m for m in DAYS if m != n], [n]))
+        variants = [
+            ("uncalibrated", None, ""),
+            ("full model (--model full)", ["--model", "full"], ""),
+            (
+                "airframe, accelerometer mean trusted",
+                [],
+                "[filter]\naccel_slow = false\n",
+            ),
+            ("airframe + slow accelerometer (default)", [], ""),
+        ]
+        results: dict[str, dict[str, list[Judged]]] = {v[0]: {} for v in variants}
+        reports: dict[str, str] = {}
+        for fold, train, held in folds:
+            for label, extra, toml in variants:
+                if extra is None:
+                    cfg = base
+                else:
+                    tag = f"{abs(hash((fold, tuple(extra)))) % 10**8}"
+                    cal, report = calibrate([flights[n] for n in train], work, tag, extra)
+                    if label.endswith("(default)"):
+                        reports[fold] = report
+                    cfg = variant_config(cal, work / f"v-{tag}-{len(toml)}.toml", toml)
+                results[label][fold] = [judge(flights[n], cfg, work) for n in held]
+        say("# NanoBench through the command line (real untethered Crazyflie flights)")
+        say("")
+        say(
+            "`python -m benchmarks.nanobench_cli` (this page; "
+            f"{time.time() - t0:.0f} s). Six shared flights (B6_linear_ramp_rep1 left out), "
+            "recorded as Telemetry with Vicon `position_m`, calibrated with `groundstation "
+            "calibrate --untethered`, served without motion capture by `groundstation replay "
+            "--offline` (the service's pipeline). Truth: zero tension. Per held-out flight: "
+            "median |T| of the Estimates in the air (mN); answered = share of Telemetry with an "
+            "Estimate; airborne = share of airborne rows (motors on, Vicon z > 0.25 m) not "
+            "`on_ground`."
+        )
+        say("")
+        for label, _, _ in variants:
+            say(f"## {label}")
+            say("")
+            say("| fold | flight | median abs T mN | answered | airborne |")
+            say("| --- | --- | ---: | ---: | ---: |")
+            loo = []
+            for fold, _, _ in folds:
+                for j in results[label][fold]:
+                    say(
+                        f"| {fold} | {j.flight} | {j.median_abs_t_mn:.1f} | "
+                        f"{100 * j.answered:.1f} % | {100 * j.airborne_not_on_ground:.1f} % |"
+                    )
+                    if fold.endswith("held out") and not fold.startswith("day"):
+                        loo.append(j.median_abs_t_mn)
+            cross = [
+                j.median_abs_t_mn
+                for fold, _, _ in folds
+                if fold.startswith("day")
+                for j in results[label][fold]
+            ]
+            say("")
+            say(
+                f"Cross-day: median over flights {statistics.median(cross):.1f} mN, worst "
+                f"{max(cross):.1f}; leave-one-out: median {statistics.median(loo):.1f}, worst "
+                f"{max(loo):.1f}."
+            )
+            say("")
+        say("## What calibrate printed (default model, one fold per held-out day)")
+        say("")
+        for fold, text in reports.items():
+            if fold.startswith("day"):
+                say(f"{fold}:")
+                say("```")
+                say(text.strip())
+                say("```")
+    page = "\n".join(lines) + "\n"
+    if args.out:
+        Path(args.out).write_text(page, encoding="utf-8")
+    sys.stdout.write(page)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,305 @@
+"""The accelerometer's slow content, replaced by what transfers (docs/estimator_design.md).
+
+Pure physics: Python floats only; time enters as ``dt_s``.
+
+Why. The tension observation (``eq:NE_tether``) ``T = m·R·f − R·u·F`` uses the IMU's specific
+force ``f``. An accelerometer reads ``f + b`` with ``b`` a bias (and scale/misalignment) that
+changes at every power-on: 0.1–0.35 m/s² on Crazyflies, i.e. 3–10 mN of tension on a 30 g
+drone, which a tether of ω = 0.05 N/m turns into 6–20 cm of ``s2`` (NOTES "Sensitivity"). A
+calibration cannot carry it from one power-on to the next; the drone's kinematics can:
+a tethered (or any) drone's velocity is bounded, so over a long window its mean acceleration
+is zero (or what motion capture says it is). So the observation is complementary::
+
+    T = m·R·(f − β) − R·u·F + R·D·Rᵀ·v           # eq:NE_tether with the slow part corrected
+    β ← β + (dt/τ)·((f − Rᵀ·(g·e3 + a_ref)) − β)   # body frame, first-order low-pass
+
+``β`` is the accelerometer's slow error in the body frame (a body-fixed bias stays put when
+the drone yaws); ``a_ref`` is the acceleration that the drone's kinematics vouch for: zero
+without motion capture, the motion-capture acceleration (low-passed) with it. Above the
+crossover ``1/(2π·τ)`` the accelerometer carries everything (tugs, manoeuvres); below it the
+slow content rests on thrust, attitude and the thrust axis (the hover model
+``m·g·e3 − R·u·F``) plus ``a_ref``. At rest on the floor (disarmed, still) ``a_ref = 0`` is
+exact and ``β`` is learnt quickly: that is this power-on's bias, measured at this power-on,
+carried nowhere else.
+
+What it cannot remove: where the drone's attitude estimator levels itself on the same
+accelerometer (the Crazyflie's do), an x/y bias tilts the reported attitude by ``b/g``; the
+observation is then off by about ``m·b`` horizontally in the full model and in the hover
+model alike (the two errors are the same to first order), and neither a rest phase nor the
+kinematics can tell it from the floor's tilt. docs/estimator_design.md has the argument.
+
+Rotor drag (PX4's EKF2 fuses the same term): a multirotor in translation feels
+``F_drag = −R·D·Rᵀ·v`` with ``D = diag(D_xy, D_xy, 0)`` in the body frame (momentum drag of
+the rotors), which the observation would report as tension unless added back. ``v`` is the
+motion-capture velocity when there is one, else the accelerometer's high-passed velocity
+(a leaky integral of ``R·(f − β) − g·e3`` with time constant ``τ_v``): it recovers
+manoeuvres of a few seconds and forgets drift. See :func:`drag_velocity_world_mps`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from typing import Literal
+
+__all__ = [
+    "SlowAccelParams",
+    "SlowAccelState",
+    "correct_accel_body_mps2",
+    "drag_velocity_world_mps",
+    "is_still",
+    "rows_from_quat_wxyz",
+    "slow_accel_step",
+]
+
+Vec3 = tuple[float, float, float]
+_ZERO3: Vec3 = (0.0, 0.0, 0.0)
+Phase = Literal["rest", "air", "hold"]
+"""``rest``: on the floor, disarmed and still (a_ref = 0 exactly); ``air``: flying (the
+filter observes); ``hold``: anything else (spool-up, landing, armed on the floor): β kept."""
+
+
+@dataclass(frozen=True, slots=True)
+class SlowAccelParams:
+    """Settings (config ``[filter]``: ``accel_slow_time_constant_s`` …).
+
+    Attributes:
+        time_constant_s: τ, the crossover in the air, s (> 0; ``inf``: the accelerometer's
+            mean is trusted, β only from rest). Longer: less of a sustained manoeuvre leaks
+            into β (error ≤ m·Δv/τ), slower to learn a bias never seen at rest.
+        rest_time_constant_s: at rest, β is the running mean of the still samples, forgetting
+            beyond this, s.
+        velocity_time_constant_s: τ_v of the accelerometer's leaky velocity (drag without
+            motion capture), s.
+        mocap_time_constant_s: low-pass of the motion-capture velocity and acceleration
+            (finite differences of positions), s.
+        mocap_max_gap_s: motion capture older than this is not used, s.
+    """
+
+    time_constant_s: float = 30.0
+    rest_time_constant_s: float = 5.0
+    velocity_time_constant_s: float = 4.0
+    mocap_time_constant_s: float = 0.15
+    mocap_max_gap_s: float = 0.2
+
+    def __post_init__(self) -> None:
+        for name in (
+            "time_constant_s",
+            "rest_time_constant_s",
+            "velocity_time_constant_s",
+            "mocap_time_constant_s",
+            "mocap_max_gap_s",
+        ):
+            value = getattr(self, name)
+            if not (value > 0.0):  # inf allowed, NaN refused
+                raise ValueError(f"SlowAccelParams.{name} must be > 0, got {value!r}")
+
+
+@dataclass(frozen=True, slots=True)
+class SlowAccelState:
+    """One drone's slow-accelerometer state (immutable; :func:`slow_accel_step` returns the
+    next).
+
+    Attributes:
+        bias_body_mps2: β, the accelerometer's slow error, body frame, m/s².
+        rest_samples: still samples at rest averaged into β since the last lift-off (the
+            running mean's count).
+        air_samples: samples in the air since β was last set at rest (the running mean's
+            count when no rest was seen).
+        learnt_at_rest: β was set at rest at this power-on.
+        velocity_world_mps: the drag's velocity, world frame, m/s (zero on the ground).
+        velocity_source: where it comes from now.
+        mocap_stamp_s / mocap_world_m: the last motion-capture sample (None: none yet).
+        mocap_velocity_world_mps / mocap_accel_world_mps2: their low-passed differences.
+        mocap_samples: consecutive motion-capture samples (the differences need 3).
+    """
+
+    bias_body_mps2: Vec3 = _ZERO3
+    rest_samples: int = 0
+    air_samples: int = 0
+    learnt_at_rest: bool = False
+    velocity_world_mps: Vec3 = _ZERO3
+    velocity_source: Literal["none", "accel", "mocap"] = "none"
+    mocap_stamp_s: float | None = None
+    mocap_world_m: Vec3 | None = None
+    mocap_velocity_world_mps: Vec3 = _ZERO3
+    mocap_accel_world_mps2: Vec3 = _ZERO3
+    mocap_samples: int = 0
+
+
+def correct_accel_body_mps2(state: SlowAccelState, accel_body_mps2: Vec3) -> Vec3:
+    """``f − β``: the reading with its slow error removed, body frame, m/s²."""
+    bx, by, bz = state.bias_body_mps2
+    return (accel_body_mps2[0] - bx, accel_body_mps2[1] - by, accel_body_mps2[2] - bz)
+
+
+def drag_velocity_world_mps(state: SlowAccelState) -> Vec3 | None:
+    """The velocity the rotor-drag term uses (None on the ground: no drag there)."""
+    return None if state.velocity_source == "none" else state.velocity_world_mps
+
+
+def _mocap_step(
+    state: SlowAccelState, params: SlowAccelParams, stamp_s: float, mocap_world_m: Vec3 | None
+) -> SlowAccelState:
+    """Low-passed first and second differences of the motion-capture position."""
+    if mocap_world_m is None:
+        if state.mocap_stamp_s is not None and stamp_s - state.mocap_stamp_s > (
+            params.mocap_max_gap_s
+        ):
+            return replace(state, mocap_stamp_s=None, mocap_world_m=None, mocap_samples=0)
+        return state
+    prev, prev_t = state.mocap_world_m, state.mocap_stamp_s
+    if prev is None or prev_t is None:
+        return replace(state, mocap_stamp_s=stamp_s, mocap_world_m=mocap_world_m, mocap_samples=1)
+    dt = stamp_s - prev_t
+    if not (0.0 < dt <= params.mocap_max_gap_s):
+        return replace(state, mocap_stamp_s=stamp_s, mocap_world_m=mocap_world_m, mocap_samples=1)
+    k = min(dt / params.mocap_time_constant_s, 1.0)  # first-order low-pass gain
+    v_old = state.mocap_velocity_world_mps
+    raw_v = tuple((mocap_world_m[i] - prev[i]) / dt for i in range(3))
+    v_new: tuple[float, ...]
+    a_new: tuple[float, ...]
+    if state.mocap_samples < 2:
+        v_new, a_new = raw_v, _ZERO3
+    else:
+        v_new = tuple(v_old[i] + k * (raw_v[i] - v_old[i]) for i in range(3))
+        a_old = state.mocap_accel_world_mps2
+        raw_a = tuple((v_new[i] - v_old[i]) / dt for i in range(3))
+        a_new = tuple(a_old[i] + k * (raw_a[i] - a_old[i]) for i in range(3))
+    return replace(
+        state,
+        mocap_stamp_s=stamp_s,
+        mocap_world_m=mocap_world_m,
+        mocap_velocity_world_mps=(v_new[0], v_new[1], v_new[2]),
+        mocap_accel_world_mps2=(a_new[0], a_new[1], a_new[2]),
+        mocap_samples=state.mocap_samples + 1,
+    )
+
+
+def slow_accel_step(
+    state: SlowAccelState,
+    params: SlowAccelParams,
+    *,
+    dt_s: float,
+    stamp_s: float,
+    accel_body_mps2: Vec3,
+    R_world_body: tuple[Vec3, Vec3, Vec3],
+    phase: Phase,
+    mocap_world_m: Vec3 | None,
+    gravity_mps2: float = 9.81,
+) -> SlowAccelState:
+    """Learn β and the drag velocity from one sample (module doc for the equations).
+
+    Args:
+        state: the drone's state before the sample.
+        params: settings.
+        dt_s: time since the previous sample, s (0 at a restart: nothing integrates).
+        stamp_s: the sample's time, s.
+        accel_body_mps2: the specific force as read (after any configured bias), m/s².
+        R_world_body: the attitude as rows of the rotation matrix.
+        phase: rest / air / hold (see :data:`Phase`).
+        mocap_world_m: the motion-capture position of this sample, m, or None.
+        gravity_mps2: g, m/s².
+
+    Returns:
+        The next state.
+    """
+    st = _mocap_step(state, params, stamp_s, mocap_world_m)
+    mocap_ok = st.mocap_samples >= 3 and mocap_world_m is not None
+    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = R_world_body
+    if phase == "hold":
+        return replace(st, velocity_world_mps=_ZERO3, velocity_source="none")
+    if phase == "rest":
+        # Still on the floor: a_ref = 0 exactly. A running mean of this rest's samples
+        # (a new rest starts a new mean: the drone may have been moved between flights).
+        n = st.rest_samples + 1 if st.learnt_at_rest and st.air_samples == 0 else 1
+        gain = max(1.0 / n, dt_s / params.rest_time_constant_s) if n > 1 else 1.0
+        ref = (0.0, 0.0, gravity_mps2)
+        learnt_at_rest = True
+    else:
+        n = st.air_samples + 1
+        if mocap_ok:
+            ax, ay, az = st.mocap_accel_world_mps2
+            ref = (ax, ay, gravity_mps2 + az)
+        else:
+            ref = (0.0, 0.0, gravity_mps2)
+        if st.learnt_at_rest:
+            gain = min(dt_s / params.time_constant_s, 1.0)
+        else:
+            # Never seen at rest (started in flight): the running mean until τ's worth.
+            gain = max(1.0 / n, min(dt_s / params.time_constant_s, 1.0))
+        learnt_at_rest = st.learnt_at_rest
+    # e = f − Rᵀ·(g·e3 + a_ref), body frame: what the accelerometer reads beyond the
+    # kinematics it should read.
+    rx, ry, rz = ref
+    ex = accel_body_mps2[0] - (r00 * rx + r10 * ry + r20 * rz)
+    ey = accel_body_mps2[1] - (r01 * rx + r11 * ry + r21 * rz)
+    ez = accel_body_mps2[2] - (r02 * rx + r12 * ry + r22 * rz)
+    bx, by, bz = st.bias_body_mps2
+    bias = (bx + gain * (ex - bx), by + gain * (ey - by), bz + gain * (ez - bz))
+    if phase == "rest":
+        return replace(
+            st,
+            bias_body_mps2=bias,
+            rest_samples=n,
+            air_samples=0,
+            learnt_at_rest=learnt_at_rest,
+            velocity_world_mps=_ZERO3,
+            velocity_source="none",
+        )
+    source: Literal["accel", "mocap"]
+    if mocap_ok:
+        velocity, source = st.mocap_velocity_world_mps, "mocap"
+    else:
+        # Leaky integral of the corrected world acceleration: v' = a − v/τ_v.
+        fx, fy, fz = (
+            accel_body_mps2[0] - bias[0],
+            accel_body_mps2[1] - bias[1],
+            accel_body_mps2[2] - bias[2],
+        )
+        awx = r00 * fx + r01 * fy + r02 * fz
+        awy = r10 * fx + r11 * fy + r12 * fz
+        awz = r20 * fx + r21 * fy + r22 * fz - gravity_mps2
+        vx, vy, vz = st.velocity_world_mps if st.velocity_source != "none" else _ZERO3
+        leak = math.exp(-dt_s / params.velocity_time_constant_s)
+        velocity = (vx * leak + awx * dt_s, vy * leak + awy * dt_s, vz * leak + awz * dt_s)
+        source = "accel"
+    return replace(
+        st,
+        bias_body_mps2=bias,
+        air_samples=n,
+        velocity_world_mps=velocity,
+        velocity_source=source,
+    )
+
+
+def rows_from_quat_wxyz(quat_wxyz: tuple[float, ...]) -> tuple[Vec3, Vec3, Vec3]:
+    """``R_world_body`` as three rows from a body→world ``[w, x, y, z]`` quaternion
+    (normalised here; the caller has refused degenerate ones)."""
+    w, x, y, z = quat_wxyz
+    n = math.sqrt(w * w + x * x + y * y + z * z)
+    w, x, y, z = w / n, x / n, y / n, z / n
+    return (
+        (1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - w * z), 2.0 * (x * z + w * y)),
+        (2.0 * (x * y + w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - w * x)),
+        (2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y)),
+    )
+
+
+def is_still(
+    accel_body_mps2: Vec3,
+    gyro_rps: Vec3 | None,
+    gravity_mps2: float = 9.81,
+    *,
+    max_gyro_rps: float = 0.1,
+    max_accel_dev_mps2: float = 0.5,
+) -> bool:
+    """A disarmed sample is at rest when the body barely turns and the specific force is
+    about g (a drone carried by hand or bumped is not)."""
+    ax, ay, az = accel_body_mps2
+    if abs(math.sqrt(ax * ax + ay * ay + az * az) - gravity_mps2) > max_accel_dev_mps2:
+        return False
+    if gyro_rps is None:
+        return True
+    gx, gy, gz = gyro_rps
+    return gx * gx + gy * gy + gz * gz <= max_gyro_rps * max_gyro_rps
