@@ -11,6 +11,7 @@ import time
 from collections.abc import Callable, Iterator
 from typing import Any
 
+import numpy as np
 import pytest
 
 from groundstation.bridges.crazyflie.bridge import (
@@ -358,14 +359,63 @@ def test_gate_ramps_take_off_and_land_then_motors_off() -> None:
     assert gate.ramp((0, 0, 0), (0, 0, 0.5), 5.0, 30.0, 0.0) == "bad", "too fast"
 
 
+def test_gate_refuses_setpoints_out_of_reach_or_too_fast() -> None:
+    from groundstation.bridges.crazyflie.bridge import Reach
+
+    reach = Reach((0.0, 0.0, 0.754), 1.6, 0.05)
+    gate = CommandGate(watchdog_s=0.5, reach=reach, max_speed_mps=1.0, yaw_deg=0.0)
+    assert gate.on_setpoint((50.0, 0.0, 10.0), 1.0, 0.0, 1.0, None) == "out_of_reach"
+    assert gate.on_setpoint((1.6, 0.0, 0.754), 1.0, 0.0, 1.0, None) == "out_of_reach"
+    # a first setpoint is judged against the measured position: 0.6 m > 1 m/s x 0.5 s
+    assert gate.on_setpoint((0.0, 0.0, 0.6), 1.0, 0.0, 1.0, None, (0.0, 0.0, 0.0)) == "too_fast"
+    assert gate.on_setpoint((0.0, 0.0, 0.4), 1.0, 0.0, 1.0, None, (0.0, 0.0, 0.0)) == "accepted"
+    # 1 cm per 10 ms is 1 m/s: accepted; 5 cm per 10 ms is not, nor after refusals
+    assert gate.on_setpoint((0.01, 0.0, 0.4), 1.01, 0.01, 1.01, None) == "accepted"
+    assert gate.on_setpoint((0.06, 0.0, 0.4), 1.02, 0.02, 1.02, None) == "too_fast"
+    assert gate.on_setpoint((0.06, 0.0, 0.4), 1.03, 0.03, 1.03, None) == "too_fast"
+    # two setpoints delivered together are judged over one setpoint period (20 ms)
+    assert gate.on_setpoint((0.025, 0.0, 0.4), 1.03, 0.03, 1.03, None) == "accepted"
+    # after a pause in the stream (0.5 s of drone time) a 0.4 m move is 0.8 m/s
+    assert gate.on_setpoint((0.425, 0.0, 0.4), 1.53, 0.53, 1.53, None) == "accepted"
+    cmd = gate.tick(0.53)
+    assert cmd is not None and cmd.position_m == (0.425, 0.0, 0.4)
+    assert gate.dropped == {"out_of_reach": 2, "too_fast": 3}
+
+
+def test_gate_landing_stop_lands_and_emergency_stop_latches() -> None:
+    from groundstation.bridges.crazyflie.bridge import LAND_SETTLE_S
+
+    gate = CommandGate(watchdog_s=0.5, yaw_deg=0.0, land_speed_mps=0.5, hold_s=5.0)
+    assert gate.on_stop("nothing flying", 0.0, landing=True) == "motors_off"
+    assert not gate.latched
+    gate.on_setpoint((0.0, 0.0, 0.5), 1.0, 0.0, 1.0, None)
+    assert gate.on_stop("tug-to-land", 0.0, landing=True) == "landing"
+    assert not gate.latched and gate.phase(0.0) == "landing"
+    assert gate.on_stop("tug-to-land", 0.1, landing=True) == "landing", "a repeat changes nothing"
+    half = gate.tick(0.5)
+    assert half is not None and half.position_m[2] == pytest.approx(0.25)
+    off = gate.tick(1.0 + LAND_SETTLE_S + 0.01)
+    assert off is not None and off.motors_off and not gate.latched
+    # flies again without a re-arm
+    assert gate.on_setpoint((0.0, 0.0, 0.5), 3.0, 3.0, 3.0, None) == "accepted"
+    assert gate.on_stop("operator", 3.0) == "latched" and gate.tick(3.1) is None
+    assert gate.on_stop("tug-to-land", 3.2, landing=True) == "latched", "no landing lifts a latch"
+    assert gate.latched
+
+
 # --------------------------------------------------------------------------- runner
 
 
 class Harness:
     """The runner on a thread, with an in-memory bus and the fake link driven by hand."""
 
-    def __init__(self, link: FakeLink, section: CrazyflieSection | None = None) -> None:
-        self.bus = InMemoryBus()
+    def __init__(
+        self,
+        link: FakeLink,
+        section: CrazyflieSection | None = None,
+        bus: InMemoryBus | None = None,
+    ) -> None:
+        self.bus = bus or InMemoryBus()
         self.link = link
         reach = ((0.0, 0.0, 0.754), 1.6)  # the default base and tether
         self.bridge = CrazyflieBridge(
@@ -425,10 +475,12 @@ def wait_for(predicate: Callable[[], bool], what: str, timeout_s: float = 5.0) -
 def harness() -> Iterator[Callable[..., Harness]]:
     made: list[Harness] = []
 
-    def make(link: FakeLink | None = None, **section: Any) -> Harness:
+    def make(
+        link: FakeLink | None = None, bus: InMemoryBus | None = None, **section: Any
+    ) -> Harness:
         section.setdefault("data_timeout_s", 60.0)  # tests pause between packets
         section.setdefault("silence_s", 60.0)  # and publish no Estimates (the heartbeat)
-        h = Harness(link or FakeLink(), CrazyflieSection(**section))
+        h = Harness(link or FakeLink(), CrazyflieSection(**section), bus)
         made.append(h)
         return h.start()
 
@@ -995,3 +1047,236 @@ def test_the_bridge_on_cflib_stops_when_the_firmware_refuses_a_block(
     assert rc == 2
     msg = " ".join(r.getMessage() for r in caplog.records)
     assert "refused log block tel1" in msg and "No more memory available" in msg
+
+
+# ------------------------------------------------------------------ issue 21: when things go wrong
+#
+# The fake link's firmware model (FakeLink.firmware) flies what the bridge sends: it follows
+# position setpoints at 1 m/s per axis, levels 0.5 s and cuts the motors (Locked) 2 s after the
+# last setpoint, locks on an emergency stop, falls when the motors are off in the air (each
+# arrival on the floor is an impact). The log data plays in real time on the fake's own thread,
+# as cflib's would. These tests assert what happens to the drone.
+
+BASE_M = (0.0, 0.0, 0.754)
+LENGTH_M = 1.6
+
+
+class GroundStation:
+    """The service's side, reduced: an Estimate (the heartbeat) for each Telemetry and, while
+    ``target`` is set, a Setpoint stamped with that Telemetry's stamp."""
+
+    def __init__(self, h: Harness, target: tuple[float, float, float] | None) -> None:
+        self.h = h
+        self.alive = True
+        self.target: Callable[[float], tuple[float, float, float]] | tuple[float, ...] | None
+        self.target = target
+        h.bus.subscribe("tether/cf1/telemetry", self._on_telemetry)
+
+    def _on_telemetry(self, sample: Sample) -> None:
+        if not self.alive:
+            return
+        tel = _j(sample)
+        self.h.bus.publish(
+            "tether/cf1/estimate",
+            json.dumps({"seq": tel["seq"], "stamp_s": tel["stamp_s"]}).encode(),
+        )
+        target = self.target
+        if callable(target):
+            target = target(tel["stamp_s"])
+        if target is not None:
+            self.h.publish(
+                "tether/cf1/cmd/setpoint", {"stamp_s": tel["stamp_s"], "position_m": list(target)}
+            )
+
+
+def _phases(h: Harness) -> list[str]:
+    """The bridge's phases as reported on ``tether/cf1/bridge``, repeats removed."""
+    out: list[str] = []
+    for status in list(h.status):
+        if not out or out[-1] != status["phase"]:
+            out.append(status["phase"])
+    return out
+
+
+def _fly_to(h: Harness, link: FakeLink, z_m: float = 0.5) -> GroundStation:
+    gs = GroundStation(h, (0.0, 0.0, z_m))
+    wait_for(lambda: link.firmware.position_m[2] > z_m - 0.01, f"climbed to {z_m} m", 10.0)
+    return gs
+
+
+def _landed(link: FakeLink) -> bool:
+    fw = link.firmware
+    fw.advance()
+    return fw.on_floor and not fw.motors_on
+
+
+def test_a_lost_ground_station_holds_then_lands_the_drone_rather_than_dropping_it(
+    harness: Any, caplog: pytest.LogCaptureFixture
+) -> None:
+    """The service dies mid-hover: the bridge reports the hold, then lands at the configured
+    rate and switches the motors off on the floor: no fall, no lock, no link closed."""
+    caplog.set_level(logging.INFO, logger="groundstation.crazyflie")
+    link = FakeLink("fake://floor", realtime=True)
+    h = harness(link, silence_s=0.1, hold_s=0.3, land_speed_mps=0.5)
+    gs = _fly_to(h, link)
+    wait_for(lambda: _phases(h)[-1:] == ["flying"], "flying")
+    gs.alive = False  # the ground station is gone: no Estimate, no Setpoint
+    t_kill = time.monotonic()
+    wait_for(lambda: _landed(link), "landed with the motors off", 10.0)
+    wait_for(lambda: h.status[-1]["phase"] == "idle", "idle reported")
+    fw = link.firmware
+    assert fw.impacts_mps == [], "landed, not dropped"
+    assert not fw.locked and not h.bridge.gate.latched, "a landing locks nothing"
+    phases = _phases(h)
+    assert phases[phases.index("flying") :] == ["flying", "holding", "landing", "idle"]
+    assert h.status[-1]["motors_off"] and "silent" in h.status[-1]["landing_reason"]
+    # The descent, from the firmware's own track: 0.4 m -> 0.1 m at the landing rate.
+    track = [(t, z) for t, _, _, z in fw.track if t > t_kill]
+    t_hi = next(t for t, z in track if z < 0.4)
+    t_lo = next(t for t, z in track if z < 0.1)
+    assert 0.3 / (t_lo - t_hi) == pytest.approx(0.5, rel=0.3)
+    names = _names(link)
+    assert names[-1] == "send_stop_setpoint" and "close" not in names and "stop_motors" not in names
+    messages = [r.getMessage() for r in caplog.records]
+    for words in ("holding", "landing (ground station silent", "landed"):
+        assert any(words in m for m in messages), words
+
+
+class _StallingBus(InMemoryBus):
+    """A bus whose next Telemetry publish blocks the publisher (the bridge's thread)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.stall_s = 0.0
+        self.stalled = threading.Event()
+
+    def publish(self, key: str, payload: bytes) -> None:
+        if key.endswith("/telemetry") and self.stall_s > 0:
+            stall_s, self.stall_s = self.stall_s, 0.0
+            threading.Event().wait(stall_s)  # the stall itself, not a synchronisation
+            self.stalled.set()
+        super().publish(key, payload)
+
+
+def test_a_stalled_bridge_thread_with_data_arriving_is_no_link_loss(harness: Any) -> None:
+    """The bridge's thread blocked 1.2 s (longer than data_timeout_s 1 s) while log data
+    keeps arriving on the link's thread: no link loss, no close (whose zero setpoint would cut
+    the motors), no landing; the firmware only levelled meanwhile."""
+    bus = _StallingBus()
+    link = FakeLink("fake://floor", realtime=True)
+    h = harness(link, bus, data_timeout_s=1.0, silence_s=0.1, hold_s=0.3)
+    _fly_to(h, link)
+    bus.stall_s = 1.2
+    wait_for(bus.stalled.is_set, "the stall", 10.0)
+    n = len(h.telemetry)
+    wait_for(lambda: len(h.telemetry) > n + 100, "telemetry after the stall", 10.0)
+    fw = link.firmware
+    assert h.bridge.counts.get("link_lost", 0) == 0 and "close" not in _names(link)
+    assert fw.motors_on and not fw.locked and fw.impacts_mps == []
+    assert "landing" not in _phases(h) and h.bridge.gate.phase(time.monotonic()) == "flying"
+    assert fw.position_m[2] == pytest.approx(0.5, abs=0.01)
+
+
+def test_a_silent_link_while_flying_is_not_closed_but_landed(harness: Any) -> None:
+    """No log data at all while flying: the link stays open and the bridge lands the drone on
+    setpoints; only with the motors off is the link given up and opened again."""
+    link = FakeLink("fake://floor", realtime=True)
+    h = harness(link, data_timeout_s=0.3, silence_s=5.0, land_speed_mps=1.0)
+    _fly_to(h, link, 0.3)
+    link._stop_player.set()  # the radio hears nothing more; setpoints still get through
+    wait_for(lambda: h.bridge.counts.get("link_silent", 0) == 1, "link reported silent")
+    names = _names(link)
+    assert "close" not in names
+    wait_for(lambda: "close" in _names(link), "link given up once landed", 10.0)
+    names = _names(link)
+    assert names.index("send_stop_setpoint") < names.index("close")
+    assert link.firmware.impacts_mps == [] and not link.firmware.locked
+    assert any(s["link_silent"] for s in h.status)
+
+
+def test_setpoints_beyond_the_tether_or_too_fast_are_refused_and_the_drone_stays_in_reach(
+    harness: Any,
+) -> None:
+    """The ground station walks the target out of the tether's reach at 0.8 m/s in a random
+    direction (seeded): the drone stops at the reach; a setpoint 50 m away and a 0.3 m jump
+    are refused; each refusal is counted and reported."""
+    rng = np.random.default_rng(21)
+    azimuth = rng.uniform(0.0, 2.0 * math.pi)
+    direction = (math.cos(azimuth), math.sin(azimuth))
+    link = FakeLink("fake://floor", realtime=True)
+    h = harness(link)
+    gs = _fly_to(h, link)
+    t0: list[float] = []
+
+    def walk(stamp_s: float) -> tuple[float, float, float]:
+        t0.append(stamp_s)
+        d = 0.8 * (stamp_s - t0[0])
+        return (d * direction[0], d * direction[1], 0.5)
+
+    gs.target = walk
+    wait_for(lambda: bool(t0) and t0[-1] - t0[0] > 2.5, "2.5 s of walking out", 10.0)
+    wait_for(lambda: h.bridge.counts.get("setpoint_out_of_reach", 0) > 50, "refusals")
+    held = h.bridge.gate.position_in_force(time.monotonic())
+    assert held is not None
+    limit_m = LENGTH_M - 0.05
+    assert math.dist(BASE_M, held) == pytest.approx(limit_m, abs=0.02), "stopped at the reach"
+    gs.target = (50.0, 0.0, 10.0)
+    n = h.bridge.counts["setpoint_out_of_reach"]
+    wait_for(lambda: h.bridge.counts["setpoint_out_of_reach"] > n + 5, "far setpoint refused")
+    inward = (held[0] - 0.3 * direction[0], held[1] - 0.3 * direction[1], held[2])
+    gs.target = inward
+    wait_for(lambda: h.bridge.counts.get("setpoint_too_fast", 0) > 5, "jump refused")
+    wait_for(lambda: h.status[-1]["dropped_setpoints"].get("too_fast", 0) > 0, "refusal reported")
+    fw = link.firmware
+    fw.advance()
+    farthest = max(math.dist(BASE_M, p[1:]) for p in fw.track)
+    assert farthest <= limit_m + 1e-6, f"the drone went {farthest:.3f} m from the base"
+    sent = [a[:3] for n_, a in link.commands if n_ == "send_position_setpoint"]
+    assert all(math.dist(BASE_M, p) <= limit_m + 1e-9 for p in sent)
+    steps = [math.dist(a, b) for a, b in itertools.pairwise(sent)]
+    assert max(steps) < 0.05, "no setpoint jumped"
+
+
+def test_a_landing_stop_lands_without_a_lock_and_the_drone_flies_again(harness: Any) -> None:
+    """tug-to-land's Stop (``kind: land``): down at the landing rate, motors off on the floor,
+    no latch and no supervisor lock: the next setpoints fly again."""
+    link = FakeLink("fake://floor", realtime=True)
+    h = harness(link, land_speed_mps=0.5)
+    gs = _fly_to(h, link)
+    gs.target = None  # the service stops following and sends its Stop
+    stamp = h.telemetry[-1]["stamp_s"]
+    h.publish("tether/cf1/cmd/stop", {"stamp_s": stamp, "reason": "tug-to-land", "kind": "land"})
+    wait_for(lambda: _landed(link), "landed with the motors off", 10.0)
+    fw = link.firmware
+    assert fw.impacts_mps == [] and not fw.locked and not h.bridge.gate.latched
+    assert "stop_motors" not in _names(link)
+    wait_for(lambda: h.status[-1]["phase"] == "idle", "idle reported")
+    assert "landing" in _phases(h) and "Stop (tug-to-land)" in h.status[-1]["landing_reason"]
+    gs.target = (0.0, 0.0, 0.3)
+    wait_for(lambda: fw.position_m[2] > 0.29, "flying again", 10.0)
+
+
+def test_an_emergency_stop_cuts_the_motors_and_locks_until_a_power_cycle(harness: Any) -> None:
+    """The operator's Stop (no ``kind``): motors off at once (the drone falls: that is what an
+    emergency stop is), the bridge latches and the supervisor locks; re-arming lifts the
+    bridge's latch, but the firmware flies again only after a power cycle."""
+    link = FakeLink("fake://floor", realtime=True)
+    h = harness(link)
+    gs = _fly_to(h, link, 0.3)
+    stamp = h.telemetry[-1]["stamp_s"]
+    h.publish("tether/cf1/cmd/stop", {"stamp_s": stamp, "reason": "operator"})
+    wait_for(lambda: _landed(link), "motors off, on the floor", 10.0)
+    fw = link.firmware
+    assert fw.locked and len(fw.impacts_mps) == 1 and h.bridge.gate.latched
+    wait_for(lambda: h.bridge.counts.get("setpoint_latched", 0) > 5, "setpoints refused")
+    h.publish("tether/cf1/cmd/rearm", {})
+    wait_for(
+        lambda: h.bridge.counts.get("setpoints_sent", 0) > 0 and not h.bridge.gate.latched,
+        "re-armed",
+    )
+    n = h.bridge.counts["setpoints_sent"]
+    wait_for(lambda: h.bridge.counts["setpoints_sent"] > n + 10, "setpoints sent again")
+    assert fw.on_floor and fw.locked, "Locked: the setpoints do nothing"
+    fw.power_cycle()
+    wait_for(lambda: fw.position_m[2] > 0.29, "flying after a power cycle", 10.0)
+    assert gs.alive

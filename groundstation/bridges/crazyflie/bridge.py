@@ -552,6 +552,7 @@ class CommandGate:
     dropped: dict[str, int] = field(default_factory=dict)
     _position: tuple[float, float, float] | None = None
     _stamp_s: float = -math.inf
+    _seen_stamp_s: float = -math.inf
     _received_s: float = -math.inf
     _yaw: float | None = None
     _ramp: _Ramp | None = None
@@ -594,7 +595,11 @@ class CommandGate:
             verdict = "out_of_reach"
         elif self._too_fast(position_m, stamp_s, now_s, current_position_m):
             verdict = "too_fast"
-        elif self._yaw is None:
+        if verdict in ("accepted", "out_of_reach", "too_fast"):
+            # The stream's pace, refused setpoints included: a jump after a run of refusals
+            # is judged over the setpoint period, not over the time since the last acceptance.
+            self._seen_stamp_s = max(self._seen_stamp_s, stamp_s)
+        if verdict == "accepted" and self._yaw is None:
             yaw = self.yaw_deg if self.yaw_deg is not None else current_yaw_deg
             if yaw is None:
                 verdict = "bad"  # no attitude yet: cannot hold the drone's yaw
@@ -622,9 +627,12 @@ class CommandGate:
         measured position) is faster than ``max_speed_mps``."""
         origin = self.position_in_force(now_s)
         if origin is not None:
-            # judged over the longer of the host's and the drone's intervals, at least one
-            # setpoint period: |Δp| > v_max · Δt
-            dt_s = max(now_s - self._received_s, stamp_s - self._stamp_s, MIN_JUMP_DT_S)
+            # |Δp| > v_max · Δt, Δt between this setpoint's stamp and the previous one's (drone
+            # clock), at least one setpoint period (two delivered together are no jump at
+            # infinite speed); after a take-off ramp, the time since it began.
+            previous_s = self._seen_stamp_s if math.isfinite(self._seen_stamp_s) else None
+            dt_s = stamp_s - previous_s if previous_s is not None else now_s - self._received_s
+            dt_s = max(dt_s, MIN_JUMP_DT_S)
         elif current_position_m is not None and len(current_position_m) == 3:
             origin = (
                 float(current_position_m[0]),
@@ -758,6 +766,13 @@ class CommandGate:
                 return SetpointCommand(ramp.at(now_s), self._yaw)
         return SetpointCommand(self._position, self._yaw)
 
+    def land(self, now_s: float, reason: str) -> bool:
+        """Land from the setpoint in force now (the bridge's own decision, e.g. a silent link);
+        False when nothing is in force, latched, or already landing."""
+        if self.latched or (self._ramp is not None and self._ramp.land):
+            return False
+        return self._begin_landing(now_s, reason)
+
     def _begin_landing(self, now_s: float, reason: str) -> bool:
         start = self.position_in_force(now_s)
         if start is None or self._yaw is None:
@@ -773,5 +788,6 @@ class CommandGate:
         self._ramp = None
         self._position = None
         self._stamp_s = -math.inf
+        self._seen_stamp_s = -math.inf
         self._received_s = -math.inf
         self._yaw = None

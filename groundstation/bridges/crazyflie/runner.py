@@ -160,6 +160,10 @@ class CrazyflieBridge:
         )
         self._heard_s = -math.inf
         """Host clock when the ground station was last heard, written on the bus's thread."""
+        self._unanswered_s: float | None = None
+        """Host clock of the first Telemetry published after the ground station was last
+        heard: silence counts from there (while the bridge publishes nothing, stalled, the
+        ground station has nothing to answer)."""
         self._arrived_s = 0.0
         """Host clock when log data last arrived, written on the link's thread."""
         self._phase: Phase = "idle"
@@ -356,8 +360,8 @@ class CrazyflieBridge:
         """No log data for ``data_timeout_s`` (timed on arrival): a lost link, unless the
         bridge is commanding the drone. Then the link is not closed (cflib's ``close_link``
         sends a zero setpoint, which the firmware takes as motors off: a drop from height);
-        setpoints keep going out, and the ground station, which hears no telemetry, falls
-        silent: the gate holds and lands, and the link is given up once the motors are off."""
+        the gate lands the drone on setpoints, which may still get through (a one-way loss), and
+        the link is given up once the motors are off."""
         silent = now - self._arrived_s > self._data_timeout_s
         if silent and self._commanding:
             if not self._link_silent:
@@ -365,10 +369,11 @@ class CrazyflieBridge:
                 self._count("link_silent")
                 _log.warning(
                     "no log data from %s for %.2f s while flying: link kept open (closing it "
-                    "would cut the motors), setpoints still sent",
+                    "would cut the motors); landing on setpoints, which may still get through",
                     self.link.uri,
                     now - self._arrived_s,
                 )
+                self.gate.land(now, f"no log data for {now - self._arrived_s:.2f} s")
                 self._publish_status()
             return
         if silent:
@@ -559,6 +564,8 @@ class CrazyflieBridge:
             self.bus.publish(
                 self.keys["telemetry"], tel.model_dump_json(exclude_none=True).encode()
             )
+            if self._unanswered_s is None or self._unanswered_s <= self._heard_s:
+                self._unanswered_s = self._clock()
             self.seq += 1
             self._last_stamp_s = tel.stamp_s
             self._last_yaw_deg = yaw_deg_from_quat(tel.quat_wxyz)
@@ -577,7 +584,11 @@ class CrazyflieBridge:
         self._publish_status()
 
     def _send_setpoint(self, now_s: float) -> None:
-        self.gate.heard_s = max(self.gate.heard_s, self._heard_s)
+        # Silent: Telemetry went out and nothing came back since. Nothing published (a stalled
+        # thread, a silent link: _check_link) is no silence of the ground station's.
+        unanswered = self._unanswered_s
+        heard = self._heard_s
+        self.gate.heard_s = now_s if unanswered is None or heard >= unanswered else unanswered
         cmd = self.gate.tick(now_s)
         self._report_phase(now_s, cmd)
         if cmd is None:
