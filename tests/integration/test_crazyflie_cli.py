@@ -131,7 +131,7 @@ def test_fake_hover_gives_estimates_and_a_stop_reaches_the_link_once(
     assert service.stop(signal.SIGTERM) == 0
 
 
-def test_tug_to_land_from_the_service_stops_the_fake_drone_once(
+def test_tug_to_land_from_the_service_lands_the_fake_drone_once_without_a_lock(
     procs: Procs, make_probe: Any, tmp_path: Path
 ) -> None:
     record = tmp_path / "commands.jsonl"
@@ -185,9 +185,17 @@ def test_tug_to_land_from_the_service_stops_the_fake_drone_once(
             raise AssertionError(f"{exc}; bridge status {bridge_status}") from None
         assert "stop_motors" not in _names(record)
         height_m[0] = 0.5  # pulled down below land_below_m: the service stops it
-        probe.wait_for(lambda: "stop_motors" in _names(record), 15, "the service's Stop")
-        stops = [json.loads(s.payload) for s in probe.got("tether/cf1/cmd/**")]
-        assert any("tug-to-land" in s.get("reason", "") for s in stops)
+        # tug-to-land's Stop is a landing Stop: down at the landing rate, motors off on the
+        # floor, no supervisor emergency stop (which would lock the drone until a power cycle)
+        probe.wait_for(
+            lambda: "send_stop_setpoint" in _names(record), 20, "the landing's motors off"
+        )
+        stops = [
+            json.loads(s.payload)
+            for s in probe.got("tether/cf1/cmd/**")
+            if s.key == "tether/cf1/cmd/stop"
+        ]
+        assert any("tug-to-land" in s["reason"] and s["kind"] == "land" for s in stops)
         probe.wait_for(
             lambda: any(e["on_ground"] for e in probe.json("tether/cf1/estimate")[-50:]),
             timeout_s=10,
@@ -196,13 +204,83 @@ def test_tug_to_land_from_the_service_stops_the_fake_drone_once(
     finally:
         done.set()
         thread.join(2)
-    names = _names(record)
-    assert names.count("stop_motors") == 1
-    i_stop = names.index("stop_motors")
-    assert names[:i_stop].count("send_position_setpoint") >= 10, "setpoints flowed before"
-    assert "send_position_setpoint" not in names[i_stop:], "and none after the Stop"
+    commands = _commands(record)
+    names = [c["cmd"] for c in commands]
+    assert "stop_motors" not in names, "no emergency stop: nothing locked"
+    assert names.count("send_stop_setpoint") == 1
+    i_off = names.index("send_stop_setpoint")
+    assert "send_position_setpoint" not in names[i_off:], "nothing after the motors off"
+    landed = commands[i_off]
+    assert landed["position_m"][2] == pytest.approx(0.0, abs=1e-6), "motors off on the floor"
+    assert landed["falls"] == 0 and not landed["locked"], "landed, not dropped; not locked"
+    assert any(s["phase"] == "landing" for s in probe.json("tether/cf1/bridge"))
     assert bridge.stop(signal.SIGTERM) == 0
     assert service.stop(signal.SIGTERM) == 0
+
+
+def test_a_killed_service_mid_hover_holds_then_lands_the_fake_drone(
+    procs: Procs, make_probe: Any, tmp_path: Path
+) -> None:
+    """Take off through the bridge, kill ``serve`` (SIGKILL: no goodbye) mid-hover: the bridge
+    reports the hold, the landing and the motors off, in that order, and the fake firmware's
+    height goes to the floor at the landing rate, without a fall or a lock."""
+    record = tmp_path / "commands.jsonl"
+    cfg = tmp_path / "bridge.toml"
+    cfg.write_text(
+        '[crazyflie]\nmocap_key = "mocap/{drone}"\nmocap_stale_s = 0.5\nland_speed_mps = 0.25\n'
+    )
+    probe, service, bridge, _ = _start(
+        procs, make_probe, f"fake://floor?record={record}", "--config", str(cfg)
+    )
+    done = threading.Event()
+
+    def mocap() -> None:  # the drone on the floor, for the take-off's start
+        while not done.wait(0.02):
+            probe.publish_json("mocap/cf1", {"position_m": [0.0, 0.0, 0.0]})
+
+    thread = threading.Thread(target=mocap, daemon=True)
+    thread.start()
+    try:
+        probe.wait_for(
+            lambda: len(probe.json("tether/cf1/estimate")) > 100, 40, "the service's estimates"
+        )
+        probe.publish_json("tether/cf1/cmd/takeoff", {"height_m": 0.5, "speed_mps": 0.5})
+        probe.wait_for(
+            lambda: any(c["position_m"][2] > 0.49 for c in _commands(record)[-5:]),
+            20,
+            "the fake drone hovering at 0.5 m",
+        )
+    finally:
+        done.set()
+        thread.join(2)
+    probe.wait_for(
+        lambda: probe.json("tether/cf1/bridge")[-1]["phase"] == "flying", 10, "flying reported"
+    )
+    service.stop(signal.SIGKILL)
+    t_kill = time.monotonic()
+    probe.wait_for(
+        lambda: "send_stop_setpoint" in _names(record), 20, "the bridge's landing, motors off"
+    )
+    probe.wait_for(
+        lambda: probe.json("tether/cf1/bridge")[-1]["phase"] == "idle", 10, "idle reported"
+    )
+    statuses = probe.json("tether/cf1/bridge")
+    phases = [s["phase"] for s in statuses]
+    phases = [p for i, p in enumerate(phases) if i == 0 or phases[i - 1] != p]
+    assert phases[-4:] == ["flying", "holding", "landing", "idle"], phases
+    assert statuses[-1]["motors_off"] and "silent" in statuses[-1]["landing_reason"]
+    commands = [c for c in _commands(record) if c["t"] > t_kill]
+    off = next(c for c in commands if c["cmd"] == "send_stop_setpoint")
+    assert off["position_m"][2] == pytest.approx(0.0, abs=1e-6), "motors off on the floor"
+    assert off["falls"] == 0 and not off["locked"], "landed, not dropped; not locked"
+    # the descent (the firmware's height, logged with each setpoint): 0.4 m -> 0.1 m
+    t_hi = next(c["t"] for c in commands if c["position_m"][2] < 0.4)
+    t_lo = next(c["t"] for c in commands if c["position_m"][2] < 0.1)
+    assert 0.3 / (t_lo - t_hi) == pytest.approx(0.25, rel=0.25)
+    # the hold began within about silence_s + hold_s (0.4 s) of the kill, the landing after
+    assert t_hi - t_kill < 0.4 + 0.1 / 0.25 + 1.0
+    assert "stop_motors" not in _names(record) and "close" not in _names(record)
+    assert bridge.stop(signal.SIGTERM) == 0
 
 
 def test_a_dropped_link_stops_telemetry_and_reconnects(
