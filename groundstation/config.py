@@ -673,12 +673,18 @@ class CrazyflieSection(_Section):
     periods: the service answers each Telemetry)."""
     hold_s: float = Field(0.3, gt=0.0, le=5.0)
     """How long the drone holds in silence before the bridge lands it itself (docs/real-lab.md,
-    "ground-station silence")."""
+    "what the bridge does when something goes wrong")."""
     land_speed_mps: float = Field(0.25, gt=0.0, le=1.0)
     """Descent speed of the bridge's own landings (silence, a landing Stop), m/s."""
     max_setpoint_speed_mps: float = Field(1.0, gt=0.0)
     """A Setpoint that jumps from the one in force faster than this is refused (the firmware's
     position controller flies at most 1 m/s per axis)."""
+    thrust_model: Literal[
+        "pwm_map", "cubic_21plus", "cubic_legacy", "cubic_upgrade_kit", "cubic_brushless"
+    ] = "pwm_map"
+    """``pwm_map``: ``thrust_map`` on the motor values; ``cubic_*``: the firmware's own model
+    (2025.09 and later) for that propeller type, a cubic in the motor's voltage ``pm.vbat`` ×
+    ``motor.m*``/65535 (``VMOTOR2THRUST0..3``; needs ``pm.vbat``; docs/real-lab.md)."""
 
     @field_validator("slow_period_ms")
     @classmethod

@@ -58,6 +58,39 @@ def test_thrust_map_sums_motors_and_zero_pwm_is_zero_thrust() -> None:
     assert thrust_n([hover] * 4, DEFAULT_MAP) == pytest.approx(0.030 * 9.81, rel=1e-9)
 
 
+def test_the_firmware_cubic_thrust_model_in_the_motor_voltage() -> None:
+    """The firmware's model (VMOTOR2THRUST0..3 of platform_defaults_cf2.h, 2.1+ propellers):
+    per motor f = c0 + c1·v + c2·v² + c3·v³ with v = vbat·m/65535, summed."""
+    from groundstation.bridges.crazyflie.bridge import VMOTOR2THRUST, thrust_cubic_n
+
+    c = VMOTOR2THRUST["cubic_21plus"]
+    assert c == (
+        -0.02476537915958403,
+        0.06523793527519485,
+        -0.026792504967750107,
+        0.006776789303971145,
+    )
+    v = 3.5 * 40000 / 65535
+    one = c[0] + c[1] * v + c[2] * v**2 + c[3] * v**3
+    assert thrust_cubic_n([40000.0] * 4, 3.5, c) == pytest.approx(4 * one, rel=1e-12)
+    assert thrust_cubic_n([40000.0, 0.0, 0.0, 0.0], 3.5, c) == pytest.approx(one, rel=1e-12)
+    assert thrust_cubic_n([0.0] * 4, 3.5, c) == 0.0
+    # the same motor value gives more thrust from a fuller battery (the duty is compensated)
+    assert thrust_cubic_n([40000.0] * 4, 4.1, c) > thrust_cubic_n([40000.0] * 4, 3.5, c)
+    # the configuration picks it; the plan then needs pm.vbat, and a period without it is
+    # skipped rather than published with a made-up thrust
+    section = CrazyflieSection(thrust_model="cubic_21plus")
+    no_vbat = {k: v for k, v in FAKE_TOC.items() if k != "pm.vbat"}
+    with pytest.raises(MissingVariables, match=r"pm\.vbat"):
+        plan_variables(section, no_vbat, "x")
+    plan = plan_variables(section, FAKE_TOC, "x")
+    values = {**_values(), **{m: 40000.0 for m in plan.motors}}
+    tel = build_telemetry(Aligned(0, values), plan, section, 0, {"pm.vbat": 3.5}, None, 0.0)
+    assert tel.thrust_n == pytest.approx(4 * one, rel=1e-6)
+    with pytest.raises(Skip, match="no_vbat"):
+        build_telemetry(Aligned(0, values), plan, section, 0, {}, None, 0.0)
+
+
 def test_crazyflie_config_defaults_and_errors() -> None:
     section = load_settings(None, use_env=False).crazyflie
     assert section.thrust_map == DEFAULT_MAP

@@ -50,6 +50,7 @@ __all__ = [
     "G_MPS2",
     "MAX_BLOCK_BYTES",
     "NOT_LOGGED_CONSEQUENCE",
+    "VMOTOR2THRUST",
     "Aligned",
     "Aligner",
     "CommandGate",
@@ -63,6 +64,7 @@ __all__ = [
     "build_telemetry",
     "plan_blocks",
     "plan_variables",
+    "thrust_cubic_n",
     "thrust_n",
     "yaw_deg_from_quat",
 ]
@@ -193,6 +195,8 @@ def plan_variables(section: CrazyflieSection, toc: Mapping[str, str], uri: str) 
     motors = MOTORS[section.motor_variables]
     attitude = ATTITUDE if section.attitude_source == "estimator" else ()
     needed = [*ACC, *GYRO, *attitude, *motors]
+    if section.thrust_model != "pwm_map":
+        needed.append(VBAT)  # the firmware's cubic is in the motor's voltage
     if section.armed_source == "supervisor":
         needed.append(SUPERVISOR_INFO)
     missing = [v for v in needed if v not in toc]
@@ -233,6 +237,59 @@ def thrust_n(pwms: Sequence[float], thrust_map: Sequence[float]) -> float:
     for pwm in pwms:
         if pwm > 0:
             total += max(0.0, a * pwm * pwm + b * pwm + c)
+    return total
+
+
+VMOTOR2THRUST: Mapping[str, tuple[float, float, float, float]] = {
+    # platform_defaults_cf2.h (CONFIG_ENABLE_THRUST_BAT_COMPENSATED), per propeller type
+    "cubic_21plus": (
+        -0.02476537915958403,
+        0.06523793527519485,
+        -0.026792504967750107,
+        0.006776789303971145,
+    ),
+    "cubic_legacy": (
+        -0.014830744918356092,
+        0.04724465241828281,
+        -0.01847364358025878,
+        0.005960923942142,
+    ),
+    "cubic_upgrade_kit": (
+        0.006728127583707208,
+        0.01011557616217668,
+        0.010263198062061085,
+        0.0028358638322392503,
+    ),
+    # platform_defaults_cf21bl.h: the brushless Crazyflie 2.1
+    "cubic_brushless": (
+        -0.014058926705279723,
+        0.04265273261724981,
+        0.0018327760144017432,
+        0.0020576974784587178,
+    ),
+}
+"""The firmware's thrust model per propeller type (firmware 2025.09 and later):
+``VMOTOR2THRUST0..3``, thrust of one motor in N as a cubic in its voltage, N/V^k."""
+
+
+def thrust_cubic_n(motors: Sequence[float], vbat_v: float, coefficients: Sequence[float]) -> float:
+    """Collective thrust by the firmware's own model, newtons.
+
+    Per motor ``v = vbat · m / 65535`` (the motor's voltage) and ``f = c0 + c1·v + c2·v² +
+    c3·v³`` (motors.c inverts this cubic to compensate the battery; ``motor.m*`` is the ratio
+    it wrote), summed. A motor at 0 is off and contributes 0; a negative value is clipped to 0.
+
+    Args:
+        motors: ``motor.m1..m4``, 0..65535.
+        vbat_v: ``pm.vbat``, V.
+        coefficients: ``VMOTOR2THRUST0..3`` (:data:`VMOTOR2THRUST`).
+    """
+    c0, c1, c2, c3 = coefficients
+    total = 0.0
+    for m in motors:
+        if m > 0:
+            v = vbat_v * m / 65535.0
+            total += max(0.0, c0 + v * (c1 + v * (c2 + v * c3)))
     return total
 
 
@@ -418,6 +475,12 @@ def build_telemetry(
         if quat is None:
             raise Skip("bad_reading", "attitude quaternion not finite or not of unit norm")
     vbat = slow.get(VBAT)
+    if section.thrust_model == "pwm_map":
+        thrust = thrust_n(pwms, section.thrust_map)
+    elif vbat is None or not math.isfinite(vbat) or vbat <= 0:
+        raise Skip("no_vbat", f"thrust_model {section.thrust_model} needs pm.vbat")
+    else:
+        thrust = thrust_cubic_n(pwms, vbat, VMOTOR2THRUST[section.thrust_model])
     armed: bool | None = None
     if plan.armed and SUPERVISOR_INFO in slow:
         armed = bool((int(slow[SUPERVISOR_INFO]) >> SUPERVISOR_IS_ARMED_BIT) & 1)
@@ -427,7 +490,7 @@ def build_telemetry(
         # specific force, g -> m/s^2
         "accel_mps2": tuple(a * G_MPS2 for a in acc_g),
         "quat_wxyz": quat,
-        "thrust_n": thrust_n(pwms, section.thrust_map),
+        "thrust_n": thrust,
         "gyro_rps": tuple(math.radians(g) for g in gyro_dps),
         "position_m": fresh.position_m if fresh is not None else None,
         "vbat_v": vbat if vbat is not None and math.isfinite(vbat) and vbat > 0 else None,
