@@ -314,7 +314,7 @@ def run_case(case: Case, dwell_s: float, seed: int, workdir: Path) -> dict[str, 
         lines: list[str] = []
         cfg_in = workdir / f"{case.name}_in.toml"
         cfg_in.write_text(f"[drone]\naccel_noise_mps2 = {case.accel_noise_mps2!r}\n")
-        run_calibrate(default, str(cfg_in), [str(rec)], str(out), echo=lines.append)
+        run_calibrate(default, str(cfg_in), [str(rec)], str(out), model="full", echo=lines.append)
         cfg = load_settings(out, use_env=False)
         judged = position_errors(cfg, flight, held_out, dwell_s)
         fitted.update(judged.error_m)

@@ -147,6 +147,10 @@ def _true_calibration(
     eq = errors["calibration"]
     cal: dict[str, Any] = {k: eq[k] for k in CAL_KEYS}
     cal["accel_bias_mps2"] = eq["accel_bias_mps2"]
+    # The equivalent is the full model's (a constant bias standing for the accelerometer's
+    # mean at this flight's hover, the attitude error folded in): as `calibrate --model full`
+    # writes it, it comes with the accelerometer's mean trusted as read.
+    cal["accel_slow"] = False
     cal["source"] = f"simulator truth (seed {seed})"
     return cal
 

@@ -95,7 +95,7 @@ def load(name: str, data_dir: Path = DATA) -> Flight:
             "armed": bool(armed[i]),
             **({"vbat_v": float(vbat[i])} if np.isfinite(vbat[i]) and vbat[i] > 0 else {}),
         }
-        t_ns = int(round(float(t[i]) * 1e9))
+        t_ns = round(float(t[i]) * 1e9)
         key = "tether/cf1/telemetry"
         without.append(RecordedMessage(key, json.dumps(body).encode(), t_ns, t_ns))
         if np.all(np.isfinite(pos[i])):
@@ -202,19 +202,24 @@ def main(argv: list[str] | None = None) -> int:
             (
                 "airframe, accelerometer mean trusted",
                 [],
-                "[filter]\naccel_slow = false\n",
+                "accel_slow = false\n",
             ),
             ("airframe + slow accelerometer (default)", [], ""),
         ]
         results: dict[str, dict[str, list[Judged]]] = {v[0]: {} for v in variants}
         reports: dict[str, str] = {}
+        refused: dict[str, str] = {}
         for fold, train, held in folds:
             for label, extra, toml in variants:
                 if extra is None:
                     cfg = base
                 else:
                     tag = f"{abs(hash((fold, tuple(extra)))) % 10**8}"
-                    cal, report = calibrate([flights[n] for n in train], work, tag, extra)
+                    try:
+                        cal, report = calibrate([flights[n] for n in train], work, tag, extra)
+                    except RuntimeError as exc:
+                        refused[label] = str(exc).splitlines()[-1]
+                        continue
                     if label.endswith("(default)"):
                         reports[fold] = report
                     cfg = variant_config(cal, work / f"v-{tag}-{len(toml)}.toml", toml)
@@ -235,6 +240,10 @@ def main(argv: list[str] | None = None) -> int:
         for label, _, _ in variants:
             say(f"## {label}")
             say("")
+            if label in refused:
+                say(f"calibrate refused: `{refused[label]}`")
+                say("")
+                continue
             say("| fold | flight | median abs T mN | answered | airborne |")
             say("| --- | --- | ---: | ---: | ---: |")
             loo = []

@@ -21,7 +21,7 @@ import re
 import tomllib
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Literal, Self, get_args
+from typing import Any, Literal, NamedTuple, Self, get_args
 
 from pydantic import (
     BaseModel,
@@ -165,13 +165,16 @@ class ZenohSection(_Section):
 class DroneSection(_Section):
     """``[drone]``: the vehicle."""
 
-    mass_kg: float = Field(0.030, gt=0.0, le=100.0)
-    """Drone mass, kg (m of eq:NE_tether)."""
+    mass_kg: float = Field(0.030, gt=0.0)
+    """Drone mass, kg (m of eq:NE_tether); 0.005–2 kg unless ``unusual_rig``."""
     accel_noise_mps2: float = Field(0.3, gt=0.0)
     """Accelerometer noise standard deviation per axis: the tension filter's prior until it has
     measured the noise on line (level and colour, over its first seconds in the air)."""
     thrust_noise_n: float = Field(0.003, gt=0.0)
     """Collective-thrust noise standard deviation (the filter's prior, as above)."""
+    unusual_rig: bool = False
+    """Accept a mass, tether length or tether weight outside a micro drone's plausible
+    ranges (:data:`PLAUSIBLE`): without it such a value is taken for a unit mistake."""
 
 
 class TetherSection(_Section):
@@ -220,16 +223,11 @@ class FilterSection(_Section):
     """Below this fraction of the weight the drone is surely on the ground; at or above it,
     on the ground until lift-off is seen (groundstation.contact: motion-capture height, the
     IMU's climb, or the floor no longer carrying it)."""
-    accel_slow: bool = True
-    """(added) Replace the accelerometer's slow content by what transfers across power-ons
-    (groundstation.slow_accel, docs/estimator_design.md): its mean is learnt at rest and, in
-    the air, as the zero (or motion-capture) mean acceleration over
-    ``accel_slow_time_constant_s``. False: the accelerometer's mean is trusted as read."""
-    accel_slow_time_constant_s: float = Field(30.0, gt=0.0)
+    accel_slow_time_constant_s: float = Field(60.0, gt=0.0)
     """(added) τ, the crossover in the air, s: below ``1/(2π·τ)`` the observation rests on
     thrust, attitude and the thrust axis. Longer lets less of a sustained manoeuvre into the
     bias (error ≤ m·Δv/τ); shorter learns a bias never seen at rest sooner."""
-    drag_velocity_time_constant_s: float = Field(4.0, gt=0.0)
+    drag_velocity_time_constant_s: float = Field(8.0, gt=0.0)
     """(added) Without motion capture the rotor-drag term's velocity is the accelerometer's
     leaky integral with this time constant, s (groundstation.slow_accel)."""
 
@@ -280,6 +278,12 @@ class CalibrationSection(_Section):
     """Change of the thrust scale per volt of ``vbat_v`` above ``thrust_vbat_ref_v``, 1/V."""
     thrust_vbat_ref_v: float = Field(3.9, gt=0.0)
     """Battery voltage at which ``thrust_scale`` holds, V."""
+    accel_slow: bool = True
+    """(added) Replace the accelerometer's slow content by what transfers across power-ons
+    (groundstation.slow_accel, docs/estimator_design.md): its mean is learnt at rest and, in
+    the air, as the zero (or motion-capture) mean acceleration over ``[filter]
+    accel_slow_time_constant_s``. False: the accelerometer's mean is trusted as read (what
+    ``groundstation calibrate --model full`` writes: its fitted bias stands for it)."""
     rotor_drag_n_s_per_m: float = Field(0.0, ge=0.0, le=1.0)
     """(added) ``D_xy``: the rotors' drag per m/s of body-horizontal speed, N·s/m; the
     observation adds ``R·D·Rᵀ·v`` back (v from motion capture, else the accelerometer's
@@ -805,6 +809,64 @@ class Settings(BaseSettings):
         return DroneParams(**merged)
 
 
+class _Range(NamedTuple):
+    """A plausible range of a micro drone's quantity and the unit mistakes that leave it."""
+
+    low: float
+    high: float
+    unit: str
+    typical: float
+    mistakes: tuple[tuple[str, str, float], ...]
+    """``(unit, name, factor)``: the value written in that unit, times factor, is SI."""
+
+
+PLAUSIBLE: dict[str, _Range] = {
+    "drone.mass_kg": _Range(0.005, 2.0, "kg", 0.03, (("g", "grams", 1e-3),)),
+    "tether.length_m": _Range(
+        0.1, 30.0, "m", 1.6, (("cm", "centimetres", 1e-2), ("mm", "millimetres", 1e-3))
+    ),
+    "tether.weight_n_per_m": _Range(1e-4, 1.0, "N/m", 0.05, (("g/m", "grams per metre", 9.81e-3),)),
+}
+"""Plausible ranges of a micro drone (5 g to 2 kg) and its tether (10 cm to 30 m, 0.01 to
+100 g/m): outside them the configuration is refused as a likely unit mistake, unless
+``[drone] unusual_rig = true``."""
+
+
+def _implausible(key: str, value: float) -> str | None:
+    """Why ``value`` of ``key`` (``table.field``) is no micro drone's, or None if it could be."""
+    r = PLAUSIBLE[key]
+    if r.low <= value <= r.high:
+        return None
+    field_name = key.split(".")[1]
+    # The likeliest mistake: the one that lands in range nearest the typical value.
+    fits = [(abs(math.log(value * f / r.typical)), u, n, value * f) for u, n, f in r.mistakes]
+    fits = [x for x in fits if r.low <= x[3] <= r.high]
+    hint = ""
+    if fits:
+        _, short, name, si = min(fits)
+        hint = f"; {name}? {value:g} {short} is {field_name} = {si:.3g}"
+    return (
+        f"{value:g} {r.unit} is outside a micro drone's {r.low:g}-{r.high:g} {r.unit}{hint} "
+        "(for an unusual rig set [drone] unusual_rig = true)"
+    )
+
+
+def _check_plausible(params: DroneParams | Settings, prefix: str) -> None:
+    """Refuse a value outside :data:`PLAUSIBLE` unless ``unusual_rig``.
+
+    Raises:
+        ConfigError: one line with the key, the value and the likely unit mistake.
+    """
+    if params.drone.unusual_rig:
+        return
+    for key in PLAUSIBLE:
+        table, name = key.split(".")
+        value = getattr(getattr(params, table), name)
+        why = _implausible(key, value)
+        if why is not None:
+            raise ConfigError(f"invalid configuration: {prefix}{key} = {value:g}: {why}")
+
+
 def _lookup(data: Any, loc: tuple[int | str, ...]) -> Any:
     for part in loc:
         if isinstance(data, Mapping) and part in data:  # noqa: SIM114 (mypy narrows apart)
@@ -916,6 +978,9 @@ def load_settings(
     except ValidationError as exc:
         raise ConfigError(_describe(exc, data=layered)) from None
     # Resolve every override once at start-up so a bad per-drone value fails now.
+    _check_plausible(settings, "")
+    for drone_id in settings.drones:
+        _check_plausible(settings.for_drone(drone_id), f"drones.{drone_id}.")
     floor_n = settings.service.follow_threshold_min_n
     for key, follow in [("follow", settings.follow)] + [
         (f"drones.{d}.follow", settings.for_drone(d).follow) for d in settings.drones

@@ -24,6 +24,7 @@ import numpy as np
 
 from groundstation import contact as contact_mod
 from groundstation import follow as follow_mod
+from groundstation import slow_accel as slow_mod
 from groundstation.bus import Sample
 from groundstation.calibration import RestCalibrator
 from groundstation.config import CalibrationSection, DroneParams, Settings
@@ -155,6 +156,10 @@ class DroneRuntime:
     length_source: str = "config"
     contact_params: contact_mod.ContactParams = field(default_factory=contact_mod.ContactParams)
     contact: contact_mod.ContactState = field(default_factory=contact_mod.ContactState)
+    slow_params: slow_mod.SlowAccelParams | None = None
+    """``[calibration] accel_slow``: the accelerometer's slow content replaced (None: off)."""
+    slow: slow_mod.SlowAccelState = field(default_factory=slow_mod.SlowAccelState)
+    """The accelerometer's slow error and the drag velocity (groundstation.slow_accel)."""
     """Ground/air state (groundstation.contact): on the floor no tension is published."""
     rested: bool = False
     """Seen certainly on the ground (disarmed, low thrust) since the last lift-off: the filter
@@ -292,6 +297,7 @@ def calibration_from_config(
         accel_bias_mps2=section.accel_bias_mps2,
         thrust_vbat_slope_per_v=section.thrust_vbat_slope_per_v,
         thrust_vbat_ref_v=section.thrust_vbat_ref_v,
+        rotor_drag_n_s_per_m=section.rotor_drag_n_s_per_m,
     )
     if cal.is_identity:
         return None, section.source
@@ -736,6 +742,14 @@ class Pipeline:
             contact_params=contact_mod.ContactParams(
                 ground_thrust_ratio=params.filter.ground_thrust_ratio
             ),
+            slow_params=(
+                slow_mod.SlowAccelParams(
+                    time_constant_s=params.filter.accel_slow_time_constant_s,
+                    velocity_time_constant_s=params.filter.drag_velocity_time_constant_s,
+                )
+                if params.calibration.accel_slow
+                else None
+            ),
         )
         with self._lock:
             self.drones[drone] = runtime
@@ -805,6 +819,12 @@ class Pipeline:
             # in force; this sample enters the rest window only once accepted, below).
             ox, oy, _ = offset.offset_body_mps2.tolist()
             accel = (accel[0] - ox, accel[1] - oy, accel[2])
+        accel_read = accel  # before the slow correction, which learns from it below
+        velocity = None
+        if runtime.slow_params is not None:
+            # The accelerometer's slow error learnt so far (groundstation.slow_accel).
+            accel = slow_mod.correct_accel_body_mps2(runtime.slow, accel)
+            velocity = slow_mod.drag_velocity_world_mps(runtime.slow)
         # Malformed content first (whatever its seq), then the stream's order.
         try:
             obs = observe_tension(
@@ -816,6 +836,7 @@ class Pipeline:
                 calibration=runtime.calibration,
                 vbat_v=msg.vbat_v,
                 ground_thrust_ratio=runtime.contact_params.ground_thrust_ratio,
+                velocity_world_mps=velocity,
             )
         except DegenerateQuaternionError as exc:
             self.count_drop(runtime.drone, "bad_quaternion", str(exc))
@@ -875,6 +896,8 @@ class Pipeline:
         )
         on_ground = runtime.contact.on_ground or obs.tension_world_n is None
         self._check_vbat_range(runtime, msg.vbat_v, on_ground, now_s)
+        if runtime.slow_params is not None:
+            self._learn_slow(runtime, msg, accel_read, dt_s, on_ground, obs.tension_world_n)
         ext = runtime.calibration_extrapolated  # this sample's (a later front moves it)
         mocap = _fresh_mocap(runtime, msg.stamp_s)  # likewise
         tail = (ext, mocap)  # the last two fields of the front, as they are now
@@ -1058,6 +1081,40 @@ class Pipeline:
             out.append(Sample(f"tether/{runtime.drone}/cmd/stop", stop.to_json()))
             self._emit(runtime.drone, "stop", "service", now_s, self.self_id, decision.stop_reason)
         return out
+
+    def _learn_slow(
+        self,
+        runtime: DroneRuntime,
+        msg: Telemetry,
+        accel_read: tuple[float, float, float],
+        dt_s: float,
+        on_ground: bool,
+        tension_obs: object,
+    ) -> None:
+        """One sample into the slow-accelerometer state: at rest (disarmed, still), in the
+        air (observing), or held (spool-up, landing, a dip)."""
+        phase: slow_mod.Phase
+        if not msg.armed and slow_mod.is_still(accel_read, msg.gyro_rps):
+            phase = "rest"
+        elif not on_ground and tension_obs is not None:
+            phase = "air"
+        else:
+            phase = "hold"
+        assert runtime.slow_params is not None
+        if runtime.calibration is not None:
+            # β is what remains beyond a configured bias, which observe_tension subtracts.
+            bx, by, bz = runtime.calibration.accel_bias_mps2
+            accel_read = (accel_read[0] - bx, accel_read[1] - by, accel_read[2] - bz)
+        runtime.slow = slow_mod.slow_accel_step(
+            runtime.slow,
+            runtime.slow_params,
+            dt_s=dt_s,
+            stamp_s=msg.stamp_s,
+            accel_body_mps2=accel_read,
+            R_world_body=slow_mod.rows_from_quat_wxyz(msg.quat_wxyz),
+            phase=phase,
+            mocap_world_m=msg.position_m,
+        )
 
     def _feed_rest(self, runtime: DroneRuntime, msg: Telemetry, now_s: float) -> None:
         """Feed an accepted sample to the rest calibration; warn when a calibration that

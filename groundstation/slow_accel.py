@@ -76,9 +76,9 @@ class SlowAccelParams:
         mocap_max_gap_s: motion capture older than this is not used, s.
     """
 
-    time_constant_s: float = 30.0
+    time_constant_s: float = 60.0
     rest_time_constant_s: float = 5.0
-    velocity_time_constant_s: float = 4.0
+    velocity_time_constant_s: float = 8.0
     mocap_time_constant_s: float = 0.15
     mocap_max_gap_s: float = 0.2
 

@@ -19,7 +19,16 @@ import pytest
 PACKAGE = Path(__file__).resolve().parent.parent / "groundstation"
 STDLIB = set(sys.stdlib_module_names)
 
-PHYSICS = ("catenary", "tension", "localization", "follow", "calibration", "contact")
+PHYSICS = (
+    "catenary",
+    "tension",
+    "localization",
+    "follow",
+    "calibration",
+    "contact",
+    "slow_accel",
+    "airframe",
+)
 CONTRACT = ("messages", "config", "bus")
 
 # room -> (module prefixes in it, groundstation modules it may import, third-party it may import)
@@ -37,7 +46,7 @@ ROOMS: dict[str, tuple[tuple[str, ...], tuple[str, ...], tuple[str, ...]]] = {
     ),
     "recording": (
         ("recording",),
-        ("recording", "pipeline", "calibration", "catenary", "zenoh_bus", *CONTRACT),
+        ("recording", "pipeline", "calibration", "airframe", "catenary", "zenoh_bus", *CONTRACT),
         ("mcap", "zstandard", "pydantic", "numpy", "matplotlib"),
     ),
     "bridges": (("bridges",), ("bridges", "zenoh_bus", *CONTRACT), ("numpy", "cflib")),
@@ -46,7 +55,16 @@ ROOMS: dict[str, tuple[tuple[str, ...], tuple[str, ...], tuple[str, ...]]] = {
 }
 NEVER = {
     # A simulator that runs the estimator's code proves nothing about it.
-    "sim": ("tension", "localization", "pipeline", "follow", "calibration", "contact"),
+    "sim": (
+        "tension",
+        "localization",
+        "pipeline",
+        "follow",
+        "calibration",
+        "contact",
+        "slow_accel",
+        "airframe",
+    ),
 }
 
 

@@ -44,7 +44,7 @@ def test_smoke_subprocess_and_round_trip(
 ) -> None:
     a, b, cfg = recordings
     out = tmp_path / "cal.toml"
-    cmd = [sys.executable, "-m", "groundstation", "calibrate", str(a), str(b)]
+    cmd = [sys.executable, "-m", "groundstation", "calibrate", "--model", "full", str(a), str(b)]
     cmd += ["--config", str(cfg), "--out", str(out)]
     proc = subprocess.run(
         cmd,
@@ -86,7 +86,22 @@ def test_existing_calibration_table_is_replaced(
     cfg = tmp_path / "old.toml"
     cfg.write_text('[drones.cf1.calibration]\nthrust_scale = 1.5\nsource = "by hand"\n')
     out = tmp_path / "new.toml"
-    assert main(["calibrate", str(a), str(b), "--config", str(cfg), "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "calibrate",
+                "--model",
+                "full",
+                str(a),
+                str(b),
+                "--config",
+                str(cfg),
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     cal = load_settings(out, use_env=False).for_drone("cf1").calibration
     assert abs(cal.thrust_scale - 0.93) < 0.005 and cal.source != "by hand"
 
@@ -108,14 +123,14 @@ def test_bad_input_one_line_exit_2_nothing_written(
 ) -> None:
     a, _, _ = recordings
     bad = tmp_path / f"{kind}.mcap"
-    args = ["calibrate", str(a), str(bad)]
+    args = ["calibrate", "--model", "full", str(a), str(bad)]
     if kind == "no_mocap":
         write_mcap(str(bad), flight(list(PAPER_HOVER_SPOTS_M[:1]), TRUTH), mocap=False)
     elif kind == "too_short":
         write_mcap(str(bad), flight(list(PAPER_HOVER_SPOTS_M[:1]), TRUTH, hover_s=2.0))
     else:
         bad = a
-        args = ["calibrate", str(a), "--drone", "cf9"]
+        args = ["calibrate", "--model", "full", str(a), "--drone", "cf9"]
     out = tmp_path / "out.toml"
     assert main([*args, "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip()
@@ -137,7 +152,7 @@ def test_the_calibrated_battery_range_is_written_and_flagged_at_run_time(
     data = flight(list(PAPER_HOVER_SPOTS_M[:4]), sag, seed=3, vbat_v=(4.05, 3.85))
     write_mcap(str(rec), data)
     out = tmp_path / "cal.toml"
-    assert main(["calibrate", str(rec), "--out", str(out)]) == 0
+    assert main(["calibrate", "--model", "full", str(rec), "--out", str(out)]) == 0
     printed = capsys.readouterr().out
     assert "thrust_vbat_range_v      [" in printed
     cal = load_settings(out, use_env=False).for_drone("cf1").calibration
@@ -165,7 +180,22 @@ def test_the_calibrated_battery_range_is_written_and_flagged_at_run_time(
     cfg = tmp_path / "old.toml"
     cfg.write_text("[drones.cf1.calibration]\nthrust_vbat_range_v = [3.9, 4.0]\n")
     out2 = tmp_path / "cal2.toml"
-    assert main(["calibrate", str(a), str(b), "--config", str(cfg), "--out", str(out2)]) == 0
+    assert (
+        main(
+            [
+                "calibrate",
+                "--model",
+                "full",
+                str(a),
+                str(b),
+                "--config",
+                str(cfg),
+                "--out",
+                str(out2),
+            ]
+        )
+        == 0
+    )
     assert "thrust_vbat_range_v      none" in capsys.readouterr().out
     cal2 = load_settings(out2, use_env=False).for_drone("cf1").calibration
     assert cal2.thrust_vbat_range_v is None
@@ -193,7 +223,7 @@ def test_without_a_rest_window_rest_is_turned_off_and_the_axis_kept(
     rec = tmp_path / "norest.mcap"
     write_mcap(str(rec), flight(spots, AXIS_TRUTH, seed=1, rest_s=0.0, accel_noise_mps2=0.1))
     out = tmp_path / "cal.toml"
-    assert main(["calibrate", str(rec), "--out", str(out)]) == 0
+    assert main(["calibrate", "--model", "full", str(rec), "--out", str(out)]) == 0
     printed = capsys.readouterr().out
     assert "rest = false (configured true)" in printed
     text = out.read_text()
@@ -239,7 +269,7 @@ def test_with_a_rest_window_the_axis_is_fitted_and_rest_required(
     rec = tmp_path / "rest.mcap"
     write_mcap(str(rec), flight(spots, AXIS_TRUTH, seed=1, rest_s=2.0, accel_noise_mps2=0.1))
     out = tmp_path / "cal.toml"
-    assert main(["calibrate", str(rec), "--out", str(out)]) == 0
+    assert main(["calibrate", "--model", "full", str(rec), "--out", str(out)]) == 0
     assert "rest_required = true" in capsys.readouterr().out
     written = load_settings(out, use_env=False)
     cal = written.for_drone("cf1").calibration
@@ -262,7 +292,7 @@ def test_rest_stays_on_when_the_axis_is_fitted_without_full_rest_coverage(
     write_mcap(str(a), flight(list(PAPER_HOVER_SPOTS_M[:2]), AXIS_TRUTH, seed=1, rest_s=2.0))
     write_mcap(str(b), flight(list(PAPER_HOVER_SPOTS_M[2:4]), AXIS_TRUTH, seed=2, rest_s=0.0))
     out = tmp_path / "cal.toml"
-    assert main(["calibrate", str(a), str(b), "--out", str(out)]) == 0
+    assert main(["calibrate", "--model", "full", str(a), str(b), "--out", str(out)]) == 0
     assert "rest = false" not in capsys.readouterr().out
     cal = load_settings(out, use_env=False).for_drone("cf1").calibration
     assert cal.rest and not cal.rest_required
@@ -282,7 +312,7 @@ def test_without_drone_every_recorded_drone_is_calibrated_and_said(
     rec = tmp_path / "two.mcap"
     copy_messages(sorted(msgs, key=lambda m: m.log_time_ns), rec)
     out = tmp_path / "cal.toml"
-    assert main(["calibrate", str(rec), "--out", str(out)]) == 0
+    assert main(["calibrate", "--model", "full", str(rec), "--out", str(out)]) == 0
     printed = capsys.readouterr().out
     assert "calibrating every drone in the recordings: cf1, cf2" in printed
     settings = load_settings(out, use_env=False)
@@ -297,12 +327,25 @@ def test_a_drone_the_configuration_does_not_describe_needs_drone(
     cfg = tmp_path / "lab.toml"
     cfg.write_text("[drones.cf7.base]\nposition_m = [0.0, 0.0, 0.7]\n")
     out = tmp_path / "cal.toml"
-    assert main(["calibrate", str(a), "--config", str(cfg), "--out", str(out)]) == 2
+    assert (
+        main(["calibrate", "--model", "full", str(a), "--config", str(cfg), "--out", str(out)]) == 2
+    )
     err = capsys.readouterr().err
     assert str(a) in err and "cf1" in err and "cf7" in err and "--drone" in err
     assert not out.exists()
     # named explicitly, it is fitted with the shared tables, and that is said
-    argv = ["calibrate", str(a), "--config", str(cfg), "--drone", "cf1", "--out", str(out)]
+    argv = [
+        "calibrate",
+        "--model",
+        "full",
+        str(a),
+        "--config",
+        str(cfg),
+        "--drone",
+        "cf1",
+        "--out",
+        str(out),
+    ]
     assert main(argv) == 0
     assert "cf1: no [drones.cf1] in the configuration" in capsys.readouterr().out
     settings = load_settings(out, use_env=False)
@@ -323,7 +366,7 @@ def test_fit_tether_recovers_omega_and_writes_a_loadable_config(
     data = flight(list(PAPER_HOVER_SPOTS_M), Truth(thrust_scale=0.95), seed=5, weight_n_per_m=0.06)
     write_mcap(str(rec), data, reel_base_m=None)
     out = tmp_path / "ft.toml"
-    assert main(["calibrate", str(rec), "--fit-tether", "--out", str(out)]) == 0
+    assert main(["calibrate", "--model", "full", str(rec), "--fit-tether", "--out", str(out)]) == 0
     printed = capsys.readouterr().out
     line = next(x for x in printed.splitlines() if "tether weight_n_per_m" in x)
     omega, se = (float(v) for v in line.split()[-3::2])

@@ -484,6 +484,8 @@ def _calibration_table(cal: DroneCalibration, source: str) -> dict[str, Any]:
         **({} if vbat_range is None else {"thrust_vbat_range_v": vbat_range}),
         "rest": cal.rest,
         "rest_required": cal.rest_required,
+        # The full model's bias stands for the accelerometer's mean: trust it as read.
+        "accel_slow": False,
         "source": source,
     }
 
@@ -697,6 +699,7 @@ def _airframe_table(fit: AirframeFit, cal: Any, source: str) -> dict[str, Any]:
         **({} if vbat is None else {"thrust_vbat_range_v": vbat}),
         "rest": cal.rest,
         "rest_required": False,
+        "accel_slow": True,
         "source": source,
     }
 
