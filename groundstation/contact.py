@@ -10,10 +10,31 @@ up: at 0.51 of the weight the floor pushes with 144 mN, above the follow thresho
 while the thrust is at or above the ratio, lift-off must be *seen* before the tension is
 trusted, and a touch-down is noticed where it can be:
 
-* **Certainly on the ground** (any state): disarmed, or thrust below
-  ``ground_thrust_ratio`` of the weight. Meanwhile the vertical accelerometer bias is
-  learnt (the drone does not move) and the resting motion-capture height is remembered
-  (a marker sits above the floor).
+* **On the ground, seen at rest** (any state): disarmed, or thrust below
+  ``ground_thrust_ratio`` of the weight *while the accelerometer shows the floor holding the
+  drone still*. A low thrust alone is no evidence (issue 23: the demo's controller cuts the
+  thrust to 7 % of the weight for 60 ms at a jump from 1.2 m to 0.5 m, and the rule "below
+  the ratio is the ground" learnt a resting height of 1.2 m in mid-air and stayed on the
+  ground for good). Physics tells the two apart: on the floor the specific force is about
+  g upward whatever the thrust (the floor pushes with ``m g - F``), so the world vertical
+  acceleration is ~0; in the air the drone falls at ``(F + T_z) / m - g``, below
+  ``-(1 - ratio) g`` plus what the tether holds (-4.9 m/s^2 at the ratio; -10.4 m/s^2 in
+  that dip). So the vertical acceleration, smoothed over ``accel_time_constant_s`` (50 ms)
+  and less the bias learnt at rest, must stay within ``rest_accel_mps2`` (2.5 m/s^2, about
+  half of ``(1 - ratio) g``) for ``rest_hold_s`` (0.2 s: longer than a motor's spin-down,
+  during which the thrust reads low before the drone falls; 30-40 ms in the realistic
+  simulator). Then the vertical accelerometer bias is learnt (the drone does not move)
+  and the resting motion-capture height is remembered (a marker sits above the floor).
+  Disarmed is the ground at once (no estimate is made without the motors), but what is
+  learnt there also waits for that evidence: a drone stopped in mid-air falls, |f| ~ 0.
+  Until the evidence is in, a low-thrust sample keeps the state it found; in the air the
+  service then coasts the tension filter (the floor may be carrying part of the weight),
+  it does not publish "on the ground".
+* **Falling** (on the ground, without motion capture, armed): the smoothed vertical
+  acceleration below ``-rest_accel_mps2`` for ``rest_hold_s`` says the floor holds nothing:
+  in the air (``reason = "falling"``). The floor cannot accelerate the drone downward, so
+  no ground state outlives this; on the floor the 50 ms mean of 2 m/s^2 of vibration
+  wanders by ~1 m/s^2 and would have to stay 2.5 sigma low for 0.2 s.
 * **Lift-off with motion capture:** the height rises ``liftoff_height_m`` (3 cm) above
   the resting height (or the floor when no rest was seen); touch-down below
   ``touchdown_height_m`` (1.5 cm) above it. The band between is the hysteresis.
@@ -77,8 +98,12 @@ trusted, and a touch-down is noticed where it can be:
   ``e F`` low: the push rule fires on the floor that much below hover thrust, and what is
   published there is ``-e F``, the thrust map's error, as in the air (calibrate it).
 
-  In the air, without motion capture, only the two certain signs above bring the drone
-  back to the ground (a hand lifting the drone pushes up like the floor would).
+  In the air, without motion capture, only the rest seen above (or a disarm) brings the
+  drone back to the ground (a hand holding the drone still pushes up like the floor would).
+
+With motion capture the height decides between the rests: on the ground within
+``touchdown_height_m`` of the resting height, but not more than ``liftoff_height_m`` *below*
+it (a drone flying below the surface it last rested on, beside a table, is not on it).
 
 The state starts on the ground, but until the drone has once been *certainly* on the
 ground (disarmed or below the ratio) the push rule is looser: a load below
@@ -117,6 +142,7 @@ Reason = Literal[
     "push_free",
     "air",
     "flying_at_start",
+    "falling",
 ]
 
 
@@ -145,6 +171,11 @@ class ContactParams:
         noise_long_run_ratio: Long-run variance of the vibration over half the mean square
             of its successive differences (1: white), dimensionless.
         bias_time_constant_s: Averaging time of the vertical accelerometer bias at rest, s.
+        accel_time_constant_s: Smoothing of the vertical acceleration that tells a rest on
+            the floor (~0) from a fall (below ``-(1 - ground_thrust_ratio) g``), s.
+        rest_accel_mps2: At rest the smoothed vertical acceleration, less the bias, stays
+            within this of 0; below minus this the drone falls, m/s^2.
+        rest_hold_s: For this long, s (a rest, or a fall, is seen only then).
     """
 
     ground_thrust_ratio: float = 0.5
@@ -160,6 +191,9 @@ class ContactParams:
     noise_time_constant_s: float = 1.0
     noise_long_run_ratio: float = 3.0
     bias_time_constant_s: float = 1.0
+    accel_time_constant_s: float = 0.05
+    rest_accel_mps2: float = 2.5
+    rest_hold_s: float = 0.2
 
     def __post_init__(self) -> None:
         if not (0.0 < self.ground_thrust_ratio < 1.0):
@@ -182,6 +216,9 @@ class ContactParams:
             "noise_time_constant_s",
             "noise_long_run_ratio",
             "bias_time_constant_s",
+            "accel_time_constant_s",
+            "rest_accel_mps2",
+            "rest_hold_s",
         ):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
@@ -211,8 +248,14 @@ class ContactState:
             acceleration on the floor at or above the thrust ratio, (m/s^2)^2, or None.
         noise_samples: Differences in ``noise_mps4``.
         rest_height_m: Motion-capture height while resting, m, or None.
-        rest_seen: The drone has once been certainly on the ground (disarmed or below the
-            thrust ratio); before that an armed drone at hover thrust is taken to be flying.
+        rest_seen: The drone has once been disarmed or seen at rest on the ground (below
+            the thrust ratio, held still); before that an armed drone at hover thrust is
+            taken to be flying.
+        accel_smooth_mps2: Vertical acceleration smoothed over ``accel_time_constant_s``,
+            m/s^2, or None before the first finite one.
+        still_s: How long the smoothed acceleration (less the bias) has been within
+            ``rest_accel_mps2`` of 0, s.
+        falling_s: How long it has been below ``-rest_accel_mps2``, s.
     """
 
     on_ground: bool = True
@@ -227,6 +270,9 @@ class ContactState:
     noise_samples: int = 0
     rest_height_m: float | None = None
     rest_seen: bool = False
+    accel_smooth_mps2: float | None = None
+    still_s: float = 0.0
+    falling_s: float = 0.0
 
 
 def vertical_accel_mps2(
@@ -290,23 +336,48 @@ def contact_step(
     accel = vertical_accel_mps2
     weight_n = mass_kg * gravity_mps2
 
-    # Certainly on the ground: learn the resting accelerometer bias and height.
-    if not armed or not (thrust_n >= params.ground_thrust_ratio * weight_n):
+    # The evidence of a rest: with the propellers carrying less than the ratio of the
+    # weight (or nothing), the floor holds the drone still (vertical acceleration ~0), where
+    # in the air it falls at (F + T_z) / m - g. (At hover thrust "still" says nothing: a
+    # hovering drone is still too.)
+    low_thrust = not armed or not (thrust_n >= params.ground_thrust_ratio * weight_n)
+    smooth = state.accel_smooth_mps2
+    still_s, falling_s = 0.0, 0.0
+    if math.isfinite(accel):
+        w = min(1.0, dt / params.accel_time_constant_s) if smooth is not None else 1.0
+        smooth = accel if smooth is None else smooth + w * (accel - smooth)
+        rel = smooth - (state.accel_bias_z_mps2 or 0.0)
+        if low_thrust and abs(rel) < params.rest_accel_mps2:
+            still_s = state.still_s + dt
+        elif rel < -params.rest_accel_mps2:
+            falling_s = state.falling_s + dt
+    at_rest = still_s >= params.rest_hold_s
+
+    # On the ground: disarmed, or low thrust seen at rest. Learn the resting accelerometer
+    # bias and height only at rest (a drone stopped in mid-air falls).
+    if not armed or at_rest:
         bias = state.accel_bias_z_mps2
-        if math.isfinite(accel):
-            w = min(1.0, dt / params.bias_time_constant_s) if bias is not None else 1.0
-            bias = accel if bias is None else bias + w * (accel - bias)
         rest = state.rest_height_m
-        if height is not None:
-            w = min(1.0, dt / params.bias_time_constant_s) if rest is not None else 1.0
-            rest = height if rest is None else rest + w * (height - rest)
+        if at_rest:
+            if math.isfinite(accel):
+                w = min(1.0, dt / params.bias_time_constant_s) if bias is not None else 1.0
+                bias = accel if bias is None else bias + w * (accel - bias)
+            if height is not None:
+                w = min(1.0, dt / params.bias_time_constant_s) if rest is not None else 1.0
+                rest = height if rest is None else rest + w * (height - rest)
         return ContactState(
             on_ground=True,
             reason="disarmed" if not armed else "low_thrust",
             accel_bias_z_mps2=bias,
             rest_height_m=rest,
-            rest_seen=True,
+            rest_seen=state.rest_seen or at_rest or not armed,
+            accel_smooth_mps2=smooth,
+            still_s=still_s,
+            falling_s=falling_s,
         )
+    # Low thrust not (yet) seen at rest: a dip, a hard descent, or a touch-down being
+    # confirmed. The state it found holds (in the air the service coasts the filter).
+    state = replace(state, accel_smooth_mps2=smooth, still_s=still_s, falling_s=falling_s)
 
     if height is not None:
         ground_m = state.rest_height_m if state.rest_height_m is not None else floor_z_m
@@ -316,6 +387,8 @@ def contact_step(
                 on_ground = not above_m > params.liftoff_height_m
             else:
                 on_ground = above_m < params.touchdown_height_m
+            if state.rest_height_m is not None and above_m < -params.liftoff_height_m:
+                on_ground = False  # below the surface it rested on: not on it
             return replace(
                 state,
                 on_ground=on_ground,
@@ -327,10 +400,13 @@ def contact_step(
             )
 
     if not state.on_ground:
-        # In the air and staying there: the same state (frozen), not a copy per sample.
+        # In the air and staying there.
         return state if state.reason == "air" else replace(state, reason="air")
 
     # On the ground with the propellers carrying part of the weight: look for lift-off.
+    if falling_s >= params.rest_hold_s:
+        # The floor cannot pull the drone down: whatever said "ground" no longer holds.
+        return replace(state, on_ground=False, reason="falling", climb_speed_mps=0.0)
     finite_accel = math.isfinite(accel)
     # The vibration: the drone does not move, so its vertical acceleration is noise.
     # s_d = E[(a_k - a_(k-1))^2] / 2, blind to a slowly moving mean (a thrust ramp).

@@ -894,7 +894,8 @@ class Pipeline:
             height_m=msg.position_m[2] if msg.position_m is not None else None,
             floor_z_m=runtime.params.base.floor_z_m,
         )
-        on_ground = runtime.contact.on_ground or obs.tension_world_n is None
+        # Issue 23: a low thrust alone (no observation) is no ground; the contact decides.
+        on_ground = runtime.contact.on_ground or not msg.armed
         self._check_vbat_range(runtime, msg.vbat_v, on_ground, now_s)
         if runtime.slow_params is not None:
             self._learn_slow(runtime, msg, accel_read, dt_s, on_ground, obs.tension_world_n)
@@ -905,7 +906,7 @@ class Pipeline:
         tension: Sequence[float] = _ZEROS3
         std: Sequence[float] = _ZEROS3
         converged = False
-        if on_ground or obs.tension_world_n is None:
+        if on_ground:
             # On the ground the floor carries the drone: no tension estimate. The filter
             # restarts at lift-off rather than from the floor's reaction, from the prior
             # that a tether resting on the floor pulls on the drone with next to nothing:
@@ -931,9 +932,18 @@ class Pipeline:
         else:
             runtime.rested = False
             runtime.filter_prior = None
-            est = runtime.filter.update(
-                obs.tension_world_n, dt_s, thrust_axis_world=obs.thrust_axis_world
-            )
+            if obs.tension_world_n is None:
+                # Low thrust in the air (a dip, a hard descent, a touch-down not yet seen at
+                # rest): the floor may carry part of the weight, so no observation is taken
+                # and the filter coasts on its last estimate.
+                coasted = runtime.filter.coast(dt_s)
+                if coasted is None:  # nothing to coast before the first observation
+                    return (runtime, msg, now_s, tension, std, False, False, True, None, *tail)
+                est = coasted
+            else:
+                est = runtime.filter.update(
+                    obs.tension_world_n, dt_s, thrust_axis_world=obs.thrust_axis_world
+                )
             if est.change_detected:
                 runtime.change_detections += 1
             # Python floats from here on: a handful of numbers per message, for which

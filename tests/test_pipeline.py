@@ -509,12 +509,17 @@ def test_landing_armed_in_the_air_is_disarmed_once_on_the_ground(landed: str) ->
 
 
 def test_ground_thrust_ratio_is_honoured() -> None:
+    """At rest on the floor (the accelerometer reads g) for 0.3 s: below the configured
+    ratio the rest is seen (low_thrust, after rest_hold_s); above it the floor's load holds
+    the drone on the ground (resting)."""
     weight_n = 0.030 * 9.81
+    rest = {"accel_mps2": [0.0, 0.0, 9.81], "quat_wxyz": [1.0, 0.0, 0.0, 0.0]}
     for ratio, thrust_ratio, reason in [(0.6, 0.55, "low_thrust"), (0.4, 0.45, "resting")]:
         settings = load_settings(None, {"filter": {"ground_thrust_ratio": ratio}}, use_env=False)
         pipe = Pipeline(settings)
-        (out,) = pipe.handle(_telemetry(0, thrust_n=thrust_ratio * weight_n), 0.0)
-        assert json.loads(out.payload)["on_ground"] is True
+        for seq in range(75):
+            (out,) = pipe.handle(_telemetry(seq, thrust_n=thrust_ratio * weight_n, **rest), 0.0)
+            assert json.loads(out.payload)["on_ground"] is True
         status = pipe.status("cf1", 0.0)
         assert status is not None and status["contact"]["reason"] == reason
 
