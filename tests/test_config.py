@@ -132,3 +132,67 @@ def test_calibration_vbat_range(tmp_path: Path) -> None:
         with pytest.raises(ConfigError, match=needle) as info:
             load_settings(path, use_env=False)
         assert "\n" not in str(info.value)
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        (
+            "[tether]\nlength_m = 160\n",
+            "invalid configuration: tether.length_m = 160: 160 m is outside a micro drone's "
+            "0.1-30 m; centimetres? 160 cm is length_m = 1.6 (for an unusual rig set [drone] "
+            "unusual_rig = true)",
+        ),
+        (
+            "[drone]\nmass_kg = 30\n",
+            "invalid configuration: drone.mass_kg = 30: 30 kg is outside a micro drone's "
+            "0.005-2 kg; grams? 30 g is mass_kg = 0.03 (for an unusual rig set [drone] "
+            "unusual_rig = true)",
+        ),
+    ],
+)
+def test_units_mistakes_are_refused_in_one_line(tmp_path: Path, text: str, message: str) -> None:
+    """Issue 23: 160 (cm) for the tether ran and reported radial_m 158.3; 30 (g) for the
+    mass was accepted. The message has the value and the likely unit mistake, one line."""
+    cfg = tmp_path / "units.toml"
+    cfg.write_text(text)
+    with pytest.raises(ConfigError) as info:
+        load_settings(cfg, use_env=False)
+    assert str(info.value) == message
+    assert "\n" not in str(info.value)
+
+
+@pytest.mark.parametrize(
+    ("key", "value", "needle"),
+    [
+        ("tether.length_m", 1600, "millimetres? 1600 mm is length_m = 1.6"),
+        ("tether.weight_n_per_m", 5, "grams per metre? 5 g/m is weight_n_per_m = 0.049"),
+        ("drone.mass_kg", 0.001, "0.001 kg is outside a micro drone's 0.005-2 kg (for"),
+        ("tether.length_m", 0.05, "0.05 m is outside a micro drone's 0.1-30 m (for"),
+    ],
+)
+def test_other_implausible_values(key: str, value: float, needle: str) -> None:
+    table, name = key.split(".")
+    with pytest.raises(ConfigError) as info:
+        load_settings(None, {table: {name: value}}, use_env=False)
+    assert f"{key} = {value:g}: " in str(info.value) and needle in str(info.value)
+
+
+def test_plausible_edges_and_the_unusual_rig_override(tmp_path: Path) -> None:
+    ok = load_settings(None, {"drone": {"mass_kg": 2.0}, "tether": {"length_m": 30}}, use_env=False)
+    assert ok.drone.mass_kg == 2.0 and ok.tether.length_m == 30.0
+    cfg = tmp_path / "big.toml"
+    cfg.write_text("[drone]\nmass_kg = 30\nunusual_rig = true\n[tether]\nlength_m = 160\n")
+    s = load_settings(cfg, use_env=False)
+    assert s.drone.mass_kg == 30.0 and s.tether.length_m == 160.0
+    # Per drone: the override's value and the override's own switch.
+    with pytest.raises(
+        ConfigError, match=r"^invalid configuration: drones\.cf2\.tether\.length_m = 160: "
+    ):
+        load_settings(None, {"drones": {"cf2": {"tether": {"length_m": 160}}}}, use_env=False)
+    s = load_settings(
+        None,
+        {"drones": {"cf2": {"tether": {"length_m": 160}, "drone": {"unusual_rig": True}}}},
+        use_env=False,
+    )
+    assert s.for_drone("cf2").tether.length_m == 160.0
