@@ -814,7 +814,9 @@ class Pipeline:
         runtime.received += 1
         accel = msg.accel_mps2
         offset = runtime.rest.offset if runtime.rest is not None else None
-        if offset is not None:
+        if offset is not None and runtime.slow_params is None:
+            # (With the slow stage on, it owns the accelerometer's per-power-on error, x/y at
+            # rest included: the rest offset is still measured and reported, not applied.)
             # Rest calibration: the offset found at rest is extra accelerometer bias (the one
             # in force; this sample enters the rest window only once accepted, below).
             ox, oy, _ = offset.offset_body_mps2.tolist()

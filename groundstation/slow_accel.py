@@ -71,8 +71,8 @@ class SlowAccelParams:
             beyond this, s.
         velocity_time_constant_s: τ_v of the accelerometer's leaky velocity (drag without
             motion capture), s.
-        mocap_time_constant_s: low-pass of the motion-capture velocity and acceleration
-            (finite differences of positions), s.
+        mocap_time_constant_s: low-pass of the motion-capture velocity (finite
+            differences of positions) that the drag term uses, s.
         mocap_max_gap_s: motion capture older than this is not used, s.
     """
 
@@ -110,7 +110,9 @@ class SlowAccelState:
         velocity_world_mps: the drag's velocity, world frame, m/s (zero on the ground).
         velocity_source: where it comes from now.
         mocap_stamp_s / mocap_world_m: the last motion-capture sample (None: none yet).
-        mocap_velocity_world_mps / mocap_accel_world_mps2: their low-passed differences.
+        mocap_velocity_world_mps: the low-passed first difference (the drag's velocity).
+        mocap_raw_velocity_world_mps / mocap_accel_world_mps2: the raw first and second
+            differences (a_ref).
         mocap_samples: consecutive motion-capture samples (the differences need 3).
     """
 
@@ -123,6 +125,7 @@ class SlowAccelState:
     mocap_stamp_s: float | None = None
     mocap_world_m: Vec3 | None = None
     mocap_velocity_world_mps: Vec3 = _ZERO3
+    mocap_raw_velocity_world_mps: Vec3 = _ZERO3
     mocap_accel_world_mps2: Vec3 = _ZERO3
     mocap_samples: int = 0
 
@@ -162,15 +165,19 @@ def _mocap_step(
     if state.mocap_samples < 2:
         v_new, a_new = raw_v, _ZERO3
     else:
+        # The drag's velocity is low-passed (it multiplies D directly); the acceleration is
+        # the raw second difference: β low-passes it over τ, where a second difference's
+        # noise telescopes (its mean over a window is Δv/window), and a low-pass here would
+        # lag a turn's rotating acceleration into β.
+        v_raw_old = state.mocap_raw_velocity_world_mps
         v_new = tuple(v_old[i] + k * (raw_v[i] - v_old[i]) for i in range(3))
-        a_old = state.mocap_accel_world_mps2
-        raw_a = tuple((v_new[i] - v_old[i]) / dt for i in range(3))
-        a_new = tuple(a_old[i] + k * (raw_a[i] - a_old[i]) for i in range(3))
+        a_new = tuple((raw_v[i] - v_raw_old[i]) / dt for i in range(3))
     return replace(
         state,
         mocap_stamp_s=stamp_s,
         mocap_world_m=mocap_world_m,
         mocap_velocity_world_mps=(v_new[0], v_new[1], v_new[2]),
+        mocap_raw_velocity_world_mps=(raw_v[0], raw_v[1], raw_v[2]),
         mocap_accel_world_mps2=(a_new[0], a_new[1], a_new[2]),
         mocap_samples=state.mocap_samples + 1,
     )

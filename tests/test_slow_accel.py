@@ -1,0 +1,195 @@
+"""groundstation.slow_accel: the accelerometer's slow error learnt at rest and in the air."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from groundstation.slow_accel import (
+    SlowAccelParams,
+    SlowAccelState,
+    correct_accel_body_mps2,
+    drag_velocity_world_mps,
+    is_still,
+    rows_from_quat_wxyz,
+    slow_accel_step,
+)
+from groundstation.tension import ObservationCalibration, observe_tension, rotation_world_body
+
+G = 9.81
+LEVEL = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
+BIAS = (0.12, -0.2, 0.3)
+
+
+def _yaw(yaw_rad: float) -> tuple[tuple[float, float, float], ...]:
+    c, s = math.cos(yaw_rad), math.sin(yaw_rad)
+    return ((c, -s, 0.0), (s, c, 0.0), (0.0, 0.0, 1.0))
+
+
+def _run(
+    state: SlowAccelState,
+    params: SlowAccelParams,
+    n: int,
+    phase: str,
+    accel_fn,  # type: ignore[no-untyped-def]
+    R_fn=lambda i: LEVEL,  # type: ignore[no-untyped-def]
+    mocap_fn=lambda i: None,  # type: ignore[no-untyped-def]
+    dt: float = 0.01,
+    t0: float = 0.0,
+) -> SlowAccelState:
+    for i in range(n):
+        state = slow_accel_step(
+            state,
+            params,
+            dt_s=dt,
+            stamp_s=t0 + i * dt,
+            accel_body_mps2=accel_fn(i),
+            R_world_body=R_fn(i),
+            phase=phase,  # type: ignore[arg-type]
+            mocap_world_m=mocap_fn(i),
+        )
+    return state
+
+
+def test_bad_settings_are_refused() -> None:
+    with pytest.raises(ValueError, match="time_constant_s"):
+        SlowAccelParams(time_constant_s=0.0)
+    with pytest.raises(ValueError, match="velocity_time_constant_s"):
+        SlowAccelParams(velocity_time_constant_s=math.nan)
+
+
+def test_rest_learns_the_bias_of_this_power_on() -> None:
+    rng = np.random.default_rng(1)
+    params = SlowAccelParams()
+    st = _run(
+        SlowAccelState(),
+        params,
+        200,
+        "rest",
+        lambda i: tuple(np.add((0.0, 0.0, G), BIAS) + rng.normal(0, 0.02, 3)),
+    )
+    assert st.learnt_at_rest
+    assert np.allclose(st.bias_body_mps2, BIAS, atol=0.01)
+    corrected = correct_accel_body_mps2(st, (BIAS[0], BIAS[1], G + BIAS[2]))
+    assert np.allclose(corrected, (0.0, 0.0, G), atol=0.01)
+    assert drag_velocity_world_mps(st) is None  # no drag on the floor
+
+
+def test_a_hold_changes_nothing() -> None:
+    params = SlowAccelParams()
+    st = _run(SlowAccelState(), params, 100, "rest", lambda i: (BIAS[0], BIAS[1], G + BIAS[2]))
+    held = _run(st, params, 300, "hold", lambda i: (3.0, -2.0, 20.0))
+    assert held.bias_body_mps2 == st.bias_body_mps2
+
+
+def test_in_the_air_a_bounded_velocity_leaves_the_bias_alone() -> None:
+    """Manoeuvres with bounded velocity: 0.5 m/s² sine at 0.2 Hz on top of the bias; after
+    the rest, the air update keeps β within m·Δv/τ-sized error of the bias."""
+    params = SlowAccelParams(time_constant_s=30.0)
+    st = _run(SlowAccelState(), params, 200, "rest", lambda i: (BIAS[0], BIAS[1], G + BIAS[2]))
+
+    def manoeuvre(i: int) -> tuple[float, float, float]:
+        a = 0.5 * math.sin(2 * math.pi * 0.2 * i * 0.01)
+        return (BIAS[0] + a, BIAS[1], G + BIAS[2])
+
+    st = _run(st, params, 6000, "air", manoeuvre)
+    # |mean of a over τ| ≤ 2·v_max/τ = 2·0.4/30 m/s²
+    assert np.allclose(st.bias_body_mps2, BIAS, atol=0.03)
+
+
+def test_started_in_the_air_the_running_mean_finds_the_bias() -> None:
+    params = SlowAccelParams()
+    rng = np.random.default_rng(2)
+    st = _run(
+        SlowAccelState(),
+        params,
+        1000,
+        "air",
+        lambda i: tuple(np.add((0.0, 0.0, G), BIAS) + rng.normal(0, 0.3, 3)),
+    )
+    assert not st.learnt_at_rest
+    assert np.allclose(st.bias_body_mps2, BIAS, atol=0.03)
+
+
+def test_a_body_fixed_bias_stays_put_while_the_drone_yaws() -> None:
+    params = SlowAccelParams(time_constant_s=5.0)
+
+    def R(i: int) -> tuple[tuple[float, float, float], ...]:
+        return _yaw(0.5 * i * 0.01)  # 0.5 rad/s
+
+    st = _run(SlowAccelState(), params, 6000, "air", lambda i: (BIAS[0], BIAS[1], G + BIAS[2]), R)
+    assert np.allclose(st.bias_body_mps2, BIAS, atol=1e-6)
+
+
+def test_motion_capture_acceleration_keeps_a_sustained_turn_out_of_the_bias() -> None:
+    """A 1 m circle at 1 rad/s: 1 m/s² centripetal, sustained. Without motion capture the
+    air update takes part of it for bias; with it, the bias is found."""
+    params = SlowAccelParams(time_constant_s=2.0)
+    w, dt = 1.0, 0.01
+
+    def accel(i: int) -> tuple[float, float, float]:
+        t = i * dt
+        a = (-math.cos(w * t), -math.sin(w * t))  # centripetal, world = body (level)
+        return (a[0] + BIAS[0], a[1] + BIAS[1], G + BIAS[2])
+
+    def mocap(i: int) -> tuple[float, float, float]:
+        t = i * dt
+        return (math.cos(w * t), math.sin(w * t), 1.0)
+
+    seen = _run(SlowAccelState(), params, 3000, "air", accel, mocap_fn=mocap)
+    blind = _run(SlowAccelState(), params, 3000, "air", accel)
+    err_seen = np.linalg.norm(np.subtract(seen.bias_body_mps2, BIAS))
+    err_blind = np.linalg.norm(np.subtract(blind.bias_body_mps2, BIAS))
+    assert err_seen < 0.05, seen.bias_body_mps2
+    assert err_blind > 0.2, blind.bias_body_mps2  # ≈ |1/(1 + iωτ)| = 0.45 m/s²
+    assert seen.velocity_source == "mocap"
+    v = drag_velocity_world_mps(seen)
+    assert v is not None
+    t_end = 2999 * dt  # the low-pass (0.15 s) lags the turn by about 0.15 rad
+    assert np.allclose(v[:2], (-math.sin(w * t_end), math.cos(w * t_end)), atol=0.2), v
+
+
+def test_the_drag_velocity_without_motion_capture_follows_a_manoeuvre() -> None:
+    """1 m/s² for 1 s: the leaky integral reads about 1 m/s (τ_v = 8 s leaks ~6 %)."""
+    params = SlowAccelParams()
+    st = _run(SlowAccelState(), params, 100, "rest", lambda i: (0.0, 0.0, G))
+    st = _run(st, params, 100, "air", lambda i: (1.0, 0.0, G))
+    v = drag_velocity_world_mps(st)
+    assert v is not None and st.velocity_source == "accel"
+    assert 0.9 < v[0] < 1.0 and abs(v[1]) < 1e-9
+
+
+def test_stillness_needs_gravity_and_no_rotation() -> None:
+    assert is_still((0.0, 0.0, G), (0.0, 0.0, 0.0))
+    assert is_still((0.0, 0.0, G), None)
+    assert not is_still((0.0, 0.0, G), (0.5, 0.0, 0.0))  # turned in a hand
+    assert not is_still((0.0, 0.0, 7.0), None)  # falling or carried
+
+
+def test_rows_match_the_rotation_matrix() -> None:
+    q = np.array([0.9, 0.1, -0.2, 0.3])
+    assert np.allclose(rows_from_quat_wxyz(tuple(q)), rotation_world_body(q / np.linalg.norm(q)))
+
+
+@pytest.mark.parametrize("yaw", [0.0, 1.0])
+def test_rotor_drag_is_added_back_in_the_body_plane(yaw: float) -> None:
+    """F_drag = −R·D·Rᵀ·v: a drone at 1 m/s reads −D·v of 'tension' unless added back."""
+    D, m = 0.012, 0.03
+    q = (math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2))
+    cal = ObservationCalibration(rotor_drag_n_s_per_m=D)
+    v = (1.0, 0.5, 0.3)
+    # untethered at constant velocity: m·f = F·e3 + Rᵀ·F_drag
+    R = rotation_world_body(q)
+    vb = R.T @ np.array(v)
+    f = (np.array([0.0, 0.0, m * G]) - D * np.array([vb[0], vb[1], 0.0])) / m
+    thrust = m * G
+    no = observe_tension(f, q, thrust, m)
+    yes = observe_tension(f, q, thrust, m, calibration=cal, velocity_world_mps=v)
+    assert no.tension_world_n is not None and yes.tension_world_n is not None
+    assert np.allclose(no.tension_world_n[:2], -D * np.array(v[:2]), atol=1e-9)
+    assert np.allclose(yes.tension_world_n, 0.0, atol=1e-9)
+    # no velocity: no drag term (bit for bit the calibration without drag)
+    plain = observe_tension(f, q, thrust, m, calibration=cal)
+    assert np.array_equal(plain.tension_world_n, no.tension_world_n)  # type: ignore[arg-type]
