@@ -19,7 +19,12 @@ COLUMNS = (
     + [f"motor_motor_m{i}" for i in range(1, 5)]
     + ["pwr_pm_vbat"]
 )
-FILES = ("B6_linear_ramp_rep1.csv", "B3_figure8_fast_rep1.csv")
+FILES = (
+    "B6_linear_ramp_rep1.csv",
+    "B3_figure8_fast_rep1.csv",
+    "B6_linear_ramp_rep3.csv",
+    "B5_helix_medium_rep3.csv",
+)
 STEP = 4
 
 

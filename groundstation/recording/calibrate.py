@@ -745,7 +745,8 @@ def run_calibrate(
             table = _airframe_table(afit, settings.for_drone(d).calibration, source)
             patch["drones"][d] = {"calibration": table}
             head = [
-                f"groundstation calibrate (airframe constants), {stamp}, from {names}:",
+                f"groundstation calibrate (airframe constants), {stamp}, from {names}, "
+                + ("untethered (reference tension zero):" if untethered else "tethered:"),
                 f"{afit.samples} samples, residual RMS x/y/z "
                 + "/".join(f"{x * 1e3:.1f}" for x in afit.rms_after_n)
                 + " mN; accel_bias_mps2 is zero on purpose: the accelerometer's offsets "
