@@ -430,13 +430,45 @@ def cmd_replay(args: argparse.Namespace) -> int:
 
 
 def cmd_crazyflie(args: argparse.Namespace) -> int:
-    from groundstation.bridges.crazyflie import CrazyflieBridge, LinkError, make_link
+    from groundstation.bridges.crazyflie import (
+        CrazyflieBridge,
+        LinkError,
+        make_link,
+        run_bridges,
+        scan,
+    )
     from groundstation.messages import DRONE_ID_RE
     from groundstation.zenoh_bus import ZenohBus
 
-    if not DRONE_ID_RE.fullmatch(args.drone):
-        print(f"groundstation: --drone {args.drone!r}: not [A-Za-z0-9_-]{{1,64}}", file=sys.stderr)
+    uris: list[str] = args.uri or []
+    drones: list[str] = args.drone or []
+    if args.scan:
+        try:
+            found = scan(uris)
+        except LinkError as exc:
+            print(f"groundstation: {exc}", file=sys.stderr)
+            return 2
+        for uri in found:
+            print(uri, flush=True)
+        if not found:
+            print("groundstation crazyflie --scan: no Crazyflie answered", file=sys.stderr)
+        return 0 if found else 1
+    if not uris or len(uris) != len(drones):
+        print(
+            f"groundstation: {len(uris)} --uri and {len(drones)} --drone: give one --drone per "
+            "--uri (or --scan)",
+            file=sys.stderr,
+        )
         return 2
+    for name, values in (("--uri", uris), ("--drone", drones)):
+        repeated = sorted({v for v in values if values.count(v) > 1})
+        if repeated:
+            print(f"groundstation: {name} {', '.join(repeated)} given twice", file=sys.stderr)
+            return 2
+    for drone in drones:
+        if not DRONE_ID_RE.fullmatch(drone):
+            print(f"groundstation: --drone {drone!r}: not [A-Za-z0-9_-]{{1,64}}", file=sys.stderr)
+            return 2
     if args.rate_hz is not None:
         args.crazyflie_overrides = {"rate_hz": args.rate_hz}
     settings = _load(args)
@@ -447,27 +479,32 @@ def cmd_crazyflie(args: argparse.Namespace) -> int:
     if settings.crazyflie.toc_cache_dir is None:
         logging.getLogger("cflib.crazyflie.toccache").setLevel(max(cflib_level, logging.ERROR))
     try:
-        link = make_link(args.uri, settings, args.drone)
+        links = [make_link(uri, settings, drone) for uri, drone in zip(uris, drones, strict=True)]
     except LinkError as exc:
         print(f"groundstation: {exc}", file=sys.stderr)
         return 2
-    params = settings.for_drone(args.drone)
     stop = _stop_on_signals()
     with ZenohBus(settings.zenoh) as bus:
-        bridge = CrazyflieBridge(
-            settings.crazyflie,
-            bus,
-            args.drone,
-            link,
-            floor_z_m=params.base.floor_z_m,
-            reach=(params.base.position_m, params.tether.length_m),
-        )
-        print(
-            f"groundstation crazyflie: {args.uri} as tether/{args.drone} "
-            f"every {settings.crazyflie.log_period_ms} ms",
-            flush=True,
-        )
-        return bridge.run(stop)
+        bridges = []
+        for drone, link in zip(drones, links, strict=True):
+            params = settings.for_drone(drone)
+            bridges.append(
+                CrazyflieBridge(
+                    settings.crazyflie,
+                    bus,
+                    drone,
+                    link,
+                    floor_z_m=params.base.floor_z_m,
+                    reach=(params.base.position_m, params.tether.length_m),
+                )
+            )
+            print(
+                f"groundstation crazyflie: {link.uri} as tether/{drone} "
+                f"every {settings.crazyflie.log_period_ms} ms",
+                flush=True,
+            )
+        # One process, several links: cflib shares the Crazyradio between them.
+        return run_bridges(bridges, stop)
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
@@ -588,12 +625,21 @@ def build_parser() -> argparse.ArgumentParser:
     _add_common(p)
     p.add_argument(
         "--uri",
-        required=True,
+        action="append",
         metavar="URI",
-        help="cflib URI (radio://0/80/2M/E7E7E7E7E7, usb://0, udp://HOST:PORT); "
-        "fake://hover is a test fake, not a drone",
+        help="cflib URI (radio://0/80/2M/E7E7E7E7E7, usb://0, udp://HOST:PORT); repeat it, with "
+        "a --drone each, for several drones on one Crazyradio; fake://hover is a test fake, "
+        "not a drone",
     )
-    p.add_argument("--drone", required=True, metavar="ID", help="drone id on the bus")
+    p.add_argument(
+        "--drone", action="append", metavar="ID", help="drone id on the bus, one per --uri"
+    )
+    p.add_argument(
+        "--scan",
+        action="store_true",
+        help="list the Crazyflies that answer (cflib's scan, and each --uri's address), "
+        "connecting to none, and exit",
+    )
     p.add_argument("--rate-hz", type=float, metavar="HZ", help="telemetry rate (100)")
     p.set_defaults(func=cmd_crazyflie)
 

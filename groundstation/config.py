@@ -255,6 +255,10 @@ class LocalizationSection(_Section):
     """σ of ``exit_elevation_rad`` when the Reel message gives none, rad."""
     mocap_std_m: float = Field(0.002, gt=0.0)
     """Horizontal σ of the motion-capture position (``azimuth = "mocap"``), m."""
+    position_max_std_m: float = Field(0.05, gt=0.0)
+    """A Telemetry ``position_m`` whose ``position_std_m`` exceeds this on any axis (an onboard
+    estimator not yet converged, a Flow deck's x/y odometry) is used as no position: not for
+    follow, tug-to-land, floor contact or the azimuth, m."""
 
 
 class CalibrationSection(_Section):
@@ -482,6 +486,11 @@ class RealisticSection(_Section):
     """Switch: per-boot accelerometer bias."""
     accel_bias_std_mps2: float = Field(0.05, ge=0.0)
     """Per-boot accelerometer bias std per axis, m/s² (beyond misalignment and scale)."""
+    attitude_levelled: bool = False
+    """Switch (added): the reported attitude is levelled on the same misaligned, biased
+    accelerometer, as a Crazyflie's estimators level it, so its error is the accelerometer's
+    (a per-boot tilt of about |b_xy|/g plus the misalignment). Off by default: the published
+    realistic figures were made without it; benchmarks/bench_powerons.py turns it on."""
     thrust_axis: bool = True
     """Switch: thrust axis off body +z."""
     thrust_axis_rad: tuple[float, float] = (-0.037, -0.016)
@@ -646,7 +655,9 @@ class CrazyflieSection(_Section):
     mocap_stale_s: float = Field(0.1, gt=0.0)
     """A pose older than this (host clock) is not used: ``position_m`` is left out."""
     send_extpos: bool = False
-    """Also forward each motion-capture pose to the drone's estimator (``extpos``)."""
+    """Also forward motion-capture poses to the drone's estimator (``extpos``, at most
+    ``extpos_rate_hz``): the bridge then selects the Kalman estimator, resets it at connection
+    and refuses take-off until it has settled, as Bitcraze's mocap example does."""
     armed_source: Literal["auto", "supervisor", "none"] = "auto"
     """``supervisor``: bit 1 of ``supervisor.info``; ``auto``: that when the firmware logs it,
     else no ``armed`` field; ``none``: never report ``armed``."""
@@ -689,6 +700,32 @@ class CrazyflieSection(_Section):
     """``pwm_map``: ``thrust_map`` on the motor values; ``cubic_*``: the firmware's own model
     (2025.09 and later) for that propeller type, a cubic in the motor's voltage ``pm.vbat`` ×
     ``motor.m*``/65535 (``VMOTOR2THRUST0..3``; needs ``pm.vbat``; docs/real-lab.md)."""
+
+    onboard_position: Literal["none", "lighthouse", "loco", "flow"] = "none"
+    """The positioning the drone's own Kalman estimator fuses (a Lighthouse, Loco or Flow
+    deck). Not ``none``: the bridge logs ``stateEstimate.x/y/z`` with ``kalman.varX/Y/Z`` in a
+    block of its own and publishes them as ``position_m`` (``position_source``, σ in
+    ``position_std_m``) when no fresh motion-capture pose is at hand, and take-off waits for
+    the estimator to settle after a reset (docs/real-lab.md, "onboard positioning")."""
+    extpos_rate_hz: float = Field(100.0, gt=0.0, le=500.0)
+    """With ``send_extpos``: poses go to the drone at most this often, the latest one winning
+    (a faster motion capture would fill the radio that several drones share)."""
+    ext_quat_std_rad: float = Field(8.0e-3, gt=0.0)
+    """With ``send_extpos`` and poses that carry an attitude: ``locSrv.extQuatStdDev``, set at
+    each connection (Bitcraze's mocap example: 8.0e-3; the firmware's default 4.5e-3)."""
+    ext_pos_std_m: float | None = Field(None, gt=0.0)
+    """With ``send_extpos``: ``locSrv.extPosStdDev`` set at each connection (None: the
+    firmware's, 0.01 m)."""
+    estimator_initial_m: tuple[float, float, float] | None = None
+    """Written to ``kalman.initialX/Y/Z`` before each estimator reset: where the drone sits,
+    world frame, m (a Flow deck's odometry then starts in the world frame). None: untouched."""
+    estimator_settle_s: float = Field(4.5, gt=0.0)
+    """After a reset the estimator has settled when each of ``kalman.varPX/PY/PZ`` has stayed
+    within ``estimator_settle_spread`` over this long (cflib's ``reset_estimator``: ten samples
+    0.5 s apart), s."""
+    estimator_settle_spread: float = Field(0.001, gt=0.0)
+    """Largest spread (max − min) of each variance over ``estimator_settle_s`` (cflib's
+    threshold), the variances' unit (m²/s²)."""
 
     @field_validator("slow_period_ms")
     @classmethod

@@ -60,6 +60,7 @@ _KEY_RE = re.compile(r"tether/([^/]+)/(" + "|".join(KEY_KINDS) + ")")
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 Vec3 = tuple[Finite, Finite, Finite]
 Vec4 = tuple[Finite, Finite, Finite, Finite]
+PositiveStd = Annotated[float, Field(gt=0.0, allow_inf_nan=False)]
 
 
 class InvalidMessage(ValueError):
@@ -202,6 +203,14 @@ class Telemetry(_In):
     """Motors armed."""
     vbat_v: Finite | None = Field(default=None, gt=0.0)
     """(added) Battery voltage, volts, where the drone reports it (battery-aware thrust)."""
+    position_source: Literal["mocap", "lighthouse", "loco", "flow"] | None = None
+    """(added) What measured ``position_m``: ``mocap`` (motion capture; also when absent), or
+    the drone's onboard estimator fusing a Lighthouse, Loco or Flow deck."""
+    position_std_m: tuple[PositiveStd, PositiveStd, PositiveStd] | None = None
+    """(added) Per-axis standard deviation of ``position_m``, world frame, metres (an onboard
+    estimator's own); absent: motion capture's (``[localization] mocap_std_m``). A position
+    whose σ exceeds ``[localization] position_max_std_m`` on any axis is no position to the
+    service (a Flow deck's x/y: odometry, σ about 10 m)."""
 
 
 class Reel(_In):

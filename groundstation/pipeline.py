@@ -204,6 +204,8 @@ class DroneRuntime:
     """The last motion-capture ``position_m`` received in Telemetry, m, world frame."""
     mocap_stamp_s: float = -math.inf
     """The telemetry ``stamp_s`` that brought :attr:`mocap_m`, s."""
+    position_untrusted_told: bool = False
+    """The one ``warning`` Event for a position too uncertain to use was sent."""
     vbat_range_v: tuple[float, float] | None = None
     """``[calibration] thrust_vbat_range_v``: the battery range the thrust map was calibrated
     over (None: not recorded)."""
@@ -397,6 +399,27 @@ class Pipeline:
     def _warn(self, runtime: DroneRuntime, now_s: float, text: str, *, field: str) -> None:
         """A ``warning`` Event about this drone's telemetry (the callers send each once)."""
         self._emit(runtime.drone, "warning", "telemetry", now_s, self.self_id, text, field=field)
+
+    def _usable_position(self, runtime: DroneRuntime, msg: Telemetry, now_s: float) -> Telemetry:
+        """``msg`` without its ``position_m`` when the position's own σ (an onboard estimator's,
+        ``position_std_m``) exceeds ``[localization] position_max_std_m`` on any axis: it is
+        then no position to follow, tug-to-land, contact or the azimuth (issue 21). Below it,
+        an onboard position is used as motion capture is."""
+        std = msg.position_std_m
+        limit = self.settings.localization.position_max_std_m
+        if msg.position_m is None or std is None or max(std) <= limit:
+            return msg
+        if not runtime.position_untrusted_told:
+            runtime.position_untrusted_told = True
+            self._warn(
+                runtime,
+                now_s,
+                f"{runtime.drone}'s position_m ({msg.position_source or 'mocap'}) has σ "
+                f"{[round(v, 3) for v in std]} m, above [localization] position_max_std_m "
+                f"{limit:g} m: not used (follow flies on the tether's position)",
+                field="position_std_m",
+            )
+        return msg.model_copy(update={"position_m": None})
 
     def _reel_fresh(self, received_s: float, now_s: float) -> bool:
         """An exit angle received at ``received_s`` is still in use at ``now_s``: the reel
@@ -812,6 +835,7 @@ class Pipeline:
         the localization's inputs (None when there is nothing to localize).
         """
         runtime.received += 1
+        msg = self._usable_position(runtime, msg, now_s)
         accel = msg.accel_mps2
         offset = runtime.rest.offset if runtime.rest is not None else None
         if offset is not None and runtime.slow_params is None:

@@ -16,7 +16,14 @@ variable                   unit         Telemetry field
 ``pwm.m1_pwm..m4_pwm``     0..65535     (the same; firmware of about 2021–2022 only)
 ``pm.vbat``                V            ``vbat_v``
 ``supervisor.info``        bit field    ``armed`` (bit 1, "is armed")
+``stateEstimate.x/y/z``    m            ``position_m`` (``onboard_position``)
+``kalman.varX/Y/Z``        m²           ``position_std_m`` (square root)
+``kalman.varPX/PY/PZ``     m²/s²        (whether the estimator has settled)
 =========================  ===========  =========================================
+
+``kalman.varX/Y/Z`` are the Kalman estimator's position variances and ``kalman.varPX/PY/PZ``
+its (body-frame) velocity variances (estimator_kalman.c); cflib's ``reset_estimator`` waits on
+the latter, and so does :class:`SettleWatch`.
 
 Which battery compensation the motor variable carries decides ``[calibration]
 thrust_vbat_slope_per_v`` (docs/real-lab.md, "compensating once"). Current firmware logs
@@ -50,15 +57,20 @@ __all__ = [
     "G_MPS2",
     "MAX_BLOCK_BYTES",
     "NOT_LOGGED_CONSEQUENCE",
+    "POSITION",
+    "POSITION_VAR",
+    "VELOCITY_VAR",
     "VMOTOR2THRUST",
     "Aligned",
     "Aligner",
     "CommandGate",
     "MissingVariables",
     "MocapPose",
+    "OnboardPosition",
     "Phase",
     "Reach",
     "SetpointCommand",
+    "SettleWatch",
     "Skip",
     "VariablePlan",
     "build_telemetry",
@@ -83,6 +95,13 @@ MOTORS = {
     "motor": ("motor.m1", "motor.m2", "motor.m3", "motor.m4"),
     "pwm": ("pwm.m1_pwm", "pwm.m2_pwm", "pwm.m3_pwm", "pwm.m4_pwm"),
 }
+POSITION = ("stateEstimate.x", "stateEstimate.y", "stateEstimate.z")
+"""The onboard estimator's position, world frame, m (``stateEstimateZ.*`` holds the same in mm as
+int16: 6 bytes instead of 12, but the block needs a packet of its own either way)."""
+POSITION_VAR = ("kalman.varX", "kalman.varY", "kalman.varZ")
+"""The Kalman estimator's position variances, m²."""
+VELOCITY_VAR = ("kalman.varPX", "kalman.varPY", "kalman.varPZ")
+"""The Kalman estimator's velocity variances, m²/s²: what cflib's ``reset_estimator`` watches."""
 VBAT = "pm.vbat"
 SUPERVISOR_INFO = "supervisor.info"
 SUPERVISOR_IS_ARMED_BIT = 1
@@ -131,6 +150,10 @@ class VariablePlan:
     not_logged: tuple[str, ...] = ()
     """Optional variables the firmware lacks (``pm.vbat``, ``supervisor.info`` with
     ``armed_source = "auto"``); :data:`NOT_LOGGED_CONSEQUENCE` says what that costs."""
+    position: bool = False
+    """``stateEstimate.x/y/z`` and ``kalman.varX/Y/Z`` are logged (a fast block of their own)."""
+    settle: bool = False
+    """``kalman.varPX/PY/PZ`` are logged (slow block): take-off waits for them to settle."""
 
 
 def plan_blocks(
@@ -199,6 +222,12 @@ def plan_variables(section: CrazyflieSection, toc: Mapping[str, str], uri: str) 
         needed.append(VBAT)  # the firmware's cubic is in the motor's voltage
     if section.armed_source == "supervisor":
         needed.append(SUPERVISOR_INFO)
+    position = section.onboard_position != "none"
+    settle = position or section.send_extpos
+    if position:
+        needed.extend((*POSITION, *POSITION_VAR))
+    if settle:
+        needed.extend(VELOCITY_VAR)
     missing = [v for v in needed if v not in toc]
     if missing:
         hint = ""
@@ -207,6 +236,11 @@ def plan_variables(section: CrazyflieSection, toc: Mapping[str, str], uri: str) 
                 'current firmware has no pwm group: set [crazyflie] motor_variables = "motor" '
                 "(there the duty after battery compensation: fit [calibration] "
                 "thrust_vbat_slope_per_v; docs/real-lab.md, compensating once)"
+            )
+        if any(v in missing for v in (*POSITION_VAR, *VELOCITY_VAR)):
+            hint = (
+                "onboard_position and send_extpos need the Kalman estimator's log variables "
+                "(kalman.*): a firmware built without the Kalman estimator cannot give them"
             )
         raise MissingVariables(missing, uri, hint)
     armed = section.armed_source != "none" and SUPERVISOR_INFO in toc
@@ -217,13 +251,28 @@ def plan_variables(section: CrazyflieSection, toc: Mapping[str, str], uri: str) 
         if lacking and v not in toc
     )
     slow_vars = [v for v, on in ((VBAT, vbat), (SUPERVISOR_INFO, armed)) if on]
+    if settle:
+        slow_vars.extend(VELOCITY_VAR)  # 18 bytes with the battery and armed state
     # Motor commands are 0..65535 (firmware doc) but stored as uint32: fetch them as uint16
     # so that attitude and motors share one packet.
     narrow = {m: "uint16_t" for m in motors if toc[m] in ("uint32_t", "int32_t")}
-    groups = [g for g in (ACC, GYRO, attitude, motors) if g]
+    # The position and its variances (24 bytes) take a third fast packet: the first two are
+    # full (24 bytes each). Sampled with the rest, they join each Telemetry by timestamp.
+    onboard = (*POSITION, *POSITION_VAR) if position else ()
+    groups = [g for g in (ACC, GYRO, attitude, motors, onboard) if g]
     fast = plan_blocks("tel", groups, toc, section.log_period_ms, narrow)
     slow = plan_blocks("slow", [slow_vars], toc, section.slow_period_ms) if slow_vars else []
-    return VariablePlan(tuple(fast), tuple(slow), motors, attitude, armed, vbat, not_logged)
+    return VariablePlan(
+        tuple(fast),
+        tuple(slow),
+        motors,
+        attitude,
+        armed,
+        vbat,
+        not_logged,
+        position=position,
+        settle=settle,
+    )
 
 
 def thrust_n(pwms: Sequence[float], thrust_map: Sequence[float]) -> float:
@@ -421,6 +470,99 @@ class MocapPose:
     """Host monotonic clock when it arrived, s."""
 
 
+@dataclass(frozen=True, slots=True)
+class OnboardPosition:
+    """The onboard estimator's position of one period, world frame."""
+
+    position_m: tuple[float, float, float]
+    std_m: tuple[float, float, float]
+    """√ of ``kalman.varX/Y/Z``, m."""
+
+
+def onboard_position(values: Mapping[str, float]) -> OnboardPosition | None:
+    """``stateEstimate.x/y/z`` and √``kalman.varX/Y/Z`` of one period, or None when a value is
+    missing or not finite, or a variance not positive (the firmware bounds them to
+    [1e-6, 100] m²)."""
+    try:
+        p = [float(values[k]) for k in POSITION]
+        var = [float(values[k]) for k in POSITION_VAR]
+    except KeyError:
+        return None
+    if not all(math.isfinite(v) for v in (*p, *var)) or min(var) <= 0.0:
+        return None
+    return OnboardPosition(
+        (p[0], p[1], p[2]), (math.sqrt(var[0]), math.sqrt(var[1]), math.sqrt(var[2]))
+    )
+
+
+@dataclass
+class SettleWatch:
+    """Has the Kalman estimator settled since it was last reset? cflib's ``reset_estimator``
+    (cflib/utils/reset_estimator.py, used by Bitcraze's mocap and Lighthouse examples): after
+    ``kalman.resetEstimation``, each of ``kalman.varPX/PY/PZ`` must stay within ``spread``
+    (max − min) over ``window_s``. Without measurements of its position the variances grow
+    and never settle; a complementary estimator leaves them frozen, which would pass: the
+    bridge selects the Kalman estimator before the reset.
+
+    Args:
+        window_s: how long the variances must stay within ``spread``, s.
+        spread: their largest spread, m²/s².
+    """
+
+    window_s: float
+    spread: float
+    reset_s: float | None = None
+    """Host clock of the last reset on this connection, s; None: none yet."""
+    _samples: deque[tuple[float, tuple[float, float, float]]] = field(default_factory=deque)
+
+    def reset(self, now_s: float) -> None:
+        """The estimator was reset now: what came before no longer counts."""
+        self.reset_s = now_s
+        self._samples.clear()
+
+    def forget(self) -> None:
+        """A new connection: no reset on it yet."""
+        self.reset_s = None
+        self._samples.clear()
+
+    def push(self, now_s: float, variances: Sequence[float]) -> None:
+        """One sample of ``kalman.varPX/PY/PZ`` received at ``now_s`` (host clock)."""
+        if self.reset_s is None or len(variances) != 3:
+            return
+        v = (float(variances[0]), float(variances[1]), float(variances[2]))
+        if not all(math.isfinite(x) for x in v):
+            self._samples.clear()  # a broken reading restarts the window
+            return
+        self._samples.append((now_s, v))
+        # keep one sample at least window_s old, so that the samples span the window
+        while len(self._samples) > 1 and self._samples[1][0] <= now_s - self.window_s:
+            self._samples.popleft()
+
+    def spreads(self) -> tuple[float, float, float] | None:
+        """max − min of each variance over the samples kept, or None without samples."""
+        if not self._samples:
+            return None
+        cols = list(zip(*(v for _, v in self._samples), strict=True))
+        return (
+            max(cols[0]) - min(cols[0]),
+            max(cols[1]) - min(cols[1]),
+            max(cols[2]) - min(cols[2]),
+        )
+
+    def settled(self, now_s: float, stale_s: float = 1.0) -> bool:
+        """Reset on this connection, samples spanning ``window_s`` each within ``spread``, the
+        latest no older than ``stale_s``."""
+        spreads = self.spreads()
+        if spreads is None or self.reset_s is None:
+            return False
+        first, last = self._samples[0][0], self._samples[-1][0]
+        return (
+            last - first >= self.window_s
+            and now_s - last <= stale_s
+            and all(s < self.spread for s in spreads)
+        )
+
+
 class Skip(ValueError):
     """This period yields no Telemetry; ``kind`` says why (counted, logged once per kind)."""
 
@@ -449,6 +591,9 @@ def build_telemetry(
         mocap: latest motion-capture pose, or None.
         now_s: host monotonic clock, s (for the pose's age).
 
+    ``position_m`` is the fresh motion-capture pose (``position_source`` ``mocap``), else, with
+    ``onboard_position``, the onboard estimator's with its σ (``position_std_m``).
+
     Raises:
         Skip: non-finite readings (``bad_reading``), no attitude (``no_attitude``).
     """
@@ -463,6 +608,7 @@ def build_telemetry(
         raise Skip("bad_reading", "non-finite accelerometer, gyro or motor value")
     stale_s = section.mocap_stale_s
     fresh = mocap if mocap is not None and now_s - mocap.received_s <= stale_s else None
+    onboard = onboard_position(v) if plan.position else None
     if section.attitude_source == "mocap":
         raw = fresh.quat_wxyz if fresh is not None else None
         if raw is None:
@@ -492,9 +638,17 @@ def build_telemetry(
         "quat_wxyz": quat,
         "thrust_n": thrust,
         "gyro_rps": tuple(math.radians(g) for g in gyro_dps),
-        "position_m": fresh.position_m if fresh is not None else None,
         "vbat_v": vbat if vbat is not None and math.isfinite(vbat) and vbat > 0 else None,
     }
+    if fresh is not None:
+        # Motion capture first: the onboard estimate fuses it (extpos) or another system.
+        fields["position_m"] = fresh.position_m
+        fields["position_source"] = "mocap"
+    elif onboard is not None:
+        fields["position_m"] = onboard.position_m
+        fields["position_source"] = section.onboard_position
+        # σ floored at 1 mm: the firmware's variance floor (1e-6 m²) is a bound, not a σ
+        fields["position_std_m"] = tuple(max(s, 1e-3) for s in onboard.std_m)
     if armed is not None:
         fields["armed"] = armed
     return Telemetry.model_validate(fields, strict=False)

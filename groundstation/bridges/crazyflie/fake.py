@@ -24,7 +24,11 @@ kept in ``impacts_mps``); the battery sags with flight time and under load.
 seconds of playback and refuses to reconnect for ``down_s``; ``firmware`` picks the log TOC of
 :data:`FIRMWARE_TOCS` (``current``, the default, or ``2022``); ``missing`` drops variables
 from it; ``refuse`` refuses (as the firmware's ``ENOMEM``) every log block holding one of the
-named variables; ``ooo`` repeats an old timestamp every 25th period (out-of-order packets).
+named variables; ``ooo`` repeats an old timestamp every 25th period (out-of-order packets);
+``positioning`` (``lighthouse``, ``loco``, ``flow``) gives the drone that deck, which its Kalman
+estimator fuses (:class:`FirmwareModel`: a reset, variances that settle, ``stateEstimate``
+following the position with the deck's noise). Parameters (:data:`FAKE_PARAMS`) are set with
+``set_param``; several fakes run side by side, each its own drone.
 """
 
 from __future__ import annotations
@@ -50,6 +54,7 @@ from groundstation.bridges.crazyflie.link import (
 )
 
 __all__ = [
+    "FAKE_PARAMS",
     "FAKE_SCENARIOS",
     "FAKE_TOC",
     "FIRMWARE_TOCS",
@@ -65,6 +70,8 @@ _COMMON_TOC: Mapping[str, str] = {
     **{f"motor.m{i}": "uint32_t" for i in range(1, 5)},
     "pm.vbat": "float",
     "supervisor.info": "uint16_t",
+    **{f"stateEstimate.{a}": "float" for a in "xyz"},
+    **{f"kalman.var{a}": "float" for a in ("X", "Y", "Z", "PX", "PY", "PZ")},
 }
 FIRMWARE_TOCS: Mapping[str, Mapping[str, str]] = {
     # motors.c logs ``motor.m*`` (the ratios written to the timers, after the stabilizer's
@@ -94,6 +101,42 @@ POS_VEL_MAX_MPS = 1.0
 G_MPS2 = 9.81
 _STEP_S = 0.002
 
+FAKE_PARAMS: Mapping[str, float] = {
+    "stabilizer.estimator": 0.0,
+    "kalman.resetEstimation": 0.0,
+    "kalman.initialX": 0.0,
+    "kalman.initialY": 0.0,
+    "kalman.initialZ": 0.0,
+    "kalman.initialYaw": 0.0,
+    "locSrv.extPosStdDev": 0.01,
+    "locSrv.extQuatStdDev": 4.5e-3,
+}
+"""The writable parameters the fake has, with the firmware's defaults (``stabilizer.estimator``
+0: automatic, the complementary estimator unless a positioning deck asks for the Kalman)."""
+
+POSITIONING_STD_M: Mapping[str, tuple[float, float, float]] = {
+    "lighthouse": (0.002, 0.002, 0.002),
+    "loco": (0.04, 0.04, 0.06),
+    "flow": (10.0, 10.0, 0.005),
+}
+"""What the fake's Kalman variance settles to with each deck, as σ per axis, m (a Flow deck
+measures velocity and height: its x/y is odometry, the variance stays at the firmware's bound
+of 100 m²)."""
+KALMAN_MAX_VAR = 100.0
+"""The firmware's covariance bound (kalman_core.c ``MAX_COVARIANCE``)."""
+KALMAN_POS_TAU_S = 0.1
+"""How fast the fake's position estimate and variance close on a measured position, s."""
+KALMAN_VEL_TAU_S = 0.5
+"""How fast the fake's velocity variances settle once positions are measured, s."""
+KALMAN_VEL_VAR_SS = 2e-4
+"""The velocity variance they settle to, m²/s²."""
+KALMAN_VEL_VAR_RESET = 0.01
+"""The velocity variance just after a reset, once the first positions pull the state, m²/s²."""
+KALMAN_VAR_GROWTH = 0.05
+"""Growth of the variances per second without position measurements, m²(/s²) per s."""
+EXTPOS_FRESH_S = 0.1
+"""An external pose older than this is no measurement to the fake's estimator, s."""
+
 
 class FirmwareModel:
     """What a Crazyflie's firmware does with the setpoints it receives (module docstring).
@@ -103,6 +146,16 @@ class FirmwareModel:
         flying: it flies there on its own (onboard) controller until the first setpoint.
         floor_z_m: the floor.
         clock: host monotonic clock, s.
+        positioning: the deck the Kalman estimator fuses (``none``: only external poses).
+
+    The Kalman estimator runs when ``stabilizer.estimator`` is 2 or a deck asks for it. A reset
+    (``kalman.resetEstimation``) puts its position at ``kalman.initialX/Y/Z`` with variance
+    100 m² (the firmware's bound) and its velocity variances at a transient of 0.01 m²/s²; while
+    positions are measured (a deck, or an external pose within 0.1 s) the position closes on the
+    measured one and the velocity variances settle to 2e-4 m²/s² (time constants 0.1 s and
+    0.5 s); without measurements every variance grows by 0.05 per second. A Flow deck measures
+    height and velocity: z closes on the truth, x/y follow the motion since the reset
+    (odometry) and their variance stays at 100 m².
     """
 
     def __init__(
@@ -112,7 +165,12 @@ class FirmwareModel:
         flying: bool = True,
         floor_z_m: float = 0.0,
         clock: Any = time.monotonic,
+        positioning: str = "none",
     ) -> None:
+        if positioning not in ("none", *POSITIONING_STD_M):
+            raise ValueError(
+                f"positioning {positioning!r}: none or one of {sorted(POSITIONING_STD_M)}"
+            )
         self._clock = clock
         self.floor_z_m = floor_z_m
         self.position_m = np.array(start_m, dtype=float)
@@ -128,6 +186,18 @@ class FirmwareModel:
         self.track: deque[tuple[float, float, float, float]] = deque(maxlen=100_000)
         """``(t_s, x_m, y_m, z_m)`` at each update (the latest 100 000)."""
         self.flight_s = 0.0
+        self.positioning = positioning
+        """The deck the onboard estimator fuses: ``none``, ``lighthouse``, ``loco``, ``flow``."""
+        self.params = dict(FAKE_PARAMS)
+        self.kalman_position_m = np.zeros(3)
+        """The Kalman estimator's position (``stateEstimate.x/y/z`` while it runs), m."""
+        self.kalman_var_pos = np.full(3, KALMAN_MAX_VAR)
+        self.kalman_var_vel = np.zeros(3)
+        """Zero until the Kalman estimator runs (static memory), as ``kalman.var*`` read."""
+        self.resets = 0
+        self.extpos: tuple[float, np.ndarray] | None = None
+        """``(t_s, position_m)`` of the latest external pose received."""
+        self._odometry_origin_m = np.zeros(3)
         self._t = clock()
         self._lock = threading.Lock()
 
@@ -148,7 +218,63 @@ class FirmwareModel:
             x, y, z = self.position_m
             self.track.append((now, float(x), float(y), float(z)))
 
+    @property
+    def kalman_running(self) -> bool:
+        return self.params["stabilizer.estimator"] == 2.0 or self.positioning != "none"
+
+    def _measured_m(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The position measured now and its σ per axis, or None (no measurement)."""
+        if self.positioning in ("lighthouse", "loco"):
+            return self.position_m, np.array(POSITIONING_STD_M[self.positioning])
+        if self.positioning == "flow":
+            odometry = self._odometry_origin_m + self.position_m
+            odometry[2] = self.position_m[2]
+            return odometry, np.array(POSITIONING_STD_M["flow"])
+        if self.extpos is not None and self._t - self.extpos[0] <= EXTPOS_FRESH_S:
+            std = self.params["locSrv.extPosStdDev"]
+            return self.extpos[1], np.array([std, std, std])
+        return None
+
+    def _step_kalman(self, dt: float) -> None:
+        if not self.kalman_running:
+            return
+        measured = self._measured_m()
+        if measured is None:
+            self.kalman_var_pos = np.minimum(
+                self.kalman_var_pos + KALMAN_VAR_GROWTH * dt, KALMAN_MAX_VAR
+            )
+            self.kalman_var_vel = np.minimum(
+                self.kalman_var_vel + KALMAN_VAR_GROWTH * dt, KALMAN_MAX_VAR
+            )
+            return
+        position_m, std_m = measured
+        k = min(1.0, dt / KALMAN_POS_TAU_S)
+        self.kalman_position_m = self.kalman_position_m + k * (position_m - self.kalman_position_m)
+        var_ss = np.minimum(std_m * std_m, KALMAN_MAX_VAR)
+        self.kalman_var_pos = self.kalman_var_pos + k * (var_ss - self.kalman_var_pos)
+        kv = min(1.0, dt / KALMAN_VEL_TAU_S)
+        self.kalman_var_vel = self.kalman_var_vel + kv * (KALMAN_VEL_VAR_SS - self.kalman_var_vel)
+
+    def reset_estimator(self) -> None:
+        """``kalman.resetEstimation``: the Kalman estimator starts again (class docstring)."""
+        self.advance()
+        with self._lock:
+            p = self.params
+            initial = np.array([p["kalman.initialX"], p["kalman.initialY"], p["kalman.initialZ"]])
+            self.kalman_position_m = initial.copy()
+            self.kalman_var_pos = np.array([KALMAN_MAX_VAR, KALMAN_MAX_VAR, 1.0])
+            self.kalman_var_vel = np.full(3, KALMAN_VEL_VAR_RESET)
+            # odometry from here: the initial position plus the motion since now
+            self._odometry_origin_m = initial - self.position_m
+            self.resets += 1
+
+    def on_extpos(self, position_m: Sequence[float]) -> None:
+        self.advance()
+        with self._lock:
+            self.extpos = (self._t, np.array(position_m, dtype=float))
+
     def _step(self, dt: float) -> None:
+        self._step_kalman(dt)
         if self.motors_on and self.last_setpoint_s is not None:
             age = self._t - self.last_setpoint_s
             if age > COMMANDER_SHUTDOWN_S:
@@ -265,10 +391,17 @@ class FakeLink:
         self.thrust_map = tuple(thrust_map)
         self.commands: list[tuple[str, tuple[Any, ...]]] = []
         self.opens = 0
-        self.firmware = FirmwareModel(
-            start_m if self.scenario != "floor" else (start_m[0], start_m[1], 0.0),
-            flying=self.scenario != "floor",
-        )
+        positioning = query.get("positioning", "none")
+        try:
+            self.firmware = FirmwareModel(
+                start_m if self.scenario != "floor" else (start_m[0], start_m[1], 0.0),
+                flying=self.scenario != "floor",
+                positioning=positioning,
+            )
+        except ValueError as exc:
+            raise LinkError(f"fake {exc}") from None
+        self.extpos_times: list[float] = []
+        """Host clock of each external pose received."""
         self._rng = np.random.default_rng(seed)
         self._lock = threading.Lock()
         self._on_lost: LostHandler | None = None
@@ -334,7 +467,20 @@ class FakeLink:
         return not self.firmware.motors_on
 
     def send_extpos(self, position_m: Sequence[float], quat_wxyz: Sequence[float] | None) -> None:
+        self.extpos_times.append(time.monotonic())
+        self.firmware.on_extpos(position_m)
         self._record("send_extpos", *position_m)
+
+    def set_param(self, name: str, value: float) -> None:
+        fw = self.firmware
+        if name not in fw.params:
+            raise LinkError(f"{self.uri}: cannot set parameter {name}: '{name} not in param TOC'")
+        self._record("set_param", name, value)
+        fw.advance()
+        fw.params[name] = float(value)
+        if name == "kalman.resetEstimation" and value:
+            fw.reset_estimator()
+            fw.params[name] = 0.0  # the firmware clears the flag once it has reset
 
     def close(self) -> None:
         with self._lock:
@@ -396,6 +542,18 @@ class FakeLink:
             "pm.vbat": fw.vbat_v(),
             "supervisor.info": float(info),
         }
+        if fw.kalman_running:
+            # stateEstimate is the Kalman's position, with the noise of what it fuses
+            std = np.sqrt(fw.kalman_var_pos)
+            est = fw.kalman_position_m + self._rng.normal(0.0, 1.0, 3) * np.minimum(std, 0.05)
+        else:
+            est = np.zeros(3)  # the complementary estimator gives no position
+        for axis, value in zip("xyz", est, strict=True):
+            out[f"stateEstimate.{axis}"] = float(value)
+        for axis, var in zip(("X", "Y", "Z"), fw.kalman_var_pos, strict=True):
+            out[f"kalman.var{axis}"] = float(var) if fw.kalman_running else 0.0
+        for axis, var in zip(("PX", "PY", "PZ"), fw.kalman_var_vel, strict=True):
+            out[f"kalman.var{axis}"] = float(var)
         for i in range(1, 5):
             # The same value for both: the fake models no battery compensation.
             out[f"motor.m{i}"] = float(round(pwm))

@@ -18,6 +18,7 @@ from typing import Any, Protocol
 
 __all__ = [
     "CFLIB_SCHEMES",
+    "SERIAL_REFUSED",
     "TYPE_SIZES",
     "CflibLink",
     "DataHandler",
@@ -26,6 +27,7 @@ __all__ = [
     "LogBlock",
     "LogBlockRefused",
     "LostHandler",
+    "scan_cflib",
 ]
 
 _log = logging.getLogger(__name__)
@@ -134,13 +136,58 @@ class Link(Protocol):
         """Forward a motion-capture pose to the drone's estimator."""
         ...
 
+    def set_param(self, name: str, value: float) -> None:
+        """Set a firmware parameter (``cf.param.set_value``), e.g. ``kalman.resetEstimation``.
+
+        Raises:
+            LinkError: the firmware has no such writable parameter, or the link failed.
+        """
+        ...
+
     def close(self) -> None:
         """Disconnect (idempotent)."""
         ...
 
 
-CFLIB_SCHEMES = ("radio", "usb", "udp", "tcp", "serial", "prrt")
-"""URI schemes of cflib 0.1.34's drivers (``cflib.crtp``)."""
+CFLIB_SCHEMES = ("radio", "usb", "udp", "tcp", "prrt")
+"""URI schemes of cflib 0.1.34's drivers (``cflib.crtp``) that the bridge opens."""
+SERIAL_REFUSED = (
+    "serial:// is not supported: cflib 0.1.34's serial driver calls itself 'an early serial "
+    "link driver [that] could still be used (after some fixing)', needs pyserial (which cflib "
+    "does not install) and a firmware speaking CPX over its UART, and waits for the UART's "
+    "sync without a timeout, which would hang the bridge. Use radio:// (a Crazyradio) or "
+    "usb:// (the Crazyflie's USB port)"
+)
+"""Why ``serial://`` is refused (issue 21: it works or it goes)."""
+PARAM_TIMEOUT_S = 10.0
+"""Longest wait for the firmware's parameter values after connecting (cflib reads them all
+once before it writes one)."""
+
+
+def scan_cflib(address: int | None = None) -> list[str]:
+    """URIs of the Crazyflies that answer cflib's scan (``cflib.crtp.scan_interfaces``).
+
+    The radio scan pings ``address`` (default E7E7E7E7E7) on every channel at 250K, 1M and 2M;
+    USB lists Crazyflies plugged in. Nothing is connected to, so nothing is commanded (a
+    connection's close would send a zero setpoint). It needs the Crazyradio, which a running
+    bridge holds.
+
+    Args:
+        address: the radio address to ping, as an int (``0xE7E7E7E701``).
+    """
+    import contextlib
+    import io
+
+    import cflib.crtp
+
+    CflibLink._init_drivers()
+    chatter = io.StringIO()  # cflib prints (e.g. "Cannot find a Crazyradio Dongle")
+    with contextlib.redirect_stdout(chatter):
+        found = cflib.crtp.scan_interfaces(address)
+    for line in chatter.getvalue().splitlines():
+        if line.strip():
+            _log.info("cflib: %s", line.strip())
+    return [str(entry[0]) for entry in found]
 
 
 class CflibLink:
@@ -157,6 +204,8 @@ class CflibLink:
 
     def __init__(self, uri: str, cache_dir: str | None = None) -> None:
         scheme = uri.split("://", 1)[0] if "://" in uri else ""
+        if scheme == "serial":
+            raise LinkError(f"--uri {uri!r}: {SERIAL_REFUSED}")
         if scheme not in CFLIB_SCHEMES:
             schemes = ", ".join(f"{s}://" for s in CFLIB_SCHEMES)
             raise LinkError(
@@ -166,6 +215,7 @@ class CflibLink:
         self._cache_dir = cache_dir
         self._cf: Any = None
         self._configs: list[Any] = []
+        self._params_ready = threading.Event()
 
     @classmethod
     def _init_drivers(cls) -> None:
@@ -197,7 +247,10 @@ class CflibLink:
                 lost_once.set()
                 on_lost(str(msg).strip().splitlines()[0] if msg else "link lost")
 
-        # `connected` fires once the log and parameter TOCs are downloaded.
+        # `connected` fires once the log and parameter TOCs are downloaded; `fully_connected`
+        # once every parameter's value has been read (cflib writes none before that).
+        self._params_ready.clear()
+        cf.fully_connected.add_callback(lambda uri: self._params_ready.set())
         cf.connected.add_callback(on_connected)
         cf.connection_failed.add_callback(on_failed)
         cf.connection_lost.add_callback(on_connection_lost)
@@ -304,6 +357,19 @@ class CflibLink:
         else:
             w, qx, qy, qz = (float(v) for v in quat_wxyz)
             cf.extpos.send_extpose(x, y, z, qx, qy, qz, w)  # cflib takes x, y, z, w
+
+    def set_param(self, name: str, value: float) -> None:
+        cf = self._require()
+        # cflib's set_value would wait up to 60 s for the values on this (the bridge's) thread.
+        if not self._params_ready.wait(PARAM_TIMEOUT_S):
+            raise LinkError(
+                f"{self.uri}: the firmware's parameter values were not read within "
+                f"{PARAM_TIMEOUT_S:g} s; {name} not set"
+            )
+        try:
+            cf.param.set_value(name, value)
+        except (KeyError, AttributeError) as exc:  # not in the TOC; read-only
+            raise LinkError(f"{self.uri}: cannot set parameter {name}: {exc}") from None
 
     def close(self) -> None:
         cf, self._cf = self._cf, None

@@ -39,6 +39,7 @@ from typing import Any
 
 from groundstation.bridges.crazyflie.bridge import (
     NOT_LOGGED_CONSEQUENCE,
+    VELOCITY_VAR,
     Aligner,
     CommandGate,
     MissingVariables,
@@ -46,6 +47,7 @@ from groundstation.bridges.crazyflie.bridge import (
     Phase,
     Reach,
     SetpointCommand,
+    SettleWatch,
     Skip,
     VariablePlan,
     build_telemetry,
@@ -64,7 +66,7 @@ from groundstation.messages import (
     TakeoffIn,
 )
 
-__all__ = ["SETPOINT_PERIOD_S", "CrazyflieBridge", "bridge_keys"]
+__all__ = ["SETPOINT_PERIOD_S", "CrazyflieBridge", "bridge_keys", "run_bridges"]
 
 _VERDICT_WHY = {
     "out_of_reach": ": beyond the tether's reach from the base",
@@ -87,6 +89,10 @@ DATA_TIMEOUT_PERIODS = 3
 most frequent block's periods have passed without data (a slow log rate is not a loss)."""
 REACH_MARGIN_M = 0.05
 """A take-off target stays this much inside the tether's length from the base."""
+RESET_HOLD_S = 0.1
+"""``kalman.resetEstimation`` is written 1, then 0 this much later (cflib's
+``reset_estimator``; the firmware clears it itself once reset)."""
+ONBOARD_SOURCES = ("lighthouse", "loco", "flow")
 
 
 def bridge_keys(drone: str) -> dict[str, str]:
@@ -186,6 +192,16 @@ class CrazyflieBridge:
         self._next_tick_s = 0.0
         self._data_timeout_s = section.data_timeout_s
         self._subs: list[Subscription] = []
+        self._settle = SettleWatch(section.estimator_settle_s, section.estimator_settle_spread)
+        self._estimator_pending = False
+        """Reset the estimator at the first period with the motors off (never in flight)."""
+        self._estimator_error = ""
+        self._settled_told = False
+        self._reset_clear_s: float | None = None
+        self._onboard: tuple[tuple[float, float, float], float] | None = None
+        """The last onboard-estimator position published and when (host clock)."""
+        self._extpos_pending: MocapPose | None = None
+        self._extpos_sent_s = -math.inf
 
     # ------------------------------------------------------------------ callbacks
 
@@ -277,6 +293,12 @@ class CrazyflieBridge:
         self._aligner = Aligner([b.name for b in plan.fast], self.section.log_period_ms)
         self._slow = {}
         self._last_stamp_s = None
+        self._settle.forget()
+        self._estimator_pending = plan.settle
+        self._estimator_error = ""
+        self._reset_clear_s = None
+        self._settled_told = False
+        self._onboard = None
         try:
             self.link.start_logging(
                 [*plan.fast, *plan.slow], self._data_handler(epoch), self.section.connect_timeout_s
@@ -351,6 +373,9 @@ class CrazyflieBridge:
             self._check_link(now)
         if self.connected:
             self._send_setpoint(now)
+        if self.connected:
+            self._estimator_tick(now)
+            self._forward_extpos(now)
         if now >= next_status:
             self._publish_status()
             next_status = now + self.section.status_period_s
@@ -409,12 +434,7 @@ class CrazyflieBridge:
                 self._count("setpoint_disconnected")
                 return
             now = self._clock()
-            seen = self._mocap
-            current = (
-                seen.position_m
-                if seen is not None and now - seen.received_s <= self.section.mocap_stale_s
-                else None
-            )
+            current = self._measured_position(now)
             verdict = self.gate.on_setpoint(
                 sp.position_m, sp.stamp_s, now, self._last_stamp_s, self._last_yaw_deg, current
             )
@@ -463,7 +483,10 @@ class CrazyflieBridge:
             pose: MocapPoseIn = event.payload
             self._mocap = MocapPose(pose.position_m, pose.quat_wxyz, self._clock())
             if self.section.send_extpos and self.connected:
-                self._send("send_extpos", pose.position_m, pose.quat_wxyz)
+                if self._extpos_pending is not None:
+                    self._count("extpos_superseded")  # a newer pose within the rate's period
+                self._extpos_pending = self._mocap
+                self._forward_extpos(self._clock())
         elif kind == "bad_input":
             self._count("bad_input")
             self._once(f"bad_input:{str(event.payload).split(':')[0]}", "dropped %s", event.payload)
@@ -489,20 +512,54 @@ class CrazyflieBridge:
             _log.warning("landing Stop (%s): nothing in force, motors off (no latch)", reason)
         self._publish_status()
 
+    def _measured_position(self, now_s: float) -> tuple[float, float, float] | None:
+        """Where the drone is measured to be: a fresh motion-capture pose, else the onboard
+        estimator's latest position (fresh, and the estimator settled since its reset)."""
+        pose, stale_s = self._mocap, self.section.mocap_stale_s
+        if pose is not None and now_s - pose.received_s <= stale_s:
+            return pose.position_m
+        onboard = self._onboard
+        if onboard is not None and now_s - onboard[1] <= stale_s and self._settle.settled(now_s):
+            return onboard[0]
+        return None
+
+    def _estimator_refusal(self, now_s: float) -> str | None:
+        """Why the estimator is not ready for a take-off, or None (ready, or not needed)."""
+        plan = self._plan
+        if plan is None or not plan.settle or self._settle.settled(now_s):
+            return None
+        if self._estimator_error:
+            return f"the estimator could not be reset ({self._estimator_error})"
+        if self._settle.reset_s is None:
+            return (
+                "the estimator has not been reset on this connection (it is reset at the "
+                "first log period with the motors off, never in flight)"
+            )
+        spreads = self._settle.spreads()
+        return (
+            f"the estimator has not settled since its reset {now_s - self._settle.reset_s:.1f} s "
+            f"ago (kalman.varPX/PY/PZ spread {[round(x, 5) for x in spreads or ()]} over "
+            f"{self.section.estimator_settle_s:g} s, wanted each < "
+            f"{self.section.estimator_settle_spread:g}; is the position measured: extpos "
+            "streaming, the deck seeing its anchors or base stations?)"
+        )
+
     def _ramp(self, kind: str, cmd: TakeoffIn | LandIn) -> None:
         now = self._clock()
-        pose = self._mocap
-        fresh = pose is not None and now - pose.received_s <= self.section.mocap_stale_s
         start = self.gate.position_in_force(now) if kind == "land" else None
-        if start is None and fresh and pose is not None:
-            start = pose.position_m
-        if not self.connected or start is None:
+        if start is None:
+            start = self._measured_position(now)
+        refusal = self._estimator_refusal(now) if kind == "takeoff" else None
+        if not self.connected or refusal is not None or start is None:
             self._count(f"{kind}_refused")
             _log.warning(
                 "%s refused: %s",
                 kind,
-                "link down" if not self.connected else "no fresh motion-capture pose",
+                "link down"
+                if not self.connected
+                else refusal or "no fresh motion-capture pose or onboard position",
             )
+            self._publish_status()
             return
         x, y, _ = start
         z = cmd.height_m if isinstance(cmd, TakeoffIn) else self.floor_z_m
@@ -540,6 +597,8 @@ class CrazyflieBridge:
             return
         if any(block == b.name for b in plan.slow):
             self._slow.update(values)
+            if plan.settle:
+                self._settle.push(self._clock(), [values.get(v, math.nan) for v in VELOCITY_VAR])
             return
         before = aligner.out_of_order
         # Until the slow block's first sample (armed, battery), a Telemetry would say "armed"
@@ -569,8 +628,77 @@ class CrazyflieBridge:
             self.seq += 1
             self._last_stamp_s = tel.stamp_s
             self._last_yaw_deg = yaw_deg_from_quat(tel.quat_wxyz)
+            if tel.position_m is not None and tel.position_source in ONBOARD_SOURCES:
+                self._onboard = (tel.position_m, self._clock())
+            motors_off = all(aligned.values.get(m, 1.0) == 0.0 for m in plan.motors)
+            if self._estimator_pending and not self._commanding and motors_off:
+                self._reset_estimator()
         if aligner.out_of_order > before:
             self._once("out_of_order", "log packet with an old timestamp dropped (%s)", block)
+
+    def _reset_estimator(self) -> None:
+        """Bitcraze's mocap example, on the floor: the Kalman estimator selected and
+        ``locSrv.extQuatStdDev`` set (with ``send_extpos``), ``kalman.initialX/Y/Z`` (with
+        ``estimator_initial_m``), then ``kalman.resetEstimation`` 1 and, 0.1 s later, 0; take-off
+        waits for the variances to settle (:class:`~.bridge.SettleWatch`)."""
+        self._estimator_pending = False
+        section = self.section
+        writes: list[tuple[str, float]] = []
+        if section.send_extpos:
+            writes.append(("stabilizer.estimator", 2.0))  # Kalman: it fuses extpos
+            writes.append(("locSrv.extQuatStdDev", section.ext_quat_std_rad))
+            if section.ext_pos_std_m is not None:
+                writes.append(("locSrv.extPosStdDev", section.ext_pos_std_m))
+        if section.estimator_initial_m is not None:
+            writes.extend(
+                (f"kalman.initial{axis}", float(v))
+                for axis, v in zip("XYZ", section.estimator_initial_m, strict=True)
+            )
+        writes.append(("kalman.resetEstimation", 1.0))
+        try:
+            for name, value in writes:
+                self.link.set_param(name, value)
+        except LinkError as exc:
+            self._estimator_error = str(exc)
+            _log.error("estimator not reset: %s; take-off is refused", exc)
+            self._publish_status()
+            return
+        now = self._clock()
+        self._settle.reset(now)
+        self._reset_clear_s = now + RESET_HOLD_S
+        self._count("estimator_resets")
+        _log.info(
+            "estimator reset (%s); take-off once kalman.varPX/PY/PZ stay within %g over %g s",
+            ", ".join(f"{n} = {v:g}" for n, v in writes),
+            section.estimator_settle_spread,
+            section.estimator_settle_s,
+        )
+        self._publish_status()
+
+    def _estimator_tick(self, now_s: float) -> None:
+        """Clear ``kalman.resetEstimation`` once due; report the estimator settling."""
+        if self._reset_clear_s is not None and now_s >= self._reset_clear_s:
+            self._reset_clear_s = None
+            try:
+                self.link.set_param("kalman.resetEstimation", 0.0)
+            except LinkError as exc:
+                _log.warning("kalman.resetEstimation not cleared: %s", exc)
+        reset_s = self._settle.reset_s
+        if reset_s is not None and self._settle.settled(now_s) and not self._settled_told:
+            self._settled_told = True
+            self._count("estimator_settled")
+            _log.info("estimator settled %.1f s after its reset: take-off allowed", now_s - reset_s)
+            self._publish_status()
+
+    def _forward_extpos(self, now_s: float) -> None:
+        """Send the pending motion-capture pose to the drone, at most ``extpos_rate_hz``."""
+        pose = self._extpos_pending
+        if pose is None or now_s - self._extpos_sent_s < 1.0 / self.section.extpos_rate_hz:
+            return
+        self._extpos_pending = None
+        if self._send("send_extpos", pose.position_m, pose.quat_wxyz):
+            self._extpos_sent_s = now_s
+            self._count("extpos_sent")
 
     def _on_lost(self, reason: str) -> None:
         self.connected = False
@@ -683,6 +811,23 @@ class CrazyflieBridge:
             "out_of_order": aligner.out_of_order if aligner else 0,
             "unmatched": aligner.unmatched if aligner else 0,
             "not_logged": {v: NOT_LOGGED_CONSEQUENCE[v] for v in plan.not_logged} if plan else {},
+            "estimator": self._estimator_status(),
+        }
+
+    def _estimator_status(self) -> dict[str, Any]:
+        """Whether take-off waits for the estimator, and where it stands."""
+        plan, now = self._plan, self._clock()
+        if plan is None or not plan.settle:
+            return {"required": False}
+        spreads = self._settle.spreads()
+        onboard = self._onboard
+        return {
+            "required": True,
+            "reset": self._settle.reset_s is not None,
+            "settled": self._settle.settled(now),
+            "spread": [round(x, 6) for x in spreads] if spreads is not None else None,
+            "error": self._estimator_error,
+            "onboard_position_m": [round(v, 4) for v in onboard[0]] if onboard else None,
         }
 
     def _publish_status(self) -> None:
@@ -695,3 +840,41 @@ class CrazyflieBridge:
         if kind not in self._logged:
             self._logged.add(kind)
             _log.warning(msg, *args)
+
+
+def run_bridges(bridges: list[CrazyflieBridge], stop: threading.Event) -> int:
+    """Run several bridges (one per link; cflib shares one Crazyradio between the links of a
+    process) until ``stop``, each on its own thread.
+
+    A bridge that ends on its own (a configuration error: exit code 2) leaves the others
+    flying: stopping them would stop their drones' motors.
+
+    Returns:
+        The largest exit code of the bridges.
+    """
+    codes: dict[str, int] = {}
+
+    def run_one(bridge: CrazyflieBridge) -> None:
+        try:
+            codes[bridge.drone] = bridge.run(stop)
+        except Exception:
+            _log.exception("bridge for %s failed", bridge.drone)
+            codes[bridge.drone] = 1
+        if codes[bridge.drone] and not stop.is_set():
+            _log.error(
+                "bridge for %s (%s) ended with code %d; the other links keep running",
+                bridge.drone,
+                bridge.link.uri,
+                codes[bridge.drone],
+            )
+
+    threads = [
+        threading.Thread(target=run_one, args=(b,), name=f"bridge-{b.drone}", daemon=True)
+        for b in bridges
+    ]
+    for t in threads:
+        t.start()
+    for t in threads:
+        while t.is_alive():
+            t.join(0.5)
+    return max(codes.values(), default=0)
