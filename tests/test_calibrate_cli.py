@@ -376,3 +376,36 @@ def test_fit_tether_recovers_omega_and_writes_a_loadable_config(
     params = load_settings(out, use_env=False).for_drone("cf1")
     assert params.tether.weight_n_per_m == pytest.approx(omega, abs=1e-4)
     assert params.base.position_m == pytest.approx((0.0, 0.0, 0.754))
+
+
+def test_a_corrupt_chunk_costs_its_messages_not_the_calibration(tmp_path: Path) -> None:
+    """Issue 23: 8 flipped bytes in a middle chunk of a calibration flight: the chunk is
+    skipped with a warning, the fit runs on the rest (before: a zstandard traceback, rc 1)."""
+    from mcap.reader import make_reader
+
+    from groundstation.recording.format import ChannelTable, open_writer
+
+    rec = tmp_path / "flight.mcap"
+    stream, writer = open_writer(rec, 16 * 1024)
+    channels = ChannelTable(writer)
+    msgs = recorded_messages(flight(list(PAPER_HOVER_SPOTS_M[:2]), TRUTH, seed=1))
+    for m in msgs:
+        writer.add_message(channels.channel_id(m.key), m.log_time_ns, m.payload, m.publish_time_ns)
+    writer.finish()
+    stream.close()
+    with rec.open("rb") as fh:
+        summary = make_reader(fh).get_summary()
+    assert summary is not None and len(summary.chunk_indexes) > 4
+    chunks = sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
+    mid = chunks[2 * len(chunks) // 3]  # in a hover, after the rest window
+    data = bytearray(rec.read_bytes())
+    at = mid.chunk_start_offset + mid.chunk_length // 2
+    data[at : at + 8] = bytes(b ^ 0xFF for b in data[at : at + 8])
+    clean = tmp_path / "clean.toml"
+    assert main(["calibrate", "--model", "full", str(rec), "--out", str(clean)]) == 0
+    rec.write_bytes(bytes(data))
+    out = tmp_path / "cal.toml"
+    assert main(["calibrate", "--model", "full", str(rec), "--out", str(out)]) == 0
+    cal = load_settings(out, use_env=False).for_drone("cf1").calibration
+    want = load_settings(clean, use_env=False).for_drone("cf1").calibration
+    assert abs(cal.thrust_scale - want.thrust_scale) < 0.005, (cal, want)

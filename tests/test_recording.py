@@ -406,3 +406,121 @@ def test_figures_from_a_replayed_recording(tmp_path: Path) -> None:
     assert pngs == ["cf1_position.png", "cf1_tension.png"]
     for name in pngs:
         assert (figures / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+# -- Issue 23: a corrupt recording is read where it can be; an empty one says so ------------
+
+
+def _chunked(bus: InMemoryBus, path: Path, n: int = 3000) -> list[Sample]:
+    recorder = Recorder(bus, path, chunk_size=4096)
+    sent = publish_many(bus, n)
+    recorder.close()
+    return sent
+
+
+def _flip(path: Path, at: int, n: int = 8) -> None:
+    data = bytearray(path.read_bytes())
+    for k in range(n):
+        data[at + k] ^= 0xFF
+    path.write_bytes(bytes(data))
+
+
+def _chunk_spans(path: Path) -> list[tuple[int, int]]:
+    with path.open("rb") as fh:
+        summary = make_reader(fh).get_summary()
+    assert summary is not None
+    return sorted(
+        (c.chunk_start_offset, c.chunk_start_offset + c.chunk_length) for c in summary.chunk_indexes
+    )
+
+
+def _is_a_gap_of(got: list[tuple[str, bytes]], sent: list[tuple[str, bytes]]) -> int:
+    """``got`` is ``sent`` less one contiguous run of messages: its length."""
+    lost = len(sent) - len(got)
+    start = next((i for i, (a, b) in enumerate(zip(got, sent, strict=False)) if a != b), len(got))
+    assert got == sent[:start] + sent[start + lost :]
+    return lost
+
+
+@pytest.mark.parametrize("finished", [True, False])
+def test_corrupt_chunk_is_skipped_named_and_counted(
+    bus: InMemoryBus, tmp_path: Path, caplog: pytest.LogCaptureFixture, finished: bool
+) -> None:
+    """8 flipped bytes in the middle chunk (before: a zstandard traceback): every other
+    message is read, in order; the warning names the chunk and the messages it held."""
+    path = tmp_path / "rec.mcap"
+    sent = [(s.key, s.payload) for s in _chunked(bus, path)]
+    spans = _chunk_spans(path)
+    k = len(spans) // 2
+    start, end = spans[k]
+    _flip(path, (start + end) // 2)
+    if not finished:  # cut the summary off: the sequential reader
+        path.write_bytes(path.read_bytes()[: spans[-1][1]])
+        assert not is_complete(path)
+    with caplog.at_level("WARNING", logger="groundstation.recording.reader"):
+        got = [(m.key, m.payload) for m in iter_messages(path, require_messages=True)]
+    lost = _is_a_gap_of(got, sent)
+    assert 0 < lost < 60  # one chunk of 4 kB
+    text = caplog.text
+    if finished:
+        assert f"chunk {k + 1} of {len(spans)} (bytes {start}-{end}) is corrupt" in text
+    else:
+        assert f"chunk {k + 1} (ending at byte " in text
+    assert f"{lost} messages lost" in text
+    assert f"{len(got)} messages read; 1 corrupt chunk(s) skipped, {lost} messages lost" in text
+
+
+def test_every_chunk_corrupt_holds_nothing(bus: InMemoryBus, tmp_path: Path) -> None:
+    path = tmp_path / "rec.mcap"
+    sent = _chunked(bus, path, 300)
+    for start, end in _chunk_spans(path):
+        _flip(path, (start + end) // 2)
+    assert list(iter_messages(path)) == []  # a reader that asks for nothing gets nothing
+    with pytest.raises(
+        RecordingError,
+        match=rf"holds no readable message: every chunk is corrupt \(\d+, {len(sent)} messages",
+    ):
+        list(iter_messages(path, require_messages=True))
+
+
+def test_a_100_byte_mcap_holds_nothing(bus: InMemoryBus, tmp_path: Path) -> None:
+    full = tmp_path / "rec.mcap"
+    _chunked(bus, full, 300)
+    path = tmp_path / "small.mcap"
+    path.write_bytes(full.read_bytes()[:100])
+    assert list(iter_messages(path)) == []
+    with pytest.raises(
+        RecordingError,
+        match=r"small\.mcap' holds no readable message: it ends after 100 bytes, before its "
+        r"first complete chunk",
+    ):
+        list(iter_messages(path, require_messages=True))
+
+
+def test_replay_offline_and_calibrate_on_damaged_recordings(
+    bus: InMemoryBus, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The commands: a corrupt chunk costs its messages, exit 0; nothing readable, exit 2
+    with one line saying so, and no output written."""
+    from groundstation.cli import main
+
+    path = tmp_path / "rec.mcap"
+    sent = _chunked(bus, path)
+    spans = _chunk_spans(path)
+    _flip(path, sum(spans[len(spans) // 2]) // 2)
+    out = tmp_path / "out.mcap"
+    assert main(["replay", "--offline", str(path), "--out", str(out)]) == 0
+    inputs = [m for m in iter_messages(out) if m.key.endswith("/telemetry")]
+    assert 0 < len(sent) - len(inputs) < 60
+    small = tmp_path / "small.mcap"
+    small.write_bytes(path.read_bytes()[:100])
+    capsys.readouterr()
+    out.unlink()
+    assert main(["replay", "--offline", str(small), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "small.mcap' holds no readable message: it ends after 100 bytes" in err
+    assert not out.exists()
+    cal = tmp_path / "cal.toml"
+    assert main(["calibrate", str(small), "--out", str(cal)]) == 2
+    assert "small.mcap' holds no readable message" in capsys.readouterr().err
+    assert not cal.exists()

@@ -99,7 +99,7 @@ def _read_file(path: Path, settings: Settings) -> tuple[dict[str, _Columns], int
     tether: dict[str, tuple[float, tuple[float, float, float]]] = {}
     weight: dict[str, float] = {}
     invalid = 0
-    for rec in iter_messages(path):
+    for rec in iter_messages(path, require_messages=True):
         try:
             drone, kind = messages.parse_key(rec.key)
         except messages.InvalidMessage:

@@ -19,6 +19,7 @@ from groundstation.recording.format import (
     ORIGINAL_PREFIX,
     OUTPUT_KEY_RE,
     ChannelTable,
+    RecordingError,
     open_writer,
 )
 from groundstation.recording.reader import iter_messages
@@ -135,7 +136,7 @@ def replay_offline(
         writer.add_message(channels.channel_id(key), t_ns, payload, t_ns)
 
     try:
-        for msg in iter_messages(path):
+        for msg in iter_messages(path, require_messages=True):
             now_s = msg.log_time_ns / 1e9
             if next_tick_s is None:
                 next_tick_s = now_s + tick_period_s
@@ -154,6 +155,11 @@ def replay_offline(
                     write(out.key, out.payload, msg.log_time_ns)
                     produced += 1
         writer.finish()
+    except RecordingError:
+        # Nothing usable in the input (or it cannot be read): no half-written output.
+        stream.close()
+        Path(out_path).unlink(missing_ok=True)
+        raise
     finally:
         stream.close()
     return produced
@@ -183,10 +189,9 @@ def run_replay(
     from groundstation.zenoh_bus import ZenohBus
 
     stop = stop_event if stop_event is not None else threading.Event()
-    first = next(iter_messages(path), None)
-    if first is None:
-        _log.warning("%s holds no message; nothing to replay", path)
-        return 0
+    first = next(iter_messages(path, require_messages=True), None)
+    if first is None:  # pragma: no cover - require_messages raises first
+        return 1
     with ZenohBus(settings.zenoh) as bus:
         _wait_for_match(bus, first.key, wait_for_subscribers_s, stop)
         stats = replay(bus, path, speed=speed, stop_event=stop)
