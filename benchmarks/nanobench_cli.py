@@ -172,7 +172,15 @@ def calibrate(train: list[Flight], work: Path, tag: str, extra: list[str]) -> tu
 
 
 def variant_config(src: Path, dst: Path, extra_toml: str) -> Path:
-    dst.write_text(src.read_text() + "\n" + extra_toml)
+    """``src`` with ``extra_toml`` appended, except ``accel_slow = false``, which replaces the
+    calibration's own ``accel_slow = true``."""
+    text = src.read_text()
+    if extra_toml.strip() == "accel_slow = false":
+        if "accel_slow = true" not in text:
+            raise RuntimeError(f"{src}: no accel_slow = true to turn off")
+        dst.write_text(text.replace("accel_slow = true", "accel_slow = false"))
+    else:
+        dst.write_text(text + "\n" + extra_toml)
     return dst
 
 

@@ -29,6 +29,7 @@ import numpy as np
 
 from groundstation.config import RealisticSection
 from groundstation.sim.drone import AirframeParams, RigidDrone
+from groundstation.sim.rotation import quat_multiply_wxyz
 from groundstation.sim.sensors import (
     Battery,
     DrawnErrors,
@@ -121,6 +122,7 @@ class RealisticDrone:
         self.offset_m = np.zeros(3)
         self.coin_mass_kg = coin_mass_kg
         self.publish_mocap = mocap
+        self._attitude_offset_wxyz: np.ndarray | None = None
         self.coin_arm_m = coin_arm_m
         self.battery = Battery(self.sensors)
         self.errors: DrawnErrors = draw_errors(self.sensors, flight_rng, self.battery.voltage(1.0))
@@ -246,6 +248,7 @@ class RealisticDrone:
     def drawn_errors(self) -> dict[str, Any]:
         """This flight's error constants and their equivalent ``[calibration]`` values."""
         out = self.errors.as_dict()
+        out["airframe_equivalent"] = self.errors.airframe_equivalent(self.sensors.attitude_levelled)
         out["yaw0_rad"] = self._yaw0_rad
         out["profile"] = "realistic"
         out["classes"] = {
@@ -255,6 +258,7 @@ class RealisticDrone:
                 "misalignment",
                 "accel_scale",
                 "accel_bias",
+                "attitude_levelled",
                 "thrust_axis",
                 "thrust_map",
                 "battery",
@@ -328,6 +332,14 @@ class RealisticDrone:
             self._length_target_m = None
         return out
 
+    def _reported_quat_wxyz(self) -> np.ndarray:
+        """The attitude as reported: true, or levelled on the accelerometer (true ⊗ Q)."""
+        if not self.sensors.attitude_levelled:
+            return self.body.q_world_body
+        if self._attitude_offset_wxyz is None:
+            self._attitude_offset_wxyz = self.errors.attitude_offset_wxyz()
+        return quat_multiply_wxyz(self.body.q_world_body, self._attitude_offset_wxyz)
+
     def _sample(self, stamp_s: float, thrust_ratio: float) -> dict[str, Any]:
         s, e, body = self.sensors, self.errors, self.body
         f_body = body.specific_force_body_mps2
@@ -340,7 +352,7 @@ class RealisticDrone:
             "seq": self.seq,
             "stamp_s": stamp_s,
             "accel_mps2": [float(v) for v in accel],
-            "quat_wxyz": [float(v) for v in body.q_world_body],
+            "quat_wxyz": [float(v) for v in self._reported_quat_wxyz()],
             "thrust_n": max(0.0, float(thrust)),
             "gyro_rps": [float(v) for v in gyro],
             "armed": bool(body.armed),

@@ -69,7 +69,12 @@ from typing import Any
 
 import numpy as np
 
-from groundstation.sim.rotation import rot_x, rot_y
+from groundstation.sim.rotation import (
+    quat_wxyz_from_z_axis,
+    rot_x,
+    rot_y,
+    rotation_world_body_wxyz,
+)
 
 __all__ = [
     "Battery",
@@ -100,6 +105,7 @@ class SensorParams:
     accel_scale_max: float = 0.025
     accel_bias: bool = True
     accel_bias_std_mps2: float = 0.05
+    attitude_levelled: bool = False
     thrust_axis: bool = True
     thrust_axis_rad: tuple[float, float] = (-0.037, -0.016)
     thrust_map: bool = True
@@ -178,6 +184,49 @@ class DrawnErrors:
         f = np.asarray(f_body_mps2, dtype=float)
         b = np.array(self.accel_bias_mps2)
         return np.asarray((1.0 + self.accel_scale_error) * self.R_body_accel.T @ f - f + b)
+
+    def level_reading_mps2(self) -> np.ndarray:
+        """What the accelerometer reads level and still: ``(1 + s)·R_B_Aᵀ·g·e3 + b``."""
+        return np.asarray(
+            (1.0 + self.accel_scale_error) * self.R_body_accel.T @ np.array([0, 0, GRAVITY_MPS2])
+            + np.array(self.accel_bias_mps2)
+        )
+
+    def attitude_offset_wxyz(self) -> np.ndarray:
+        """``Q`` of an attitude levelled on this accelerometer: reported = true ⊗ Q.
+
+        A levelling estimator takes the still reading's direction ``â`` for "up", so the
+        reported body frame satisfies ``R_repᵀ·e3 = â`` at level: ``Q = R_q^T`` with
+        ``R_q·e3 = â`` (the shortest arc, zero yaw).
+        """
+        w, x, y, z = quat_wxyz_from_z_axis(self.level_reading_mps2())
+        return np.array([w, -x, -y, -z])
+
+    def airframe_equivalent(self, levelled: bool) -> dict[str, Any]:
+        """The airframe constants as the airframe calibration sees them for this flight.
+
+        Thrust scale and battery term as :meth:`equivalent`; the thrust axis in the frame
+        the attitude is reported in (``Qᵀ·n_B`` when the attitude is levelled on the
+        accelerometer: then it differs from flight to flight by the per-boot tilt).
+        """
+        n_b = (
+            rot_x(self.thrust_axis_rad[0])
+            @ rot_y(self.thrust_axis_rad[1])
+            @ np.array([0.0, 0.0, 1.0])
+        )
+        if levelled:
+            Q = rotation_world_body_wxyz(self.attitude_offset_wxyz())
+            n_b = Q.T @ n_b
+        # n = (sin ay, −sin ax·cos ay, cos ax·cos ay)
+        ay = math.asin(float(np.clip(n_b[0], -1.0, 1.0)))
+        ax = math.atan2(-float(n_b[1]), float(n_b[2]))
+        one_e = 1.0 + self.thrust_report_error
+        return {
+            "thrust_scale": 1.0 / one_e,
+            "thrust_vbat_slope_per_v": self.thrust_vbat_exponent / (one_e * self.thrust_vbat_ref_v),
+            "thrust_vbat_ref_v": self.thrust_vbat_ref_v,
+            "thrust_axis_rad": [ax, ay],
+        }
 
     def equivalent(self) -> dict[str, Any]:
         """The ``[calibration]`` values that make the estimator exact at hover.
