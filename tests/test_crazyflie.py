@@ -1313,3 +1313,350 @@ def test_an_emergency_stop_cuts_the_motors_and_locks_until_a_power_cycle(harness
     fw.power_cycle()
     wait_for(lambda: fw.position_m[2] > 0.29, "flying after a power cycle", 10.0)
     assert gs.alive
+
+
+# ------------------------------------------------------------------ issue 21, items 6-8
+
+
+def _counted(h: Harness, kind: str, n: int = 1) -> Callable[[], bool]:
+    return lambda: h.bridge.counts.get(kind, 0) >= n
+
+
+def _params(link: FakeLink) -> list[tuple[Any, ...]]:
+    return [a for n, a in link.commands if n == "set_param"]
+
+
+def test_onboard_position_and_its_variances_take_a_block_of_their_own() -> None:
+    """stateEstimate.x/y/z and kalman.varX/Y/Z (24 bytes) cannot join the two full fast
+    packets: a third; the velocity variances the settle check reads join the slow block."""
+    from groundstation.bridges.crazyflie.bridge import POSITION, POSITION_VAR, VELOCITY_VAR
+
+    plan = plan_variables(CrazyflieSection(onboard_position="lighthouse"), FAKE_TOC, "x")
+    assert plan.position and plan.settle
+    assert len(plan.fast) == 3
+    assert plan.fast[2].variables == (*POSITION, *POSITION_VAR)
+    assert [v for b in plan.slow for v in b.variables] == [
+        "pm.vbat",
+        "supervisor.info",
+        *VELOCITY_VAR,
+    ]
+    for block in (*plan.fast, *plan.slow):
+        assert _block_bytes(block) <= MAX_BLOCK_BYTES
+    # motion capture into the drone needs the settle check, not the onboard position
+    extpos = plan_variables(CrazyflieSection(send_extpos=True), FAKE_TOC, "x")
+    assert len(extpos.fast) == 2 and extpos.settle and not extpos.position
+    no_kalman = {k: v for k, v in FAKE_TOC.items() if not k.startswith("kalman.")}
+    with pytest.raises(MissingVariables, match=r"kalman\.varX.*Kalman estimator"):
+        plan_variables(CrazyflieSection(onboard_position="loco"), no_kalman, "x")
+
+
+def test_telemetry_position_from_mocap_first_else_the_onboard_estimator_with_its_sigma() -> None:
+    section = CrazyflieSection(onboard_position="loco", mocap_stale_s=0.1)
+    plan = plan_variables(section, FAKE_TOC, "x")
+    values = {
+        **_values(),
+        "stateEstimate.x": 0.4,
+        "stateEstimate.y": -0.1,
+        "stateEstimate.z": 0.6,
+        "kalman.varX": 0.0016,
+        "kalman.varY": 0.0009,
+        "kalman.varZ": 1e-6,  # the firmware's floor
+    }
+    tel = build_telemetry(Aligned(0, values), plan, section, 0, {}, None, 0.0)
+    assert tel.position_m == pytest.approx((0.4, -0.1, 0.6))
+    assert tel.position_source == "loco"
+    assert tel.position_std_m == pytest.approx((0.04, 0.03, 0.001))
+    pose = MocapPose((0.3, -0.2, 0.5), None, received_s=10.0)
+    tel = build_telemetry(Aligned(0, values), plan, section, 0, {}, pose, 10.05)
+    assert tel.position_m == (0.3, -0.2, 0.5) and tel.position_source == "mocap"
+    assert tel.position_std_m is None
+    broken = {**values, "kalman.varY": math.nan}
+    tel = build_telemetry(Aligned(0, broken), plan, section, 0, {}, None, 0.0)
+    assert tel.position_m is None, "no σ, no position"
+
+
+def test_settle_watch_is_cflibs_reset_estimator() -> None:
+    """After a reset each velocity variance must stay within the spread over the window; one
+    growing (no position measured) never settles; a new reset starts again."""
+    from groundstation.bridges.crazyflie.bridge import SettleWatch
+
+    watch = SettleWatch(window_s=4.5, spread=0.001)
+    for i in range(100):
+        watch.push(i * 0.1, (2e-4, 2e-4, 2e-4))
+    assert not watch.settled(10.0), "no reset yet: nothing counts"
+    watch.reset(10.0)
+    t = 10.0
+    while t < 14.4:  # settling: v = 2e-4 + 0.01·exp(-t/0.5)
+        watch.push(t, (2e-4 + 0.01 * math.exp(-(t - 10.0) / 0.5),) * 3)
+        assert not watch.settled(t)
+        t += 0.1
+    while not watch.settled(t):
+        assert t < 20.0, "settles once the transient is inside the spread for 4.5 s"
+        watch.push(t, (2e-4 + 0.01 * math.exp(-(t - 10.0) / 0.5),) * 3)
+        t += 0.1
+    # 0.01·e^{-(t-4.5)/0.5}·(1 - e^{-9}) < 0.001: some 5.6 s after the reset
+    assert 5.3 < t - 10.0 < 6.0
+    assert not watch.settled(t + 2.0), "a stale variance is no settled estimator"
+    watch.reset(t)
+    for i in range(200):  # growing at 0.05 per second: never settles
+        watch.push(t + 0.1 * i, (0.01 + 0.005 * i, 2e-4, 2e-4))
+        assert not watch.settled(t + 0.1 * i)
+
+
+def test_lighthouse_position_is_published_with_its_sigma_and_take_off_flies_from_it(
+    harness: Any,
+) -> None:
+    """A Lighthouse deck, no motion capture: the estimator is reset on the floor, take-off is
+    refused until its variances settle, then the drone climbs straight up from the onboard
+    position, and the published position follows the firmware's within its noise."""
+    link = FakeLink("fake://floor?positioning=lighthouse", realtime=True, start_m=(0.3, -0.2, 0))
+    h = harness(link, onboard_position="lighthouse", estimator_settle_s=0.5)
+    fw = link.firmware
+    wait_for(_counted(h, "estimator_resets"), "the estimator reset on the floor")
+    assert _params(link)[0] == ("kalman.resetEstimation", 1.0)
+    h.publish("tether/cf1/cmd/takeoff", {"height_m": 0.4, "speed_mps": 0.5})
+    wait_for(_counted(h, "takeoff_refused"), "take-off refused before the estimator settles")
+    assert not fw.motors_on and fw.position_m[2] == 0.0
+    assert h.status[-1]["estimator"]["settled"] is False
+    wait_for(_counted(h, "estimator_settled"), "the estimator settled", 10.0)
+    wait_for(lambda: ("kalman.resetEstimation", 0.0) in _params(link), "reset flag cleared")
+    tel = h.telemetry[-1]
+    assert tel["position_source"] == "lighthouse"
+    assert max(tel["position_std_m"]) < 0.005
+    assert tel["position_m"] == pytest.approx([0.3, -0.2, 0.0], abs=0.01)
+    h.publish("tether/cf1/cmd/takeoff", {"height_m": 0.4, "speed_mps": 0.5})
+    wait_for(lambda: fw.position_m[2] > 0.399, "climbed to 0.4 m", 10.0)
+    assert fw.position_m[:2] == pytest.approx([0.3, -0.2], abs=0.01), "up from where it sat"
+    assert h.bridge.counts["takeoff_refused"] == 1
+    wait_for(
+        lambda: abs(h.telemetry[-1]["position_m"][2] - fw.position_m[2]) < 0.01,
+        "the published position at the firmware's height",
+    )
+    assert h.close() == 0
+
+
+def test_flow_deck_odometry_starts_where_configured_and_its_xy_sigma_says_untrusted(
+    harness: Any,
+) -> None:
+    """A Flow deck measures height and velocity: the bridge writes kalman.initialX/Y/Z before
+    the reset so that the odometry starts in the world frame, take-off flies from there, and
+    the published σ says x/y are not to be trusted (the service then does not, below)."""
+    link = FakeLink("fake://floor?positioning=flow", realtime=True, start_m=(0.3, -0.2, 0))
+    h = harness(
+        link,
+        onboard_position="flow",
+        estimator_settle_s=0.5,
+        estimator_initial_m=(0.3, -0.2, 0.0),
+    )
+    wait_for(_counted(h, "estimator_settled"), "the estimator settled", 10.0)
+    assert _params(link)[:4] == [
+        ("kalman.initialX", 0.3),
+        ("kalman.initialY", -0.2),
+        ("kalman.initialZ", 0.0),
+        ("kalman.resetEstimation", 1.0),
+    ]
+    tel = h.telemetry[-1]
+    assert tel["position_source"] == "flow"
+    assert tel["position_m"][:2] == pytest.approx([0.3, -0.2], abs=0.05)
+    assert min(tel["position_std_m"][:2]) > 5.0 and tel["position_std_m"][2] < 0.02
+    h.publish("tether/cf1/cmd/takeoff", {"height_m": 0.3, "speed_mps": 0.5})
+    wait_for(lambda: link.firmware.position_m[2] > 0.299, "climbed", 10.0)
+    assert link.firmware.position_m[:2] == pytest.approx([0.3, -0.2], abs=0.05)
+
+
+def test_the_service_uses_an_onboard_position_only_within_its_sigma_limit() -> None:
+    """The pipeline: a Lighthouse position (σ 2 mm) is used as motion capture is (follow may
+    be switched on without a calibration); a Flow deck's (σ_xy 10 m) is no position: one
+    warning Event, and follow stays off as without one."""
+    from groundstation.bus import Sample
+    from groundstation.pipeline import Pipeline
+
+    def run(std: list[float], source: str) -> tuple[Any, list[Any]]:
+        events: list[Any] = []
+        pipe = Pipeline(load_settings(None, use_env=False), on_event=lambda d, e: events.append(e))
+        for seq in range(3):
+            tel = {
+                "seq": seq,
+                "stamp_s": 0.01 * seq,
+                "accel_mps2": [0, 0, 9.81],
+                "quat_wxyz": [1, 0, 0, 0],
+                "thrust_n": 0.3,
+                "position_m": [0.3, -0.2, 0.5],
+                "position_source": source,
+                "position_std_m": std,
+            }
+            pipe.handle(Sample("tether/cf1/telemetry", json.dumps(tel).encode()), 0.01 * seq)
+        pipe.handle(Sample("tether/cf1/follow", b'{"enabled": true}'), 0.03)
+        return pipe.drones["cf1"], events
+
+    trusted, events = run([0.002, 0.002, 0.002], "lighthouse")
+    assert trusted.mocap_m == (0.3, -0.2, 0.5)
+    assert trusted.follow_state.enabled
+    assert not [e for e in events if e.field == "position_std_m"]
+    untrusted, events = run([10.0, 10.0, 0.005], "flow")
+    assert untrusted.mocap_m is None
+    assert not untrusted.follow_state.enabled
+    warned = [e for e in events if e.field == "position_std_m"]
+    assert len(warned) == 1 and "flow" in warned[0].reason and "0.05" in warned[0].reason
+
+
+class _MocapStream:
+    """A motion-capture system publishing the fake drone's true pose at ``rate_hz`` until
+    stopped (its pacing is the stream's own rate, not a synchronisation)."""
+
+    def __init__(self, h: Harness, link: FakeLink, rate_hz: float = 200.0) -> None:
+        self.h, self.link, self.period_s = h, link, 1.0 / rate_hz
+        self.stop = threading.Event()
+        self.sent = 0
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+
+    def _run(self) -> None:
+        while not self.stop.wait(self.period_s):
+            fw = self.link.firmware
+            fw.advance()
+            pose = {"position_m": [float(v) for v in fw.position_m], "quat_wxyz": [1, 0, 0, 0]}
+            self.h.publish("mocap/cf1", pose)
+            self.sent += 1
+
+    def close(self) -> None:
+        self.stop.set()
+        self.thread.join(2.0)
+
+
+def test_mocap_into_the_drone_reset_settle_then_take_off_as_bitcraze_does_it(
+    harness: Any,
+) -> None:
+    """send_extpos: on the floor the bridge selects the Kalman estimator, sets
+    locSrv.extQuatStdDev, resets it (1, then 0 0.1 s later); with no pose streaming the
+    variances grow and take-off is refused; once poses stream they settle and the drone takes
+    off. Poses go out at most extpos_rate_hz, the latest winning."""
+    link = FakeLink("fake://floor", realtime=True, start_m=(0.2, 0.1, 0.0))
+    h = harness(
+        link,
+        mocap_key="mocap/{drone}",
+        send_extpos=True,
+        estimator_settle_s=0.5,
+        extpos_rate_hz=50.0,
+        mocap_stale_s=0.2,
+    )
+    fw = link.firmware
+    wait_for(_counted(h, "estimator_resets"), "the estimator reset on the floor")
+    assert _params(link)[:3] == [
+        ("stabilizer.estimator", 2.0),
+        ("locSrv.extQuatStdDev", 8.0e-3),
+        ("kalman.resetEstimation", 1.0),
+    ]
+    # No motion capture: the variances grow (0.05 per s); a second of it, then take-off.
+    wait_for(lambda: fw.kalman_var_vel[0] > 0.06, "a second without poses", 10.0)
+    h.publish("tether/cf1/cmd/takeoff", {"height_m": 0.4, "speed_mps": 0.5})
+    wait_for(_counted(h, "takeoff_refused"), "take-off refused: the estimator has not settled")
+    assert not fw.motors_on and fw.position_m[2] == 0.0
+    assert "estimator_settled" not in h.bridge.counts
+    stream = _MocapStream(h, link)
+    try:
+        wait_for(_counted(h, "estimator_settled"), "settled once poses stream", 10.0)
+        h.publish("tether/cf1/cmd/takeoff", {"height_m": 0.4, "speed_mps": 0.5})
+        wait_for(lambda: fw.position_m[2] > 0.399, "climbed to 0.4 m", 10.0)
+        assert fw.position_m[:2] == pytest.approx([0.2, 0.1], abs=1e-6)
+        # the estimator tracks the poses it is sent (within 1 cm once hovering)
+        wait_for(
+            lambda: float(np.max(np.abs(fw.kalman_position_m - fw.position_m))) < 0.01,
+            "the onboard estimate on the poses",
+        )
+    finally:
+        stream.close()
+    times = link.extpos_times
+    gaps = np.diff(times)
+    assert len(times) > 20 and gaps.min() >= 0.9 / 50.0, f"shortest gap {gaps.min():.4f} s"
+    assert h.bridge.counts["extpos_superseded"] > 0, "faster poses were superseded, not queued"
+    assert stream.sent > 2 * len(times)
+    # the latest pose wins: a last, distinct pose reaches the drone
+    h.publish("mocap/cf1", {"position_m": [0.2, 0.1, 0.4321]})
+    wait_for(
+        lambda: any(n == "send_extpos" and a[2] == 0.4321 for n, a in list(link.commands)),
+        "the last pose sent",
+    )
+
+
+def test_without_mocap_the_reset_waits_for_the_floor_and_a_hovering_drone_is_not_reset(
+    harness: Any,
+) -> None:
+    """Connected to a drone already flying: no reset (a reset in flight throws the estimate
+    to kalman.initial*), and take-off is refused with the reason."""
+    link = FakeLink("fake://hover", realtime=True)
+    h = harness(link, send_extpos=True, mocap_key="mocap/{drone}", estimator_settle_s=0.5)
+    wait_for(lambda: len(h.telemetry) >= 50, "half a second of telemetry")
+    assert _params(link) == [] and "estimator_resets" not in h.bridge.counts
+    h.publish("tether/cf1/cmd/takeoff", {"height_m": 0.6})
+    wait_for(_counted(h, "takeoff_refused"), "take-off refused")
+    assert h.status[-1]["estimator"] == {
+        "required": True,
+        "reset": False,
+        "settled": False,
+        "spread": None,
+        "error": "",
+        "onboard_position_m": None,
+    }
+
+
+def test_one_process_runs_several_links_each_its_own_drone() -> None:
+    """run_bridges: three fakes on one bus. Commands reach only their drone; a link whose
+    firmware lacks a variable ends (exit 2) without stopping the others."""
+    from groundstation.bridges.crazyflie.runner import run_bridges
+
+    bus = InMemoryBus()
+    links = {
+        "cf1": FakeLink("fake://hover", realtime=True),
+        "cf2": FakeLink("fake://hover", realtime=True, start_m=(0.5, 0.0, 0.5)),
+        "cf3": FakeLink("fake://hover?missing=acc.x", realtime=True),
+    }
+    telemetry: dict[str, list[dict[str, Any]]] = {d: [] for d in links}
+    for drone in links:
+        bus.subscribe(f"tether/{drone}/telemetry", lambda s, d=drone: telemetry[d].append(_j(s)))
+    section = CrazyflieSection(data_timeout_s=60.0, silence_s=60.0)
+    reach = ((0.0, 0.0, 0.754), 1.6)
+    bridges = [
+        CrazyflieBridge(section, bus, drone, link, reach=reach) for drone, link in links.items()
+    ]
+    stop = threading.Event()
+    rc: list[int] = []
+    thread = threading.Thread(target=lambda: rc.append(run_bridges(bridges, stop)))
+    thread.start()
+    try:
+        wait_for(lambda: _names(links["cf3"]) == ["open", "close"], "cf3 refused")
+        wait_for(lambda: min(len(telemetry["cf1"]), len(telemetry["cf2"])) >= 20, "both stream")
+        stamp = telemetry["cf2"][-1]["stamp_s"]
+        bus.publish(
+            "tether/cf2/cmd/setpoint",
+            json.dumps({"stamp_s": stamp, "position_m": [0.5, 0.0, 0.7]}).encode(),
+        )
+        fw1, fw2 = links["cf1"].firmware, links["cf2"].firmware
+        wait_for(lambda: fw2.position_m[2] > 0.699, "cf2 climbed", 10.0)
+        assert fw1.position_m[2] == pytest.approx(0.5) and fw1.target_m is None
+        bus.publish("tether/cf1/cmd/stop", b'{"stamp_s": 0.0, "reason": "test"}')
+        wait_for(lambda: fw1.locked, "cf1 stopped")
+        assert fw2.motors_on and not fw2.locked, "cf2 flies on"
+        n = len(telemetry["cf2"])
+        wait_for(lambda: len(telemetry["cf2"]) > n + 20, "cf2 still streaming")
+        assert telemetry["cf3"] == []
+    finally:
+        stop.set()
+        thread.join(10.0)
+        bus.close()
+    assert rc == [2], "the worst exit code: cf3's missing variable"
+
+
+def test_serial_is_refused_with_the_reason_and_scan_connects_to_nothing() -> None:
+    from groundstation.bridges.crazyflie import _radio_address, scan
+    from groundstation.bridges.crazyflie.link import CflibLink, LinkError
+
+    with pytest.raises(LinkError, match=r"serial:// is not supported.*pyserial.*radio://"):
+        CflibLink("serial://ttyUSB0")
+    with pytest.raises(LinkError, match="serial://"):
+        scan(["serial://ttyUSB0"])
+    assert scan(["fake://hover", "fake://floor?absent=1"]) == ["fake://hover"]
+    assert _radio_address("radio://0/80/2M/E7E7E7E701") == 0xE7E7E7E701
+    assert _radio_address("radio://0/80/2M") is None
+    with pytest.raises(LinkError, match="hexadecimal"):
+        _radio_address("radio://0/80/2M/XYZ")

@@ -126,6 +126,9 @@ KALMAN_MAX_VAR = 100.0
 """The firmware's covariance bound (kalman_core.c ``MAX_COVARIANCE``)."""
 KALMAN_POS_TAU_S = 0.1
 """How fast the fake's position estimate and variance close on a measured position, s."""
+KALMAN_POS_VAR_TAU_S = 0.05
+"""How fast the position variance falls from the reset's 100 m² once positions are measured
+(the first measurements collapse it), s."""
 KALMAN_VEL_TAU_S = 0.5
 """How fast the fake's velocity variances settle once positions are measured, s."""
 KALMAN_VEL_VAR_SS = 2e-4
@@ -152,10 +155,11 @@ class FirmwareModel:
     (``kalman.resetEstimation``) puts its position at ``kalman.initialX/Y/Z`` with variance
     100 m² (the firmware's bound) and its velocity variances at a transient of 0.01 m²/s²; while
     positions are measured (a deck, or an external pose within 0.1 s) the position closes on the
-    measured one and the velocity variances settle to 2e-4 m²/s² (time constants 0.1 s and
-    0.5 s); without measurements every variance grows by 0.05 per second. A Flow deck measures
-    height and velocity: z closes on the truth, x/y follow the motion since the reset
-    (odometry) and their variance stays at 100 m².
+    measured one (its variance on the measurement's) and the velocity variances settle to
+    2e-4 m²/s² (time constants 0.1 s, 0.05 s and 0.5 s); without measurements every variance
+    grows by 0.05 per second. A Flow deck measures height and velocity: z closes on the truth,
+    x/y follow the motion since the reset (odometry) and their variance stays at 100 m².
+    ``stateEstimate`` jitters about the estimate with its σ, at most 1 cm.
     """
 
     def __init__(
@@ -251,7 +255,8 @@ class FirmwareModel:
         k = min(1.0, dt / KALMAN_POS_TAU_S)
         self.kalman_position_m = self.kalman_position_m + k * (position_m - self.kalman_position_m)
         var_ss = np.minimum(std_m * std_m, KALMAN_MAX_VAR)
-        self.kalman_var_pos = self.kalman_var_pos + k * (var_ss - self.kalman_var_pos)
+        kp = min(1.0, dt / KALMAN_POS_VAR_TAU_S)
+        self.kalman_var_pos = self.kalman_var_pos + kp * (var_ss - self.kalman_var_pos)
         kv = min(1.0, dt / KALMAN_VEL_TAU_S)
         self.kalman_var_vel = self.kalman_var_vel + kv * (KALMAN_VEL_VAR_SS - self.kalman_var_vel)
 
@@ -543,9 +548,10 @@ class FakeLink:
             "supervisor.info": float(info),
         }
         if fw.kalman_running:
-            # stateEstimate is the Kalman's position, with the noise of what it fuses
+            # stateEstimate is the Kalman's position, jittering with its σ but at most 1 cm (a
+            # Flow deck's x/y are uncertain by metres, yet a smooth odometry)
             std = np.sqrt(fw.kalman_var_pos)
-            est = fw.kalman_position_m + self._rng.normal(0.0, 1.0, 3) * np.minimum(std, 0.05)
+            est = fw.kalman_position_m + self._rng.normal(0.0, 1.0, 3) * np.minimum(std, 0.01)
         else:
             est = np.zeros(3)  # the complementary estimator gives no position
         for axis, value in zip("xyz", est, strict=True):

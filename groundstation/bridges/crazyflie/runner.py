@@ -536,9 +536,10 @@ class CrazyflieBridge:
                 "first log period with the motors off, never in flight)"
             )
         spreads = self._settle.spreads()
+        spread = [round(x, 5) for x in spreads] if spreads is not None else "no sample yet"
         return (
             f"the estimator has not settled since its reset {now_s - self._settle.reset_s:.1f} s "
-            f"ago (kalman.varPX/PY/PZ spread {[round(x, 5) for x in spreads or ()]} over "
+            f"ago (kalman.varPX/PY/PZ spread {spread} over "
             f"{self.section.estimator_settle_s:g} s, wanted each < "
             f"{self.section.estimator_settle_spread:g}; is the position measured: extpos "
             "streaming, the deck seeing its anchors or base stations?)"
