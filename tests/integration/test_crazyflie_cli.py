@@ -419,3 +419,87 @@ def test_the_bridge_over_cflib_udp_to_a_crtp_responder(procs: Procs, make_probe:
         assert service.stop(signal.SIGTERM) == 0
     finally:
         firmware.close()
+
+
+# ------------------------------------------------------------------ issue 21, item 8
+
+
+def test_one_bridge_process_runs_two_links_served_as_two_drones(
+    procs: Procs, make_probe: Any, tmp_path: Path
+) -> None:
+    """``--uri`` repeated with a ``--drone`` each: one process, two links; the service
+    estimates both, and a Stop for one reaches only that link."""
+    rec1, rec2 = tmp_path / "cf1.jsonl", tmp_path / "cf2.jsonl"
+    port = free_port()
+    procs.router(port)
+    probe: Probe = make_probe(port)
+    for drone in ("cf1", "cf2"):
+        probe.collect(f"tether/{drone}/estimate")
+        probe.collect(f"tether/{drone}/bridge")
+    ep = f"tcp/127.0.0.1:{port}"
+    procs.groundstation("serve", "serve", "--connect", ep, "--headless")
+    bridge = procs.groundstation(
+        "bridge",
+        "crazyflie",
+        "--uri",
+        f"fake://hover?record={rec1}",
+        "--drone",
+        "cf1",
+        "--uri",
+        f"fake://tug?record={rec2}",
+        "--drone",
+        "cf2",
+        "--connect",
+        ep,
+    )
+    probe.wait_for(
+        lambda: all(
+            sum(1 for e in probe.json(f"tether/{d}/estimate") if e["converged"]) > 100
+            for d in ("cf1", "cf2")
+        ),
+        timeout_s=40,
+        what="converged estimates of both drones",
+    )
+    # Each link is its own drone: the hover pulls 0.05 N down, the tug 0.2 N.
+    for drone, pull_n in (("cf1", 0.05), ("cf2", 0.20)):
+        late = [e for e in probe.json(f"tether/{drone}/estimate") if e["converged"]][-50:]
+        assert np.median([e["vertical_n"] for e in late]) == pytest.approx(pull_n, abs=0.01)
+    stamp = probe.json("tether/cf1/estimate")[-1]["stamp_s"]
+    probe.publish_json("tether/cf1/cmd/stop", {"stamp_s": stamp, "reason": "test"})
+    probe.wait_for(lambda: "stop_motors" in _names(rec1), 10, "stop_motors on cf1's link")
+    n = len(probe.json("tether/cf2/estimate"))
+    probe.wait_for(
+        lambda: len(probe.json("tether/cf2/estimate")) > n + 100, 10, "cf2 still estimated"
+    )
+    assert "stop_motors" not in _names(rec2)
+    assert bridge.popen.poll() is None
+    bridge.popen.send_signal(signal.SIGINT)
+    assert bridge.popen.wait(15) == 0
+
+
+def _cli(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "groundstation", "crazyflie", *args],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+
+
+def test_scan_lists_what_answers_and_serial_or_unpaired_uris_are_refused() -> None:
+    """``--scan`` connects to nothing: the fakes given answer unless absent; ``serial://``
+    fails at once with the reason; a --uri without its --drone is refused."""
+    found = _cli("--scan", "--uri", "fake://hover", "--uri", "fake://floor?absent=1")
+    assert found.returncode == 0, found.stderr
+    assert found.stdout.split() == ["fake://hover"]
+    none = _cli("--scan", "--uri", "fake://floor?absent=1")
+    assert none.returncode == 1 and "no Crazyflie answered" in none.stderr
+    serial = _cli("--uri", "serial://ttyUSB0", "--drone", "cf1")
+    assert serial.returncode == 2
+    assert "serial:// is not supported" in serial.stderr and "radio://" in serial.stderr
+    unpaired = _cli("--uri", "fake://hover", "--uri", "fake://floor", "--drone", "cf1")
+    assert unpaired.returncode == 2 and "one --drone per --uri" in unpaired.stderr
+    twice = _cli(
+        "--uri", "fake://hover", "--drone", "cf1", "--uri", "fake://floor", "--drone", "cf1"
+    )
+    assert twice.returncode == 2 and "cf1 given twice" in twice.stderr
