@@ -128,7 +128,10 @@ class PeerWatch:
             self.ever_connected = True
             self._warned = False
         elif self.ever_connected and previous:
-            self._log.warning("%s: lost every zenoh peer and router; %s", self.what, self.where)
+            if self._alone_level == logging.WARNING:
+                self._log.warning("%s: lost every zenoh peer and router; %s", self.what, self.where)
+            else:  # alone is fine (demo): a client (record, a dashboard) went away
+                self._log.info("%s: no zenoh peer connected any more", self.what)
             self._warned = True
         elif not self._warned and now_s - self._started_s >= self.grace_s:
             self._log.log(self._alone_level, "%s: %s", self.what, self.where)
@@ -137,7 +140,13 @@ class PeerWatch:
 
 
 def describe_endpoints(mode: str, connect: tuple[str, ...], listen: tuple[str, ...]) -> str:
-    """ "no peer / no router reachable at ..." for the ``[zenoh]`` table's endpoints."""
+    """ "no peer / no router reachable at ..." for the ``[zenoh]`` table's endpoints.
+
+    A router given no listen endpoint listens on ``tcp/127.0.0.1:7447``
+    (:func:`groundstation.zenoh_bus.make_zenoh_config`): said so, not "nothing".
+    """
+    if not listen and mode == "router":
+        listen = ("tcp/127.0.0.1:7447",)
     heard = f"; listening on {', '.join(listen)}" if listen else "; listening on nothing"
     if connect:
         return (

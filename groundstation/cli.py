@@ -1,4 +1,5 @@
-"""Command line: ``groundstation serve | sim | demo | record | replay | crazyflie | calibrate``.
+"""Command line: ``groundstation serve | sim | demo | router | record | replay | crazyflie |
+calibrate | dashboard``.
 
 Flags of the public contract are kept exactly (``docs/contract.md``); the ones added beside
 them are listed there too. Every long-running command stops on SIGINT or SIGTERM, closes its
@@ -62,17 +63,23 @@ def _setup_logging(level: str, as_json: bool) -> None:
     logging.getLogger("websockets").setLevel(max(logging.WARNING, root.level))
 
 
-def _stop_on_signals() -> threading.Event:
-    """An event set by SIGINT/SIGTERM; a second signal exits at once (status 1)."""
+def _stop_on_signals(*, child: bool = False) -> threading.Event:
+    """An event set by SIGINT/SIGTERM; a second signal exits at once (status 1).
+
+    ``child``: a process that ``serve`` started (its dashboard). Its parent stops it with
+    SIGTERM, so it ignores the terminal's Ctrl-C (which reaches the whole process group: it
+    would count as the first of two signals and exit abruptly) and says nothing at INFO
+    (the parent has said "stopping": one line, not one per process).
+    """
     stop = threading.Event()
 
     def handler(signum: int, frame: FrameType | None) -> None:
         if stop.is_set():
             os._exit(1)
-        _log.info("signal %d: stopping", signum)
+        _log.log(logging.DEBUG if child else logging.INFO, "signal %d: stopping", signum)
         stop.set()
 
-    signal.signal(signal.SIGINT, handler)
+    signal.signal(signal.SIGINT, signal.SIG_IGN if child else handler)
     signal.signal(signal.SIGTERM, handler)
     return stop
 
@@ -200,6 +207,35 @@ def _zenoh_error_line(exc: Exception, settings: Settings | None) -> str:
     return f"zenoh could not open a session: {detail}"
 
 
+ROUTER_ENDPOINT = "tcp/127.0.0.1:7447"
+"""Where ``groundstation router`` listens by default, and what the others ``--connect`` to
+(docker-compose's zenohd publishes the same port)."""
+
+
+class PortInUse(RuntimeError):
+    """A fixed port this command must bind is taken (one line, exit status 2)."""
+
+
+def _port_free(host: str, port: int) -> bool:
+    with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET) as s:
+        try:
+            s.bind((host, port))
+        except OSError:
+            return False
+    return True
+
+
+def _check_web_port(settings: Settings) -> None:
+    """Fail before starting anything when the dashboard's port is taken (never a silent move:
+    viser would take the next free one, and the operator would open the other one's page)."""
+    host, port = settings.web.host, settings.web.port
+    if port != 0 and not _port_free(host, port):
+        raise PortInUse(
+            f"the dashboard's port {host}:{port} is in use (another groundstation "
+            "serve, demo or dashboard?): stop it, or pass --web-port N (0: any free port)"
+        )
+
+
 def _free_port(host: str, preferred: int) -> int:
     for port in (preferred, 0):
         with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
@@ -216,8 +252,20 @@ def _start_dashboard(settings: Settings, bus: Any) -> Any:
 
     dashboard = Dashboard(settings, bus)
     dashboard.start()
+    _check_bound(dashboard, settings)
     print(f"dashboard: {dashboard.url}", flush=True)
     return dashboard
+
+
+def _check_bound(dashboard: Any, settings: Settings) -> None:
+    """The port checked free may be taken before viser binds it: viser then moves on."""
+    wanted, bound = settings.web.port, dashboard.server.get_port()
+    if wanted != 0 and bound != wanted:
+        dashboard.close()
+        raise PortInUse(
+            f"the dashboard's port {settings.web.host}:{wanted} was taken while "
+            f"starting (the server went to {bound}): pass --web-port N (0: any free port)"
+        )
 
 
 # --------------------------------------------------------------------------- commands
@@ -232,6 +280,12 @@ def _dashboard_endpoint(settings: Settings) -> tuple[Settings, str]:
     z = settings.zenoh
     if z.mode == "client" and z.connect:
         return settings, z.connect[0]
+    # A router with no listen endpoint listens on ROUTER_ENDPOINT (make_zenoh_config):
+    # keep that one rather than make it listen on a random port only.
+    listen = z.listen or ((ROUTER_ENDPOINT,) if z.mode == "router" else ())
+    if listen != z.listen:
+        settings = settings.model_copy(update={"zenoh": z.model_copy(update={"listen": listen})})
+        z = settings.zenoh
     for ep in z.listen:
         m = re.fullmatch(r"tcp/(127\.0\.0\.1|0\.0\.0\.0|\[::\]|localhost):(\d+)", ep)
         if m and m.group(2) != "0":
@@ -269,6 +323,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
     settings = _load(args)
     endpoint = None
     if not args.headless:
+        _check_web_port(settings)
         settings, endpoint = _dashboard_endpoint(settings)
     stop = _stop_on_signals()
     with ZenohBus(settings.zenoh) as bus:
@@ -301,11 +356,13 @@ def cmd_dashboard(args: argparse.Namespace) -> int:
         # file's listen endpoints are the service's). The file's TLS settings still apply.
         zenoh = settings.zenoh.model_copy(update={"mode": "client", "listen": ()})
         settings = settings.model_copy(update={"zenoh": zenoh})
-    stop = _stop_on_signals()
+    _check_web_port(settings)
+    stop = _stop_on_signals(child=bool(args.parent_pid))
     with ZenohBus(settings.zenoh) as bus:
         dashboard = Dashboard(settings, bus)
         try:
             dashboard.start()
+            _check_bound(dashboard, settings)
             print(f"dashboard: {dashboard.url}", flush=True)
             while not stop.wait(0.2):
                 if args.parent_pid and os.getppid() != args.parent_pid:
@@ -361,18 +418,72 @@ DEMO_DEFAULTS: dict[str, Any] = {
 """The embedded demo configuration: peer on loopback, one simulated drone, dashboard."""
 
 
+def _demo_bus(args: argparse.Namespace, settings: Settings) -> tuple[Settings, str]:
+    """The demo's own bus: a peer listening on ROUTER_ENDPOINT's port, whatever the file says.
+
+    Everything runs in this one process, so it needs no router; a configuration written for
+    separate processes (config/sim.toml: a client of a router on 7447) would otherwise
+    connect to itself. ``--connect`` on the command line still joins a router. Returns the
+    settings and the line the banner prints about the bus.
+    """
+    z = settings.zenoh
+    if args.connect:
+        return settings, f"zenoh: {z.mode} of {', '.join(z.connect)}"
+    if z.mode != "peer" or z.connect:
+        origin = args.config or "the environment"
+        print(
+            f"groundstation demo: runs its own bus in this process; [zenoh] mode "
+            f"{z.mode!r} and connect {list(z.connect)} of {origin} are not used (to join a "
+            "router: --connect ENDPOINT, or run serve and sim as separate processes)",
+            flush=True,
+        )
+    host, port = "127.0.0.1", int(ROUTER_ENDPOINT.rsplit(":", 1)[1])
+    line = f"zenoh: peer on tcp/{host}:{port}"
+    if not _port_free(host, port):
+        port = _free_port(host, 0)
+        line = f"zenoh: peer on tcp/{host}:{port}"
+        _log.warning(
+            "groundstation demo: %s is in use (a router or another demo?): this demo's bus "
+            "listens on tcp/%s:%d instead (connect other processes there)",
+            ROUTER_ENDPOINT,
+            host,
+            port,
+        )
+    zenoh = z.model_copy(update={"mode": "peer", "connect": (), "listen": (f"tcp/{host}:{port}",)})
+    return settings.model_copy(update={"zenoh": zenoh}), line
+
+
+def _demo_web_port(args: argparse.Namespace, settings: Settings) -> Settings:
+    """The demo's dashboard port: as asked (``--web-port``, a file's [web] port: in use is an
+    error); by default 8080, or, with 8080 in use, a free one said loudly."""
+    if args.web_port is not None or settings.web.port != DEMO_DEFAULTS["web"]["port"]:
+        _check_web_port(settings)
+        return settings
+    host = settings.web.host
+    if _port_free(host, settings.web.port):
+        return settings
+    port = _free_port(host, 0)
+    _log.warning(
+        "groundstation demo: the dashboard's port %s:%d is in use (another demo or serve?): "
+        "this demo's dashboard is on port %d instead (the URL below)",
+        host,
+        settings.web.port,
+        port,
+    )
+    return settings.model_copy(update={"web": settings.web.model_copy(update={"port": port})})
+
+
 def cmd_demo(args: argparse.Namespace) -> int:
     from groundstation.service import Service
     from groundstation.sim import Simulator
     from groundstation.zenoh_bus import ZenohBus
 
     base = json.loads(json.dumps(DEMO_DEFAULTS))
-    zport = _free_port("127.0.0.1", 7447)
-    base["zenoh"]["listen"] = [f"tcp/127.0.0.1:{zport}"]
-    if args.web_port is None:
-        base["web"]["port"] = _free_port("127.0.0.1", 8080)
     settings = _load(args, base=base)
     _check_scenario(settings.sim.scenario)
+    settings, bus_line = _demo_bus(args, settings)
+    if not args.headless:
+        settings = _demo_web_port(args, settings)
     stop = _stop_on_signals()
     with ZenohBus(settings.zenoh) as bus:
         service = Service(settings, bus, alone_ok=True)
@@ -385,7 +496,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
             sim.start()
             print(
                 f"groundstation demo: scenario {sim.scenario.name}, drones "
-                f"{', '.join(sim.drones)}; zenoh on tcp/127.0.0.1:{zport}; Ctrl-C stops",
+                f"{', '.join(sim.drones)}; {bus_line}; Ctrl-C stops",
                 flush=True,
             )
             deadline = time.monotonic() + args.duration if args.duration else None
@@ -399,6 +510,40 @@ def cmd_demo(args: argparse.Namespace) -> int:
             if dashboard is not None:
                 dashboard.close()
             service.close()
+    return 0
+
+
+def cmd_router(args: argparse.Namespace) -> int:
+    """A zenoh router session (what docker-compose runs as zenohd): the hub the other
+    processes of one machine or lab connect to. Listens on ROUTER_ENDPOINT unless told."""
+    from groundstation.zenoh_bus import open_session
+
+    settings = _load(args)
+    z = settings.zenoh
+    # The file's connect endpoints are where its clients go (this router), not routers to
+    # join: only --connect makes this router connect to others.
+    listen = z.listen or (ROUTER_ENDPOINT,)
+    section = z.model_copy(
+        update={"mode": "router", "listen": listen, "connect": tuple(args.connect)}
+    )
+    for ep in listen:
+        m = re.fullmatch(r"tcp/([0-9.]+|localhost):(\d+)", ep)
+        if m and m.group(2) != "0" and not _port_free(m.group(1), int(m.group(2))):
+            raise PortInUse(
+                f"{ep} is in use (another router, zenohd, or a demo?); "
+                "stop it, or pass --listen tcp/127.0.0.1:N"
+            )
+    stop = _stop_on_signals()
+    session = open_session(section)
+    try:
+        print(
+            f"groundstation router: listening on {', '.join(listen)} (zenoh {session.zid()}); "
+            f"the others connect with --connect {listen[0]}; Ctrl-C stops",
+            flush=True,
+        )
+        _wait(stop)
+    finally:
+        session.close()
     return 0
 
 
@@ -545,6 +690,37 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--record", metavar="FILE", help="also record the bus to this MCAP file")
     p.set_defaults(func=cmd_serve)
+
+    p = sub.add_parser(
+        "router",
+        help=f"a zenoh router for the other processes to connect to ({ROUTER_ENDPOINT})",
+        description=f"A zenoh router session (as zenohd): listens on {ROUTER_ENDPOINT} unless "
+        "--listen or [zenoh] listen says otherwise, with multicast scouting off; serve, sim, "
+        f"record and dashboard then run as separate processes with --connect {ROUTER_ENDPOINT}. "
+        "The file's [zenoh] connect is where its clients go, not a router to join.",
+    )
+    p.add_argument(
+        "--config", metavar="PATH", help="TOML configuration ([zenoh] listen, config_file: TLS/ACL)"
+    )
+    p.add_argument(
+        "--listen",
+        metavar="ENDPOINT",
+        action="append",
+        default=[],
+        help=f"endpoint to listen on (repeatable; default {ROUTER_ENDPOINT})",
+    )
+    p.add_argument(
+        "--connect",
+        metavar="ENDPOINT",
+        action="append",
+        default=[],
+        help="another router to join (repeatable; default none)",
+    )
+    p.add_argument(
+        "--log-level", choices=["DEBUG", "INFO", "WARNING", "ERROR"], help="log level (INFO)"
+    )
+    p.add_argument("--log-json", action="store_true", help="log JSON lines on stderr")
+    p.set_defaults(func=cmd_router)
 
     p = sub.add_parser("dashboard", help="the operator dashboard alone, as a bus client")
     _add_common(p)
@@ -723,6 +899,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     except (FileNotFoundError, IsADirectoryError, PermissionError) as exc:
         print(f"groundstation: {exc}", file=sys.stderr)
+        return 2
+    except PortInUse as exc:
+        print(f"groundstation {args.command}: {exc}", file=sys.stderr)
         return 2
     except Exception as exc:
         import zenoh

@@ -115,3 +115,35 @@ def test_patterns_overlap_on_drone_slices(a: str, b: str, overlap: bool) -> None
 
     assert patterns_overlap(a, b) is overlap
     assert patterns_overlap(b, a) is overlap
+
+
+def test_a_router_without_listen_endpoints_is_said_to_listen_on_7447() -> None:
+    """Issue 23: ``serve --mode router --headless`` logged "listening on nothing" while zenoh
+    listened on tcp/127.0.0.1:7447 (make_zenoh_config's router default)."""
+    from groundstation.bus import describe_endpoints
+
+    assert "listening on tcp/127.0.0.1:7447" in describe_endpoints("router", (), ())
+    assert "listening on nothing" in describe_endpoints("peer", (), ())
+    assert "listening on tcp/127.0.0.1:9" in describe_endpoints("router", (), ("tcp/127.0.0.1:9",))
+
+
+@pytest.mark.parametrize(("alone_ok", "level"), [(True, "INFO"), (False, "WARNING")])
+def test_losing_the_last_peer_warns_only_where_being_alone_is_wrong(
+    caplog: pytest.LogCaptureFixture, alone_ok: bool, level: str
+) -> None:
+    """Issue 23: the in-process demo warned "lost every zenoh peer and router… pass
+    --connect" whenever a client (a recorder, a dashboard) disconnected."""
+    import logging
+
+    from groundstation.bus import PeerWatch
+
+    count = [1]
+    log = logging.getLogger("test.peerwatch")
+    watch = PeerWatch(lambda: count[0], "where", "demo", log, alone_ok=alone_ok)
+    with caplog.at_level(logging.DEBUG, logger="test.peerwatch"):
+        watch.poll(0.0)
+        count[0] = 0
+        watch.poll(1.0)
+    last = caplog.records[-1]
+    assert last.levelname == level, caplog.text
+    assert ("lost every zenoh peer" in last.getMessage()) is not alone_ok, last.getMessage()

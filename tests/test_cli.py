@@ -24,3 +24,28 @@ def test_every_flag_has_a_help_text(command: str) -> None:
         if action.help is None
     ]
     assert not missing, f"groundstation {command}: flags without help: {missing}"
+
+
+def test_demo_moves_off_a_busy_default_dashboard_port_loudly(
+    monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    """Issue 23: ``demo`` with 8080 busy went to 46627 without a word. By default it still
+    moves (one command must work) but says so at WARNING; asked for a port, it fails."""
+    import socket
+
+    from groundstation import cli
+    from groundstation.config import load_settings
+
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen(1)
+        port = busy.getsockname()[1]
+        monkeypatch.setitem(cli.DEMO_DEFAULTS["web"], "port", port)
+        settings = load_settings(None, {"web": {"port": port}}, use_env=False)
+        with caplog.at_level("WARNING", logger="groundstation"):
+            moved = cli._demo_web_port(argparse.Namespace(web_port=None), settings)
+        assert moved.web.port not in (port, 0)
+        assert f"the dashboard's port 127.0.0.1:{port} is in use" in caplog.text
+        assert f"on port {moved.web.port} instead" in caplog.text
+        with pytest.raises(cli.PortInUse, match=f"127.0.0.1:{port} is in use"):
+            cli._demo_web_port(argparse.Namespace(web_port=port), settings)
