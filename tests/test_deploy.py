@@ -360,3 +360,17 @@ def test_compose_healthcheck_script(router_endpoint: str) -> None:
             holder.wait(timeout=10)
             if holder.stdout is not None:
                 holder.stdout.close()
+
+
+@pytest.mark.parametrize(("argv", "rc"), [(["nonsense"], 2), (["help"], 0), ([], 0)])
+def test_dev_script_help_is_its_usage_not_its_code(argv: list[str], rc: int) -> None:
+    """Issue 23: ``./dev nonsense`` printed script lines (``set -euo pipefail``) as help."""
+    out = subprocess.run(
+        [str(REPO / "dev"), *argv], capture_output=True, text=True, timeout=30, check=False
+    )
+    assert out.returncode == rc, out
+    text = out.stdout + out.stderr
+    assert "./dev demo" in text and "./dev test" in text
+    assert "set -euo" not in text and "cd " not in text and "# " not in text
+    if rc:
+        assert out.stderr.startswith("dev: unknown command 'nonsense'\n")
