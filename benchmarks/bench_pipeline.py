@@ -20,8 +20,10 @@ message runs the whole path: observation, filter, localization, follow, Estimate
   ``localize``, ``follow_step`` (follow is off: what the pipeline does instead of
   ``follow.follow_step``, whose own cost is the row below), ``estimate`` (the Estimate's
   JSON, ``messages.encode_estimate_ordered``).
-* Rows in parentheses, not in the sum: filterpy's own predict + update (the floor under
-  ``filter_update``), ``localize`` over batches (``localization.localize_batch``).
+* Rows in parentheses, not in the sum: the filter's Kalman step alone, in closed form
+  (``tension.DiagonalKalman``, the floor under ``filter_update``) and as filterpy's
+  ``KalmanFilter`` predict + update (what that step cost before it was written out),
+  ``localize`` over batches (``localization.localize_batch``).
 * The drone rows: 8 drones interleaved, ``Pipeline.process`` one message at a time against
   ``Pipeline.process_batch`` in batches of 32 grouped by drone (the service's drain while a
   backlog exists), CPU time per message, validation not included.
@@ -46,9 +48,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from filterpy.kalman import KalmanFilter
 
 from benchmarks import git
 from benchmarks.bench_service import _telemetry_payloads
+from benchmarks.floor_service import _inv3
 from groundstation import follow as follow_mod
 from groundstation.bus import Sample
 from groundstation.evaluation import settings_for
@@ -56,14 +60,15 @@ from groundstation.localization import localize, localize_batch
 from groundstation.messages import Telemetry
 from groundstation.pipeline import Pipeline, _follow_stamped
 from groundstation.service import group_by_drone
-from groundstation.tension import TensionFilter, observe_tension
+from groundstation.tension import DiagonalKalman, TensionFilter, observe_tension
 
 DOC_PATH = Path(__file__).resolve().parent.parent / "docs" / "pipeline_benchmark.md"
 KEY = "tether/d0/telemetry"
 STAGES = ("validate", "observe_tension", "filter_update", "localize", "follow_step", "estimate")
-EXTRA = ("filterpy_bare", "localize_batch", "follow_step_itself")
-"""Not in the sum: filterpy's own predict + update (the floor under ``filter_update``), and
-``localize`` over the batch (``localization.localize_batch``, BATCH cases per call)."""
+EXTRA = ("kalman_bare", "filterpy_bare", "localize_batch", "follow_step_itself")
+"""Not in the sum: the Kalman step alone, closed form and filterpy (the floor under
+``filter_update``), and ``localize`` over the batch (``localization.localize_batch``, BATCH
+cases per call)."""
 BATCH = 32
 """Batch size of the batched rows (the service's ``_MAX_BATCH``)."""
 DRONES = 8
@@ -216,6 +221,7 @@ def measure(warmup: int, messages: int, repeats: int, seed: int = 0) -> dict[str
             "estimate": _best_mean_us(run_estimate, repeats),
         }
         extra = {
+            "kalman_bare": _kalman_us(filt0, obs, repeats),
             "filterpy_bare": _filterpy_us(filt0, msgs, obs, repeats),
             "follow_step_itself": _best_mean_us(run_follow, repeats),
             "localize_batch": _best_mean_us(run_localize_batch, repeats),
@@ -256,16 +262,50 @@ def _filter_us(filt0: TensionFilter, msgs: list[Telemetry], obs: list[Any], repe
     return best
 
 
+def _hover_qr(filt0: TensionFilter) -> tuple[list[float], list[float]]:
+    """The converged filter's hover Q (one 4 ms step) and R, diagonals, N^2."""
+    _, _, r = filt0.noise_model()
+    tau = filt0.hover_time_constant(r, 0.004)
+    return [ri * 0.004 / (tau * tau) * 0.004 for ri in r], list(r)
+
+
+def _kalman_us(filt0: TensionFilter, obs: list[Any], repeats: int) -> float:
+    """The closed-form Kalman step alone (``DiagonalKalman`` predict + update), with the
+    converged filter's state, hover Q and R: the floor of ``filter_update``, which also
+    sets Q and R and adds the noise estimate, the change test and the estimate."""
+    est = filt0.estimate
+    assert est is not None
+    q, r = _hover_qr(filt0)
+    zs = [o.tension_world_n.tolist() for o in obs]
+    best = math.inf
+    for _ in range(repeats):
+        kf = DiagonalKalman()
+        kf.set(est.tension_world_n.tolist(), np.diag(est.cov_n2).tolist())
+        predict, update = kf.predict, kf.update
+        t0 = time.perf_counter_ns()
+        for z in zs:
+            predict(q)
+            update(z, r)
+        best = min(best, (time.perf_counter_ns() - t0) / len(zs) / 1e3)
+    return best
+
+
 def _filterpy_us(
     filt0: TensionFilter, msgs: list[Telemetry], obs: list[Any], repeats: int
 ) -> float:
-    """filterpy's KalmanFilter predict + update alone, with the converged filter's Q and R
-    (set once: the floor of ``filter_update``, which also sets them and adds the noise
-    estimate, the change test and the estimate around these two calls)."""
+    """filterpy's KalmanFilter predict + update alone (its default inverse), with the
+    converged filter's state, hover Q and R set once: the same step as ``kalman_bare``,
+    as the tension filter took it before that was written out in closed form."""
+    est = filt0.estimate
+    assert est is not None
+    q, r = _hover_qr(filt0)
     best = math.inf
     zs = [np.array(o.tension_world_n, dtype=float) for o in obs]
     for _ in range(repeats):
-        kf = copy.deepcopy(filt0.kalman_filter)
+        kf = KalmanFilter(dim_x=3, dim_z=3)
+        kf.F, kf.H, kf.Q, kf.R = np.eye(3), np.eye(3), np.diag(q), np.diag(r)
+        kf.x, kf.P = est.tension_world_n.reshape(3, 1).copy(), est.cov_n2.copy()
+        kf.inv = _inv3  # the adjugate hook the tension filter installed
         predict, update = kf.predict, kf.update
         t0 = time.perf_counter_ns()
         for z in zs:
@@ -342,7 +382,8 @@ def render(result: dict[str, Any], before: dict[str, Any] | None, argv: list[str
     ):
         rows.append((label, result.get(key), (before or {}).get(key)))
     extra_labels = {
-        "filterpy_bare": "(filterpy KalmanFilter predict + update alone)",
+        "kalman_bare": "(the Kalman step alone: DiagonalKalman predict + update)",
+        "filterpy_bare": "(the same step on filterpy's KalmanFilter, as before)",
         "localize_batch": f"(localize_batch, {BATCH} cases per call, per case)",
         "follow_step_itself": "(follow_step itself, follow off: the pipeline skips it)",
     }

@@ -28,6 +28,7 @@ the same router with the same client, in the same run.
 from __future__ import annotations
 
 import gc
+import math
 import sys
 import time
 
@@ -37,9 +38,42 @@ from filterpy.kalman import KalmanFilter
 from benchmarks.echo_service import serve_telemetry
 from benchmarks.service_rig import MASS_KG, telemetry_payloads
 from groundstation.messages import FollowInfo, InvalidMessage, Telemetry, encode_estimate
-from groundstation.tension import _inv3, observe_tension
+from groundstation.tension import observe_tension
 
 _FOLLOW = FollowInfo(enabled=False, active=False, threshold_n=0.1, reason="floor rig").model_dump()
+
+
+def _inv3(S: np.ndarray) -> np.ndarray:
+    """Inverse of a 3x3 matrix by its adjugate: S^-1 = adj(S) / det(S).
+
+    Installed as ``KalmanFilter.inv`` (it was the tension filter's until that became three
+    scalar filters in closed form), filterpy's hook for the inverse it needs in
+    ``update`` (K = P- C' (C P- C' + R)^-1). There S is symmetric positive definite with
+    eigenvalues at least (m sigma_a)^2 = (9 mN)^2, so the adjugate form is as accurate as
+    np.linalg.inv's LU (agreement to rounding). A singular or non-finite S takes
+    np.linalg.inv, which decides what happens, as before.
+
+    Args:
+        S: Shape (3, 3).
+
+    Returns:
+        The inverse, shape (3, 3).
+    """
+    (a, b, c), (d, e, f), (g, h, i) = S.tolist()
+    c00, c01, c02 = e * i - f * h, c * h - b * i, b * f - c * e
+    det = a * c00 + d * c01 + g * c02
+    if not (det != 0.0 and math.isfinite(det)):
+        return np.asarray(np.linalg.inv(S), dtype=np.float64)
+    return (
+        np.array(
+            [
+                [c00, c01, c02],
+                [f * g - d * i, a * i - c * g, c * d - a * f],
+                [d * h - e * g, b * g - a * h, a * e - b * d],
+            ]
+        )
+        / det
+    )
 
 
 def _new_filter(r_n2: float = 4e-4, q_n2: float = 1e-8) -> KalmanFilter:

@@ -1,7 +1,7 @@
 """Tether tension from IMU + thrust, and the tension filter (paper sec. tens_estimate).
 
-Pure physics: numpy, scipy-free linear algebra and filterpy only; time enters as
-``dt_s``. Two parts:
+Pure physics: numpy and Python floats only (the filter is three scalar Kalman filters in
+closed form, :class:`DiagonalKalman`); time enters as ``dt_s``. Two parts:
 
 * :func:`observe_tension` turns one telemetry sample (body specific force, attitude,
   collective thrust) into one raw tension observation in the world frame, with the
@@ -25,13 +25,13 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
-from filterpy.kalman import KalmanFilter
 from numpy.typing import ArrayLike, NDArray
 
 __all__ = [
     "GRAVITY_MPS2",
     "NO_CALIBRATION",
     "DegenerateQuaternionError",
+    "DiagonalKalman",
     "InvalidObservationError",
     "InvalidTimeStepError",
     "ObservationCalibration",
@@ -926,15 +926,85 @@ class _NoiseEstimate:
         return s2, rho, r
 
 
+class DiagonalKalman:
+    """Three scalar Kalman filters, one per world axis: the tension filter's state and gain.
+
+    The model of ``eq:sysk1``, ``eq:sysk2``, ``eq:Kalman_vars`` has A = C = I, and the
+    tension filter's Q and R are diagonal at every step; P starts diagonal (P0 = R, a
+    diagonal prior, or R / n at a restart) and is only ever rescaled by a diagonal D. So
+    P stays diagonal and the 3-state filter is three independent scalar ones, written out
+    here in closed form, equation beside each line. Stepped with the same Q and R, filterpy's
+    ``KalmanFilter`` (dim_x = dim_z = 3, F = H = I) gives the same x and P to rounding:
+    tests/test_tension.py steps both, with resets and coasts, and compares them to 1e-12.
+    Per message this is a few float operations where filterpy's predict + update cost
+    ~20 µs of numpy calls on 3x3 matrices (docs/pipeline_benchmark.md).
+
+    Attributes:
+        x: The state, the tension per world axis, N, 3 floats.
+        P: The diagonal of the covariance, per world axis, N^2, 3 floats.
+    """
+
+    __slots__ = ("P", "x")
+
+    def __init__(self) -> None:
+        self.x = [0.0, 0.0, 0.0]
+        self.P = [0.0, 0.0, 0.0]
+
+    def set(self, x_n: list[float], P_n2: list[float]) -> None:
+        """Sets the state and the diagonal of its covariance (an initialisation)."""
+        self.x = [float(x_n[0]), float(x_n[1]), float(x_n[2])]
+        self.P = [float(P_n2[0]), float(P_n2[1]), float(P_n2[2])]
+
+    def predict(self, q_n2: list[float]) -> None:
+        """The time update with process noise ``Q = diag(q_n2)``, N^2.
+
+        x- = A x = x (A = I), so only the covariance moves.
+        """
+        p0, p1, p2 = self.P
+        q0, q1, q2 = q_n2
+        self.P = [p0 + q0, p1 + q1, p2 + q2]  # P- = A P A' + Q = P + Q
+
+    def update(self, z_n: list[float], r_n2: list[float]) -> list[float]:
+        """The measurement update with ``z = x + v``, ``v ~ N(0, diag(r_n2))``.
+
+        Args:
+            z_n: The observation per world axis, N, 3 floats.
+            r_n2: The observation noise variance per world axis, N^2, 3 floats.
+
+        Returns:
+            The whitened innovation ``nu / sqrt(S)`` per axis (``L^-1 nu`` with S = L L',
+            L diagonal here), dimensionless: N(0, 1) per axis while the model holds.
+        """
+        x, P = self.x, self.P
+        w = [0.0, 0.0, 0.0]
+        for i in range(3):
+            p, r = P[i], r_n2[i]
+            nu = z_n[i] - x[i]  # nu = z - C x-
+            s = p + r  # S = C P- C' + R
+            k = p / s  # K = P- C' S^-1
+            x[i] += k * nu  # x = x- + K nu
+            # P = (I - KC) P- (I - KC)' + K R K' (Joseph form, as filterpy: >= 0 always)
+            P[i] = (1.0 - k) * p * (1.0 - k) + k * r * k
+            w[i] = nu / math.sqrt(s)  # w = L^-1 nu
+        return w
+
+    def rescale(self, d: list[float]) -> None:
+        """``P = D P D`` with ``D = diag(sqrt(d))``: P follows a revised R (``R = d R_prev``)."""
+        P = self.P
+        for i in range(3):
+            sd = math.sqrt(d[i])
+            P[i] = P[i] * (sd * sd)  # P = D P D
+
+
 class TensionFilter:
     """Constant-tension Kalman filter that learns its noise, with tug detection.
 
     **Model** (``eq:sysk1``, ``eq:sysk2``, ``eq:Kalman_vars``): state x = (Tx, Ty, Tz),
-    A = C = I, B = D = 0. The state and covariance live in a
-    ``filterpy.kalman.KalmanFilter`` (``kf.x``, ``kf.P``); each step sets ``kf.Q`` and
-    ``kf.R`` and calls ``kf.predict()`` then ``kf.update()`` (x- = x, P- = P + Q;
-    K = P-(P- + R)^-1; x = x- + K(y - x-); Joseph-form P). Where the paper's filter is
-    told its noise, this one measures it, colour included.
+    A = C = I, B = D = 0, and Q, R and P diagonal: three scalar filters, one per world
+    axis, in closed form (:class:`DiagonalKalman`; equal to filterpy's ``KalmanFilter``
+    stepped with the same Q and R, to 1e-12). Each step sets Q and R, predicts and updates
+    (x- = x, P- = P + Q; K = P- / (P- + R); x = x- + K(y - x-); Joseph-form P). Where the
+    paper's filter is told its noise, this one measures it, colour included.
 
     **Noise, measured on line** (:class:`_NoiseEstimate`). Real Crazyflie hover noise is
     0.7-2.0 m/s^2 per axis (20-60 mN per sample on 30 g), not the 0.3 m/s^2 of the
@@ -1148,20 +1218,16 @@ class TensionFilter:
 
     **Cost.** One step runs per telemetry message (2000/s for 8 drones), on 3-vectors
     and 3x3 matrices, where numpy's per-call overhead outweighs the arithmetic. So the
-    work around filterpy is done in Python floats (noise estimate, whitening, innovation
-    bias), S^-1 goes through filterpy's ``inv`` hook as a 3x3 adjugate, and the windowed
+    Kalman step is three scalar filters in Python floats (:class:`DiagonalKalman`; it was
+    filterpy's ``KalmanFilter``, ~20 µs a step), as are the noise estimate, the whitening
+    and the innovation bias, and the windowed
     innovation sums of the change test are kept as running sums (one in-place add per
     step instead of a cumulative sum over the history).
     """
 
     def __init__(self, params: TensionFilterParams | None = None) -> None:
         self.params = params if params is not None else TensionFilterParams()
-        self._kf = KalmanFilter(dim_x=3, dim_z=3)
-        self._kf.F = np.eye(3)  # A = I (eq:Kalman_vars)
-        self._kf.H = np.eye(3)  # C = I
-        # filterpy's hook for the inverse of S = P- + R in update() (its default is
-        # np.linalg.inv, whose per-call overhead is most of its cost on a 3x3).
-        self._kf.inv = _inv3
+        self._kf = DiagonalKalman()  # A = C = I, Q and R diagonal (eq:Kalman_vars)
         p = self.params
         self._ring = _Ring(p.ring_size)
         # Window lengths of the change statistic, made once (floats).
@@ -1214,7 +1280,7 @@ class TensionFilter:
             std = _vector3(prior_std_n, "prior_std_n")
             if not np.all(std > 0.0):
                 raise ValueError(f"prior_std_n must be > 0, got {prior_std_n!r}")
-            self._prior = (x0, np.diag(std * std))
+            self._prior = (x0.tolist(), (std * std).tolist())  # x0, diag(P0)
         self._initialized = False
         self._samples = 0
         self._r_prev: tuple[float, ...] | None = None
@@ -1274,11 +1340,6 @@ class TensionFilter:
     def estimate(self) -> TensionEstimate | None:
         """The latest estimate, or None before the first observation."""
         return self._last
-
-    @property
-    def kalman_filter(self) -> KalmanFilter:
-        """The underlying filterpy filter (read it; do not step it from outside)."""
-        return self._kf
 
     def noise_model(self) -> tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]]:
         """The observation noise in force: ``(s2, rho, r)`` per world axis.
@@ -1341,22 +1402,20 @@ class TensionFilter:
         s2, rho, r = self.noise_model()
         # R = the long-run variance r, not the per-sample s2: what the filter averages.
         r0, r1, r2 = r
-        z, R = y, np.array([[r0, 0.0, 0.0], [0.0, r1, 0.0], [0.0, 0.0, r2]])
+        z = y
 
         if first:
             self._initialized = True
             if self._prior is None:
                 # First sample: x = y, P = R (see the class docstring).
-                kf.x = np.array(z).reshape(3, 1)
-                kf.P = R.copy()
+                kf.set(z, [r0, r1, r2])
                 self._samples = 1
                 self._r_prev = r
                 return self._publish(False, 0.0, 1.0, s2, rho, r)
             # First sample after a reset with a prior: x- = prior, P- = its covariance,
             # then the usual update (no prediction step: no time has passed).
             x0, P0 = self._prior
-            kf.x = x0.reshape(3, 1).copy()
-            kf.P = P0.copy()
+            kf.set(x0, P0)
             self._prior = None
             self._samples = 0
 
@@ -1368,8 +1427,7 @@ class TensionFilter:
             # precise as that prior says. Applied once R has moved by 1 % (cost).
             d0, d1, d2 = r[0] / r_prev[0], r[1] / r_prev[1], r[2] / r_prev[2]
             if max(abs(d0 - 1.0), abs(d1 - 1.0), abs(d2 - 1.0)) > 0.01:
-                d = np.sqrt([d0, d1, d2])
-                kf.P = kf.P * np.outer(d, d)
+                kf.rescale([d0, d1, d2])
                 self._r_prev = r
         else:
             self._r_prev = r
@@ -1377,14 +1435,10 @@ class TensionFilter:
         dt_mean = self._dt_mean if self._dt_mean == self._dt_mean else dt
         # Q = q dt I per axis, q = r dt_mean / tau^2 (tau: hover, restart or drift).
         c = dt_mean / (tau * tau) * dt
-        kf.Q = np.array([[r0 * c, 0.0, 0.0], [0.0, r1 * c, 0.0], [0.0, 0.0, r2 * c]])
-        kf.R = R
-        kf.predict()  # x- = A x,  P- = A P A' + Q
-        kf.update(np.array(z))  # K = P-C'(CP-C' + R)^-1, x = x- + K(y - Cx-), Joseph P
+        kf.predict([r0 * c, r1 * c, r2 * c])  # x- = x,  P- = P + Q
+        # K = P- / (P- + R), x = x- + K (y - x-), Joseph P; w = (y - x-) / sqrt(S)
+        innov = kf.update(z, [r0, r1, r2])
         self._samples += 1
-
-        # Whitened innovation w = L^-1 nu with S = L L' (filterpy kept nu and S).
-        innov = _whiten(kf.S, kf.y)
         if p.estimate_noise and self._noise.samples < p.noise_warmup_samples:
             # Innovations whitened with a noise estimate of a few samples are not evidence
             # (of a tug or of a drift).
@@ -1430,8 +1484,7 @@ class TensionFilter:
         s2, rho, r = self.noise_model()
         dt_mean = self._dt_mean if self._dt_mean == self._dt_mean else 0.0
         tau = self.hover_time_constant(r, dt_mean)
-        self._kf.Q = np.diag([r[i] * dt_mean / (tau * tau) * dt for i in range(3)])
-        self._kf.predict()
+        self._kf.predict([r[i] * dt_mean / (tau * tau) * dt for i in range(3)])  # P = P + Q
         return self._publish(False, 0.0, 1.0, s2, rho, r, tau)
 
     # -- internals ---------------------------------------------------------------------
@@ -1641,8 +1694,7 @@ class TensionFilter:
         The new regime began ``window`` samples ago: the step test keeps those samples'
         sums (and the one before them, its baseline) as the start of its next reference.
         """
-        self._kf.P = np.diag([r[i] / window for i in range(3)])  # P = R / n
-        self._kf.x = np.array(mean_n).reshape(3, 1)
+        self._kf.set(mean_n, [r[i] / window for i in range(3)])  # x = mean, P = R / n
         self._ring.count = 0
         self._hist.count = min(self._hist.count, window)
         self._bias = [0.0, 0.0, 0.0]
@@ -1659,12 +1711,15 @@ class TensionFilter:
         tau: float = math.nan,
     ) -> TensionEstimate:
         kf = self._kf
-        p00, p11, p22 = kf.P.diagonal().tolist()
+        p00, p11, p22 = kf.P
         std = np.array([_sqrt_clipped(p00), _sqrt_clipped(p11), _sqrt_clipped(p22)])
         std.setflags(write=False)
+        cov = np.zeros((3, 3))
+        cov[0, 0], cov[1, 1], cov[2, 2] = p00, p11, p22
+        cov.setflags(write=False)
         est = TensionEstimate(
-            tension_world_n=_frozen(kf.x[:, 0]),
-            cov_n2=_frozen(kf.P),
+            tension_world_n=_frozen(kf.x),
+            cov_n2=cov,
             std_n=std,  # sqrt(clip(diag(P), 0))
             converged=self._samples >= self.params.converged_min_samples,
             change_detected=change,
@@ -1679,77 +1734,9 @@ class TensionFilter:
         return est
 
 
-def _inv3(S: FloatArray) -> FloatArray:
-    """Inverse of a 3x3 matrix by its adjugate: S^-1 = adj(S) / det(S).
-
-    Installed as ``KalmanFilter.inv``, filterpy's hook for the inverse it needs in
-    ``update`` (K = P- C' (C P- C' + R)^-1). There S is symmetric positive definite with
-    eigenvalues at least (m sigma_a)^2 = (9 mN)^2, so the adjugate form is as accurate as
-    np.linalg.inv's LU (agreement to rounding). A singular or non-finite S takes
-    np.linalg.inv, which decides what happens, as before.
-
-    Args:
-        S: Shape (3, 3).
-
-    Returns:
-        The inverse, shape (3, 3).
-    """
-    (a, b, c), (d, e, f), (g, h, i) = S.tolist()
-    c00, c01, c02 = e * i - f * h, c * h - b * i, b * f - c * e
-    det = a * c00 + d * c01 + g * c02
-    if not (det != 0.0 and math.isfinite(det)):
-        return np.asarray(np.linalg.inv(S), dtype=np.float64)
-    return (
-        np.array(
-            [
-                [c00, c01, c02],
-                [f * g - d * i, a * i - c * g, c * d - a * f],
-                [d * h - e * g, b * g - a * h, a * e - b * d],
-            ]
-        )
-        / det
-    )
-
-
 def _sqrt_clipped(v: float) -> float:
     """``np.sqrt(np.clip(v, 0.0, None))`` for one value (NaN stays NaN)."""
     return math.sqrt(v) if v > 0.0 else (v if v != v else 0.0)
-
-
-def _whiten(S: FloatArray, nu: FloatArray) -> list[float]:
-    """Whitened innovation ``L^-1 nu`` with ``S = L L'`` (Cholesky), in scalars.
-
-    Equal to ``np.linalg.solve(np.linalg.cholesky(S), nu)`` up to rounding (numpy's cost
-    for a 3x3 is mostly per-call overhead). Like numpy, reads the lower triangle of S and
-    raises ``LinAlgError`` when S is not positive definite.
-
-    Args:
-        S: Innovation covariance, shape (3, 3).
-        nu: Innovation, shape (3, 1) or (3,).
-
-    Returns:
-        The whitened innovation, 3 floats.
-    """
-    (s00, _, _), (s10, s11, _), (s20, s21, s22) = S.tolist()
-    n0, n1, n2 = nu.ravel().tolist()
-    if not s00 > 0.0:
-        raise np.linalg.LinAlgError("Matrix is not positive definite")
-    l00 = math.sqrt(s00)
-    l10 = s10 / l00
-    l20 = s20 / l00
-    d1 = s11 - l10 * l10
-    if not d1 > 0.0:
-        raise np.linalg.LinAlgError("Matrix is not positive definite")
-    l11 = math.sqrt(d1)
-    l21 = (s21 - l20 * l10) / l11
-    d2 = s22 - l20 * l20 - l21 * l21
-    if not d2 > 0.0:
-        raise np.linalg.LinAlgError("Matrix is not positive definite")
-    l22 = math.sqrt(d2)
-    w0 = n0 / l00
-    w1 = (n1 - l10 * w0) / l11
-    w2 = (n2 - l20 * w0 - l21 * w1) / l22
-    return [w0, w1, w2]
 
 
 def _check_dt(dt_s: float) -> float:

@@ -8,6 +8,7 @@ import sys
 
 import numpy as np
 import pytest
+from filterpy.kalman import KalmanFilter
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -15,6 +16,7 @@ from groundstation.tension import (
     GRAVITY_MPS2,
     NO_CALIBRATION,
     DegenerateQuaternionError,
+    DiagonalKalman,
     InvalidObservationError,
     InvalidTimeStepError,
     ObservationCalibration,
@@ -354,7 +356,8 @@ def test_coast_grows_covariance_with_elapsed_time() -> None:
     filt = TensionFilter(params)
     for _ in range(10):
         filt.update(HOVER_TENSION_N, DT_S)
-    before = filt.kalman_filter.P.copy()
+    assert filt.estimate is not None
+    before = filt.estimate.cov_n2.copy()
     est = filt.coast(2.0)
     assert est is not None
     _, _, r = filt.noise_model()
@@ -403,43 +406,157 @@ def test_params_validation(kwargs: dict[str, float]) -> None:
         TensionFilterParams(**kwargs)  # type: ignore[arg-type]
 
 
-def test_filterpy_matches_textbook_kalman_equations() -> None:
-    """Guards the filterpy==2.0.0 pin: its predict/update equal the textbook procedure.
+class _FilterpyAxes:
+    """:class:`DiagonalKalman`'s interface over filterpy's ``KalmanFilter`` (F = H = I).
 
-    Irregular dt and the drift adaptation (so Q varies) active; the noise estimate off
-    (with it P is also rescaled as R is revised, which is not filterpy's step); the change
-    threshold is out of reach so no re-initialisation overwrites the state.
+    Full 3x3 matrices, filterpy's own ``inv`` (np.linalg.inv) and Joseph update; the
+    whitened innovation from the Cholesky factor of filterpy's S. Reading ``P`` checks
+    that filterpy's covariance stayed diagonal, the premise of the closed form.
     """
-    rng = np.random.default_rng(3)
-    filt = TensionFilter(TensionFilterParams(change_threshold=1e12, estimate_noise=False))
-    n = 600
-    truth = HOVER_TENSION_N + np.outer(np.linspace(0.0, 0.03, n), [1.0, -0.5, 0.3])
-    ys = truth + rng.normal(0.0, 0.009, (n, 3))
-    Qs, Rs, zs = [], [], []
+
+    def __init__(self) -> None:
+        self.kf = KalmanFilter(dim_x=3, dim_z=3)
+        self.kf.F = np.eye(3)
+        self.kf.H = np.eye(3)
+        self.calls = {"set": 0, "predict": 0, "update": 0, "rescale": 0}
+
+    @property
+    def x(self) -> list[float]:
+        out: list[float] = self.kf.x[:, 0].tolist()
+        return out
+
+    @property
+    def P(self) -> list[float]:
+        P = self.kf.P
+        assert np.array_equal(P, np.diag(np.diag(P))), P  # off-diagonals exactly 0
+        out: list[float] = np.diag(P).tolist()
+        return out
+
+    def set(self, x_n: list[float], P_n2: list[float]) -> None:
+        self.calls["set"] += 1
+        self.kf.x = np.array(x_n, dtype=float).reshape(3, 1)
+        self.kf.P = np.diag(np.array(P_n2, dtype=float))
+
+    def predict(self, q_n2: list[float]) -> None:
+        self.calls["predict"] += 1
+        self.kf.Q = np.diag(np.array(q_n2, dtype=float))
+        self.kf.predict()
+
+    def update(self, z_n: list[float], r_n2: list[float]) -> list[float]:
+        self.calls["update"] += 1
+        self.kf.R = np.diag(np.array(r_n2, dtype=float))
+        self.kf.update(np.array(z_n, dtype=float))
+        w: list[float] = np.linalg.solve(np.linalg.cholesky(self.kf.S), self.kf.y)[:, 0].tolist()
+        return w
+
+    def rescale(self, d: list[float]) -> None:
+        self.calls["rescale"] += 1
+        D = np.diag(np.sqrt(d))
+        self.kf.P = D @ self.kf.P @ D
+
+
+def test_closed_form_equals_filterpy_kalman_filter() -> None:
+    """Three scalar filters in closed form = filterpy's 3-state KalmanFilter, to 1e-12.
+
+    Both are stepped through the same random sequence (seeded): updates with Q and R drawn
+    log-uniformly over five decades per axis (so the gain runs from ~0 to ~1), coasts
+    (predict alone), re-initialisations (x and P set, as a reset, a prior or a restart
+    does) and rescales of P. x and P are compared relative to their size, the whitened
+    innovation to 1e-12.
+    """
+    rng = np.random.default_rng(22)
+    closed, ref = DiagonalKalman(), _FilterpyAxes()
+    x0, p0 = rng.normal(0.0, 0.05, 3).tolist(), (10.0 ** rng.uniform(-7, -3, 3)).tolist()
+    closed.set(x0, p0)
+    ref.set(x0, p0)
+    kinds = rng.choice(["update", "coast", "reset", "rescale"], size=4000, p=[0.8, 0.1, 0.05, 0.05])
+    gains = []
+    for kind in kinds:
+        if kind == "update":
+            q = (10.0 ** rng.uniform(-10, -5, 3)).tolist()
+            r = (10.0 ** rng.uniform(-6, -1, 3)).tolist()
+            z = (np.array(closed.x) + rng.normal(0.0, 0.05, 3)).tolist()
+            gains.append(np.array(closed.P) / (np.array(closed.P) + q + r))
+            closed.predict(q)
+            ref.predict(q)
+            w = closed.update(z, r)
+            np.testing.assert_allclose(w, ref.update(z, r), rtol=1e-12, atol=1e-12)
+        elif kind == "coast":
+            q = (10.0 ** rng.uniform(-8, -4, 3)).tolist()
+            closed.predict(q)
+            ref.predict(q)
+        elif kind == "reset":
+            x0, p0 = rng.normal(0.0, 0.05, 3).tolist(), (10.0 ** rng.uniform(-7, -3, 3)).tolist()
+            closed.set(x0, p0)
+            ref.set(x0, p0)
+        else:
+            d = rng.uniform(0.5, 2.0, 3).tolist()
+            closed.rescale(d)
+            ref.rescale(d)
+        np.testing.assert_allclose(closed.x, ref.x, rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose(closed.P, ref.P, rtol=1e-12, atol=0.0)
+    g = np.concatenate(gains)
+    assert g.min() < 1e-2 and g.max() > 0.99  # the whole range of gains was visited
+    assert min(ref.calls.values()) >= 100
+
+
+def test_tension_filter_equals_itself_on_filterpy() -> None:
+    """The whole tension filter gives the same estimates on filterpy's KalmanFilter.
+
+    One filter on :class:`DiagonalKalman`, one with filterpy's ``KalmanFilter`` put in
+    its place, fed the same flight: noise learning on (so R is revised and P rescaled),
+    irregular dt, a gap, coasts, a 40 mN tug (change detection and restart from the
+    window's mean), a reset without and one with a prior, learn_noise before the second.
+    Every estimate field agrees to 1e-12 (relative for the covariance) and the detections
+    are the same samples.
+    """
+    rng = np.random.default_rng(7)
+    closed = TensionFilter()
+    ref = TensionFilter()
+    axes = _FilterpyAxes()
+    ref._kf = axes  # type: ignore[assignment]
+    n = 3000
+    truth = np.tile(HOVER_TENSION_N, (n, 1))
+    truth[1200:] += [0.040, 0.0, -0.010]  # the tug
+    truth[2200:] -= [0.030, 0.010, 0.0]
+    ys = truth + rng.normal(0.0, 0.012, (n, 3))
+    events = {600: "gap", 900: "coast", 1700: "reset", 2500: "learn_reset_prior"}
+    detections = 0
+    coasts = 0
     for k in range(n):
-        filt.update(ys[k], float(rng.uniform(0.001, 0.02)))
-        Qs.append(filt.kalman_filter.Q.copy())
-        Rs.append(filt.kalman_filter.R.copy())
-        zs.append(np.asarray(filt.kalman_filter.z, dtype=float).ravel())
-    assert max(float(Q[0, 0]) for Q in Qs[2:]) > 2.0 * float(Qs[2][0, 0])  # Q did adapt
-
-    def textbook(joseph: bool) -> tuple[np.ndarray, np.ndarray]:
-        A = C = np.eye(3)  # eq:Kalman_vars
-        x = ys[0].copy()  # initialisation from the first sample: x = y, P = R
-        P = np.diag(np.diag(observation_cov_n2(None, MASS_KG, ACCEL_NOISE_MPS2, THRUST_NOISE_N)))
-        for k in range(1, n):
-            x_prior = A @ x  # x- = A x
-            P_prior = A @ P @ A.T + Qs[k]  # P- = A P A' + Q
-            K = P_prior @ C.T @ np.linalg.inv(C @ P_prior @ C.T + Rs[k])
-            x = x_prior + K @ (zs[k] - C @ x_prior)  # x = x- + K (z - C x-)
-            I_KC = np.eye(3) - K @ C
-            P = I_KC @ P_prior @ I_KC.T + K @ Rs[k] @ K.T if joseph else I_KC @ P_prior
-        return x, P
-
-    for joseph in (True, False):
-        x, P = textbook(joseph)
-        np.testing.assert_allclose(filt.kalman_filter.x[:, 0], x, rtol=0, atol=1e-12)
-        np.testing.assert_allclose(filt.kalman_filter.P, P, rtol=0, atol=1e-12)
+        dt = float(rng.uniform(0.002, 0.006))
+        event = events.get(k)
+        if event == "gap":
+            dt = 0.5
+        elif event == "coast":
+            for _ in range(25):
+                a, b = closed.coast(DT_S), ref.coast(DT_S)
+                assert a is not None and b is not None
+                np.testing.assert_allclose(a.tension_world_n, b.tension_world_n, atol=1e-12)
+                np.testing.assert_allclose(a.cov_n2, b.cov_n2, rtol=1e-12, atol=0.0)
+                coasts += 1
+        elif event == "reset":
+            closed.reset()
+            ref.reset()
+        elif event == "learn_reset_prior":
+            for j in range(50):
+                closed.learn_noise(ys[k - 50 + j], DT_S)
+                ref.learn_noise(ys[k - 50 + j], DT_S)
+            prior, std = (0.0, 0.0, -0.06), (0.02, 0.02, 0.02)
+            closed.reset(prior, std)
+            ref.reset(prior, std)
+        a, b = closed.update(ys[k], dt), ref.update(ys[k], dt)
+        np.testing.assert_allclose(a.tension_world_n, b.tension_world_n, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(a.cov_n2, b.cov_n2, rtol=1e-12, atol=0.0)
+        np.testing.assert_allclose(a.std_n, b.std_n, rtol=1e-12, atol=0.0)
+        assert a.change_detected == b.change_detected and a.samples == b.samples
+        assert math.isclose(a.change_statistic, b.change_statistic, rel_tol=1e-9, abs_tol=1e-12)
+        assert math.isclose(a.process_noise_scale, b.process_noise_scale, rel_tol=1e-9)
+        assert a.noise_std_n == b.noise_std_n  # the noise estimate does not read the state
+        np.testing.assert_array_equal(a.time_constant_s, b.time_constant_s)  # nan at start
+        detections += a.change_detected
+    assert detections >= 2 and coasts == 25  # both tugs found; the script ran its events
+    assert axes.calls["rescale"] >= 5 and axes.calls["set"] >= 5
 
 
 # ---------------------------------------------------------------- filter vs truth
