@@ -1,4 +1,4 @@
-"""Benchmarks: each a command that writes its page in docs/ (see README, Results)."""
+"""Benchmarks: each a command that writes its page in docs/ (see docs/results_summary.md)."""
 
 from __future__ import annotations
 

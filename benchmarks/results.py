@@ -8,12 +8,13 @@ Run from the repository root::
     .venv/bin/python -m benchmarks.results --only envelope   # section (d) into the page
 
 Writes ``<out-dir>/RESULTS.md`` and ``<out-dir>/figures/*.png`` (default ``docs/``). A full
-run into ``docs/`` also rewrites the README block between ``<!-- results:start`` and
-``<!-- results:end -->``, so every number in the README comes from this command; a quick run
-or another ``--out-dir`` never touches the README. ``--only envelope`` reruns section (d)
-(and (a)'s deterministic runs, which its bullets cite) into the existing page and the README
-block's bullets and figure, leaving the timing sections as they were, and says so on the
-page ((a) and (d)'s flights cost ~11 CPU-minutes; the timing sections want a quiet machine).
+run into ``docs/`` also rewrites the block of ``docs/results_summary.md`` (the README's
+until issue 23) between ``<!-- results:start`` and ``<!-- results:end -->``, so every number
+there comes from this command; a quick run or another ``--out-dir`` never touches it.
+``--only envelope`` reruns section (d) (and (a)'s deterministic runs, which its bullets cite)
+into the existing page and that block's bullets and figure, leaving the timing sections as
+they were, and says so on the page ((a) and (d)'s flights cost ~11 CPU-minutes; the timing
+sections want a quiet machine).
 
 Sections:
 
@@ -58,7 +59,9 @@ from benchmarks.bench_catenary import machine
 from benchmarks.results_sim import run_jobs
 
 REPO = Path(__file__).resolve().parents[1]
-README = REPO / "README.md"
+README = REPO / "docs" / "results_summary.md"
+"""The page whose results block a full run rewrites (the README's until issue 23 moved the
+paper-notation results out of the README; the constant keeps its name for the tests)."""
 README_START = re.compile(r"^<!-- results:start.*-->[ \t]*$", re.MULTILINE)
 README_END = "<!-- results:end -->"
 SECTIONS = (
@@ -778,7 +781,7 @@ def _readme_tail(o: Outcome | EnvelopeOutcome) -> list[str]:
         "",
         *[f"- {b}" for b in trust_bullets(o)],
         "",
-        "![envelope](docs/figures/envelope.png)",
+        "![envelope](figures/envelope.png)",
     ]
 
 
@@ -787,7 +790,7 @@ def readme_block(o: Outcome, prov: dict[str, str], wall_s: float) -> str:
         f"{README_PROFILES} ({prov['machine']}); from "
         f"`.venv/bin/python -m benchmarks.results` ({wall_s / 60:.1f} min; `--quick`, "
         f"every section, shorter, runs in CI), {prov['date']}, commit "
-        f"`{prov['commit']}`. Tables, figures and method: [docs/RESULTS.md](docs/RESULTS.md).",
+        f"`{prov['commit']}`. Tables, figures and method: [RESULTS.md](RESULTS.md).",
         "",
         *_summary_table(o),
         *_readme_tail(o),
@@ -1655,13 +1658,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--no-readme",
         action="store_true",
-        help="do not rewrite the README block (full runs into docs/ do)",
+        help="do not rewrite the block of docs/results_summary.md (full runs into docs/ do)",
     )
     parser.add_argument(
         "--only",
         choices=("envelope",),
         help="rerun one section into the existing <out-dir>/RESULTS.md (and, for docs/, the "
-        "README block's bullets and figure); the other sections stay as they are",
+        "summary block's bullets and figure); the other sections stay as they are",
     )
     args = parser.parse_args(argv)
     t0 = time.perf_counter()
