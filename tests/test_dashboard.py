@@ -1168,3 +1168,25 @@ def test_update_thread_stays_within_the_scene_rate(settings: Settings, bus: InMe
     finally:
         dashboard.close()
         service.close()
+
+
+def test_an_uncalibrated_position_says_its_error_where_it_is_shown() -> None:
+    """Issue 23: 167 cm off, on the wrong side of the base, with only a small orange badge.
+    The position row and a warning under the table say it, with the expected size."""
+    text = tension_html(_estimate(calibration="none"))
+    position_row = text.split("position</td>")[1].split("</tr>")[0]
+    assert "± ~1 m uncalibrated" in position_row
+    assert 'role="alert"' in text and "median 95 cm" in text and "groundstation calibrate" in text
+    calibrated = tension_html(_estimate(calibration="cal.toml"))
+    assert "± ~1 m" not in calibrated and "median 95 cm" not in calibrated
+    undetermined = tension_html(_estimate(calibration="none", position_m=None))
+    assert "(undetermined)" in undetermined and "median 95 cm" not in undetermined
+
+
+def test_follow_checkboxes_have_no_tooltip_over_the_stop_buttons(dash: Dashboard) -> None:
+    """Issue 23: the Follow mode tooltip stayed over Emergency stop / Stop all drones after a
+    click. What the two boxes do is a note below them instead."""
+    panel = _panel(dash)
+    assert panel.follow.handle.hint is None and panel.land.handle.hint is None
+    assert "Follow mode: the drone yields when the tether is pulled" in panel.follow_help.content
+    assert panel.stop_button.hint is not None  # the stop buttons keep theirs

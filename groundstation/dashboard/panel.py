@@ -68,6 +68,14 @@ STOP_HOTKEY = "Shift+S"
 field, where the browser keeps the keys)."""
 
 
+FOLLOW_HELP = (
+    "Follow mode: the drone yields when the tether is pulled. Tug-to-land: after a tug, "
+    "stop the motors below the land height."
+)
+"""Said below the follow controls, not as their tooltips (which stayed over the emergency
+stop buttons after a click)."""
+
+
 class PanelHost(Protocol):
     """What a panel asks of the dashboard (commands go on the bus there)."""
 
@@ -236,22 +244,12 @@ class Panel:
         settings = self._settings
         with gui.add_folder("Follow"):
             self.follow = _Synced(
-                gui.add_checkbox(
-                    "Follow mode",
-                    False,
-                    disabled=True,
-                    hint="Tension following: the drone yields when the tether is pulled",
-                )
+                # No hint (tooltip) on these two: after a click it stayed over the emergency
+                # stop buttons just above (issue 23); the note below says what they do.
+                gui.add_checkbox("Follow mode", False, disabled=True)
             )
             self.follow.handle.on_update(self._on_follow_toggled)
-            self.land = _Synced(
-                gui.add_checkbox(
-                    "Tug-to-land",
-                    False,
-                    disabled=True,
-                    hint="After a tug, stop the motors below the land height",
-                )
-            )
+            self.land = _Synced(gui.add_checkbox("Tug-to-land", False, disabled=True))
             self.land.handle.on_update(self._on_land_toggled)
             with gui.add_form("Follow settings") as form:
                 # No min= on purpose: the browser would clamp a typed -1 to it silently;
@@ -281,7 +279,7 @@ class Panel:
             self.threshold.handle.on_update(self._on_threshold_typed)
             self.land_height.handle.on_update(self._on_land_height_typed)
             self.follow_message = gui.add_html("")
-            self.follow_help = gui.add_html(note_html(THRESHOLD_HELP))
+            self.follow_help = gui.add_html(note_html(FOLLOW_HELP + " " + THRESHOLD_HELP))
             self.follow_html = gui.add_html(follow_html(None))
 
     def _build_tether(self, gui: viser.GuiApi) -> None:
@@ -632,8 +630,9 @@ class Panel:
                 )
         limits = self._host.follow_limits(drone.id)
         help_text = (
-            f"{THRESHOLD_HELP} Accepted here: ≥ {limits.threshold_floor_n:.3f} N. Land height "
-            f"between the floor ({limits.floor_z_m:.2f} m) and {limits.reach_top_m:.2f} m."
+            f"{FOLLOW_HELP} {THRESHOLD_HELP} Accepted here: ≥ "
+            f"{limits.threshold_floor_n:.3f} N. Land height between the floor "
+            f"({limits.floor_z_m:.2f} m) and {limits.reach_top_m:.2f} m."
         )
         if limits.follow_blocked is not None and not (follow is not None and follow.enabled):
             self.follow_help.content = note_html(
