@@ -227,6 +227,10 @@ class FilterSection(_Section):
     """(added) τ, the crossover in the air, s: below ``1/(2π·τ)`` the observation rests on
     thrust, attitude and the thrust axis. Longer lets less of a sustained manoeuvre into the
     bias (error ≤ m·Δv/τ); shorter learns a bias never seen at rest sooner."""
+    accel_hover_crossover_s: float = Field(0.3, ge=0.0)
+    """(added) While the drone hovers (1 s mean acceleration < 0.2 m/s², speed < 0.3 m/s),
+    the hover model replaces the accelerometer below ``1/(2π·this)``: its vibration noise
+    leaves the tension filter's band (groundstation.slow_accel), s; 0: off."""
     drag_velocity_time_constant_s: float = Field(8.0, gt=0.0)
     """(added) Without motion capture the rotor-drag term's velocity is the accelerometer's
     leaky integral with this time constant, s (groundstation.slow_accel)."""

@@ -769,6 +769,7 @@ class Pipeline:
                 slow_mod.SlowAccelParams(
                     time_constant_s=params.filter.accel_slow_time_constant_s,
                     velocity_time_constant_s=params.filter.drag_velocity_time_constant_s,
+                    hover_crossover_s=params.filter.accel_hover_crossover_s,
                 )
                 if params.calibration.accel_slow
                 else None

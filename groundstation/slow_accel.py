@@ -74,6 +74,13 @@ class SlowAccelParams:
         mocap_time_constant_s: low-pass of the motion-capture velocity (finite
             differences of positions) that the drag term uses, s.
         mocap_max_gap_s: motion capture older than this is not used, s.
+        hover_crossover_s: while quasi-static, the crossover below which the hover model
+            replaces the accelerometer (its vibration noise, not only its bias), s; 0: off.
+        quasi_static_accel_mps2: quasi-static while the accelerometer's 1 s mean
+            acceleration (bias removed) stays below this, m/s² ...
+        quasi_static_speed_mps: ... and the drag's velocity below this, m/s.
+        release_time_constant_s: leaving quasi-static, the hover model hands the band back
+            to the accelerometer over this, s.
     """
 
     time_constant_s: float = 60.0
@@ -81,9 +88,20 @@ class SlowAccelParams:
     velocity_time_constant_s: float = 8.0
     mocap_time_constant_s: float = 0.15
     mocap_max_gap_s: float = 0.2
+    hover_crossover_s: float = 0.3
+    quasi_static_accel_mps2: float = 0.2
+    quasi_static_speed_mps: float = 0.3
+    release_time_constant_s: float = 0.5
 
     def __post_init__(self) -> None:
+        if not (self.hover_crossover_s >= 0.0):
+            raise ValueError(
+                f"SlowAccelParams.hover_crossover_s must be >= 0, got {self.hover_crossover_s!r}"
+            )
         for name in (
+            "quasi_static_accel_mps2",
+            "quasi_static_speed_mps",
+            "release_time_constant_s",
             "time_constant_s",
             "rest_time_constant_s",
             "velocity_time_constant_s",
@@ -114,6 +132,13 @@ class SlowAccelState:
         mocap_raw_velocity_world_mps / mocap_accel_world_mps2: the raw first and second
             differences (a_ref).
         mocap_samples: consecutive motion-capture samples (the differences need 3).
+        fast_body_mps2: L, the accelerometer's low band that the hover model replaces while
+            quasi-static (zero otherwise), body frame, m/s².
+        accel_1s_body_mps2: the 1 s mean of ``f − β − Rᵀ·g·e3``, body frame, m/s².
+        quasi_static: the drone hovers (both below their thresholds).
+        regime_velocity_world_mps: the velocity the hover test uses: motion capture's, or a
+            leaky integral with a 2 s leak (a bias not yet learnt drifts it 2 s × less than
+            the drag's 8 s one), world frame, m/s.
     """
 
     bias_body_mps2: Vec3 = _ZERO3
@@ -128,12 +153,22 @@ class SlowAccelState:
     mocap_raw_velocity_world_mps: Vec3 = _ZERO3
     mocap_accel_world_mps2: Vec3 = _ZERO3
     mocap_samples: int = 0
+    fast_body_mps2: Vec3 = _ZERO3
+    accel_1s_body_mps2: Vec3 = _ZERO3
+    quasi_static: bool = False
+    regime_velocity_world_mps: Vec3 = _ZERO3
 
 
 def correct_accel_body_mps2(state: SlowAccelState, accel_body_mps2: Vec3) -> Vec3:
-    """``f − β``: the reading with its slow error removed, body frame, m/s²."""
+    """``f − β − L``: the reading with its slow error removed and, while quasi-static, its
+    low band replaced by the hover model's (L), body frame, m/s²."""
     bx, by, bz = state.bias_body_mps2
-    return (accel_body_mps2[0] - bx, accel_body_mps2[1] - by, accel_body_mps2[2] - bz)
+    lx, ly, lz = state.fast_body_mps2
+    return (
+        accel_body_mps2[0] - bx - lx,
+        accel_body_mps2[1] - by - ly,
+        accel_body_mps2[2] - bz - lz,
+    )
 
 
 def drag_velocity_world_mps(state: SlowAccelState) -> Vec3 | None:
@@ -215,7 +250,15 @@ def slow_accel_step(
     mocap_ok = st.mocap_samples >= 3 and mocap_world_m is not None
     (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = R_world_body
     if phase == "hold":
-        return replace(st, velocity_world_mps=_ZERO3, velocity_source="none")
+        return replace(
+            st,
+            velocity_world_mps=_ZERO3,
+            velocity_source="none",
+            fast_body_mps2=_ZERO3,
+            accel_1s_body_mps2=_ZERO3,
+            quasi_static=False,
+            regime_velocity_world_mps=_ZERO3,
+        )
     if phase == "rest":
         # Still on the floor: a_ref = 0 exactly. A running mean of this rest's samples
         # (a new rest starts a new mean: the drone may have been moved between flights).
@@ -253,6 +296,10 @@ def slow_accel_step(
             learnt_at_rest=learnt_at_rest,
             velocity_world_mps=_ZERO3,
             velocity_source="none",
+            fast_body_mps2=_ZERO3,
+            accel_1s_body_mps2=_ZERO3,
+            quasi_static=False,
+            regime_velocity_world_mps=_ZERO3,
         )
     source: Literal["accel", "mocap"]
     if mocap_ok:
@@ -271,12 +318,51 @@ def slow_accel_step(
         leak = math.exp(-dt_s / params.velocity_time_constant_s)
         velocity = (vx * leak + awx * dt_s, vy * leak + awy * dt_s, vz * leak + awz * dt_s)
         source = "accel"
+    # The hover crossover. e = f − β − Rᵀ·g·e3 is the drone's acceleration plus vibration,
+    # body frame. While the drone hovers (its 1 s mean acceleration and its velocity small),
+    # L follows e below 1/(2π·τ_h): then f − β − L reads only e's high band, and the
+    # observation's low band is the hover model's (thrust, attitude, axis), without the
+    # accelerometer's vibration noise, which the tension filter would otherwise average
+    # for tens of seconds. Out of the hover L returns to zero (release) and the
+    # accelerometer carries the manoeuvre, whose sustained acceleration the hover model
+    # would miss.
+    gx, gy, gz = r20 * gravity_mps2, r21 * gravity_mps2, r22 * gravity_mps2  # Rᵀ·g·e3
+    ex = accel_body_mps2[0] - bias[0] - gx
+    ey = accel_body_mps2[1] - bias[1] - gy
+    ez = accel_body_mps2[2] - bias[2] - gz
+    k1 = min(dt_s / 1.0, 1.0)
+    a1x, a1y, a1z = st.accel_1s_body_mps2
+    a1 = (a1x + k1 * (ex - a1x), a1y + k1 * (ey - a1y), a1z + k1 * (ez - a1z))
+    if source == "mocap":
+        rv = velocity
+    else:
+        # awx.. is this sample's corrected world acceleration (computed above).
+        ox, oy, oz = st.regime_velocity_world_mps
+        leak2 = math.exp(-dt_s / 2.0)
+        rv = (ox * leak2 + awx * dt_s, oy * leak2 + awy * dt_s, oz * leak2 + awz * dt_s)
+    vx, vy, vz = rv
+    quasi = (
+        params.hover_crossover_s > 0.0
+        and a1[0] * a1[0] + a1[1] * a1[1] + a1[2] * a1[2] < params.quasi_static_accel_mps2**2
+        and vx * vx + vy * vy + vz * vz < params.quasi_static_speed_mps**2
+    )
+    lx, ly, lz = st.fast_body_mps2
+    if quasi:
+        k = min(dt_s / params.hover_crossover_s, 1.0)
+        fast = (lx + k * (ex - lx), ly + k * (ey - ly), lz + k * (ez - lz))
+    else:
+        k = min(dt_s / params.release_time_constant_s, 1.0)
+        fast = (lx - k * lx, ly - k * ly, lz - k * lz)
     return replace(
         st,
         bias_body_mps2=bias,
         air_samples=n,
         velocity_world_mps=velocity,
         velocity_source=source,
+        fast_body_mps2=fast,
+        accel_1s_body_mps2=a1,
+        quasi_static=quasi,
+        regime_velocity_world_mps=(rv[0], rv[1], rv[2]),
     )
 
 

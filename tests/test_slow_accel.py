@@ -193,3 +193,34 @@ def test_rotor_drag_is_added_back_in_the_body_plane(yaw: float) -> None:
     # no velocity: no drag term (bit for bit the calibration without drag)
     plain = observe_tension(f, q, thrust, m, calibration=cal)
     assert np.array_equal(plain.tension_world_n, no.tension_world_n)  # type: ignore[arg-type]
+
+
+def test_while_hovering_the_hover_model_takes_the_low_band() -> None:
+    """Quasi-static: L follows the reading's low band, so f − β − L keeps only vibration
+    above ~0.5 Hz; a sustained manoeuvre ends it and L returns to zero."""
+    params = SlowAccelParams()
+    rng = np.random.default_rng(4)
+    st = _run(SlowAccelState(), params, 200, "rest", lambda i: (0.0, 0.0, G))
+    drift = (0.05, -0.04, 0.03)  # a slow error the bias has not learnt yet
+
+    def hover(i: int) -> tuple[float, float, float]:
+        n = rng.normal(0.0, 0.2, 3)
+        return (drift[0] + n[0], drift[1] + n[1], G + drift[2] + n[2])
+
+    st = _run(st, params, 500, "air", hover)
+    assert st.quasi_static
+    assert np.allclose(st.fast_body_mps2, drift, atol=0.1)  # L: a 0.3 s mean of the noise
+    # f − β − L averages to the hover model's g·e3 (the drift gone with the low band)
+    corrected = correct_accel_body_mps2(st, (drift[0], drift[1], G + drift[2]))
+    assert np.allclose(corrected, (0.0, 0.0, G), atol=0.1)
+    st = _run(st, params, 300, "air", lambda i: (1.0, 0.0, G), t0=5.0)
+    assert not st.quasi_static
+    assert np.allclose(st.fast_body_mps2, 0.0, atol=0.01)  # the accelerometer carries it
+    off = _run(
+        SlowAccelState(),
+        SlowAccelParams(hover_crossover_s=0.0),
+        500,
+        "air",
+        hover,
+    )
+    assert not off.quasi_static and off.fast_body_mps2 == (0.0, 0.0, 0.0)
