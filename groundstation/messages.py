@@ -24,6 +24,7 @@ __all__ = [
     "EVENT_KINDS",
     "KEY_KINDS",
     "Estimate",
+    "EstimateSmoothed",
     "Event",
     "FollowCommand",
     "FollowInfo",
@@ -335,6 +336,28 @@ class Estimate(_Out):
     with it the tension and position, rest on an extrapolation; null when no range is
     recorded, the Telemetry carries no ``vbat_v``, or the drone is on the ground (no thrust
     in use; an unloaded battery reads higher)."""
+
+
+class EstimateSmoothed(_Out):
+    """(added) ``replay --offline`` → its output file, ``tether/{drone}/estimate_smoothed``:
+    the forward-backward (RTS) smoothed tension and position of one Estimate, for
+    post-flight analysis (docs/smoother.md). Written at that Estimate's log time, for each
+    Estimate the tension filter stepped for (none while on the ground)."""
+
+    seq: int
+    """The ``seq`` of the Estimate (and Telemetry) it smooths."""
+    stamp_s: float
+    """That Telemetry's ``stamp_s``, seconds."""
+    tension_n: tuple[float, float, float]
+    """Force the tether applies to the drone, world frame, newtons, from every sample of the
+    regime (before and after this one)."""
+    tension_std_n: tuple[float, float, float]
+    """Its standard deviation per axis, newtons."""
+    position_m: tuple[float, float, float] | None
+    """Catenary position of the smoothed tension (azimuth from the tension), world, metres;
+    None when it has no solution."""
+    position_std_m: tuple[float, float, float] | None = None
+    """Its standard deviation per world axis, metres."""
 
 
 class Setpoint(_Out):

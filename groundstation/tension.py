@@ -32,6 +32,7 @@ __all__ = [
     "NO_CALIBRATION",
     "DegenerateQuaternionError",
     "DiagonalKalman",
+    "FilterStep",
     "InvalidObservationError",
     "InvalidTimeStepError",
     "ObservationCalibration",
@@ -926,6 +927,33 @@ class _NoiseEstimate:
         return s2, rho, r
 
 
+@dataclass(frozen=True, slots=True)
+class FilterStep:
+    """One step of :class:`TensionFilter`, as its trace records it for offline smoothing.
+
+    ``kind``: ``"start"`` (the trace began on a running filter: ``x_n``, ``p_n2`` its
+    state), ``"reset"`` (the regime ends; ``x_n``, ``p_n2`` the prior the next update starts
+    from, or None), ``"init"`` (first sample after a reset without prior: x = z, P = R),
+    ``"update"`` (x- = x, P- = P + Q, then the update with z and R; Q = 0 right after a
+    reset with a prior) or ``"coast"`` (the prediction alone).
+    """
+
+    kind: Literal["start", "reset", "init", "update", "coast"]
+    x_n: tuple[float, float, float] | None
+    """The state after the step, world, N (for a reset: its prior, or None)."""
+    p_n2: tuple[float, float, float] | None
+    """The diagonal of P after the step, N^2 (for a reset: the prior's, or None)."""
+    z_n: tuple[float, float, float] | None = None
+    """The observation, world, N (init and update)."""
+    q_n2: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """The process noise of the prediction into this step, diagonal, N^2."""
+    r_n2: tuple[float, float, float] | None = None
+    """The observation noise, diagonal, N^2 (init and update)."""
+    restart: int = 0
+    """A change detected here: the filter restarted from the last ``restart`` updates
+    (this one included), so the new regime began at the ``restart``-th last update."""
+
+
 class DiagonalKalman:
     """Three scalar Kalman filters, one per world axis: the tension filter's state and gain.
 
@@ -1249,6 +1277,8 @@ class TensionFilter:
         self._threshold_cache: tuple[tuple[int, int] | None, float] = (None, math.inf)
         self._step_countdown = 0
         self._decay_cache: tuple[float, float] = (math.nan, math.nan)
+        self.trace: list[FilterStep] | None = None
+        """Every step from :meth:`start_trace` on (None: not recorded, the default)."""
         self.reset()
 
     # -- state -------------------------------------------------------------------------
@@ -1284,6 +1314,9 @@ class TensionFilter:
         self._initialized = False
         self._samples = 0
         self._r_prev: tuple[float, ...] | None = None
+        if self.trace is not None:
+            prior = self._prior if self._prior is not None else (None, None)
+            self.trace.append(FilterStep("reset", _tuple3(prior[0]), _tuple3(prior[1])))
         self._new_regime()
         self._last: TensionEstimate | None = None
 
@@ -1330,6 +1363,17 @@ class TensionFilter:
         if not 0.0 < dt <= p.gap_s:
             self._noise.break_chain()
         self._noise.push(y, dt, p.noise_time_constant_s, p.noise_warmup_samples)
+
+    def start_trace(self) -> list[FilterStep]:
+        """Records every step from now on in :attr:`trace` (for :mod:`groundstation.smoother`).
+
+        Returns:
+            The trace: a ``"start"`` step with the current state if the filter is running.
+        """
+        self.trace = []
+        if self._initialized:
+            self.trace.append(FilterStep("start", _tuple3(self._kf.x), _tuple3(self._kf.P)))
+        return self.trace
 
     @property
     def initialized(self) -> bool:
@@ -1411,6 +1455,8 @@ class TensionFilter:
                 kf.set(z, [r0, r1, r2])
                 self._samples = 1
                 self._r_prev = r
+                if self.trace is not None:
+                    self._record("init", z, (0.0, 0.0, 0.0), r, 0)
                 return self._publish(False, 0.0, 1.0, s2, rho, r)
             # First sample after a reset with a prior: x- = prior, P- = its covariance,
             # then the usual update (no prediction step: no time has passed).
@@ -1460,6 +1506,8 @@ class TensionFilter:
             stat = max(stat, step_stat * (p.change_threshold / h_step))
         if self._noise.samples >= p.noise_warmup_samples or not p.estimate_noise:
             self._hist.push(z)
+        if self.trace is not None:
+            self._record("update", z, (r0 * c, r1 * c, r2 * c), r, window if change else 0)
         return self._publish(change, stat, scale, s2, rho, r, tau)
 
     def coast(self, dt_s: float) -> TensionEstimate | None:
@@ -1484,7 +1532,10 @@ class TensionFilter:
         s2, rho, r = self.noise_model()
         dt_mean = self._dt_mean if self._dt_mean == self._dt_mean else 0.0
         tau = self.hover_time_constant(r, dt_mean)
-        self._kf.predict([r[i] * dt_mean / (tau * tau) * dt for i in range(3)])  # P = P + Q
+        q = [r[i] * dt_mean / (tau * tau) * dt for i in range(3)]
+        self._kf.predict(q)  # P = P + Q
+        if self.trace is not None:
+            self._record("coast", None, (q[0], q[1], q[2]), None, 0)
         return self._publish(False, 0.0, 1.0, s2, rho, r, tau)
 
     # -- internals ---------------------------------------------------------------------
@@ -1700,6 +1751,21 @@ class TensionFilter:
         self._bias = [0.0, 0.0, 0.0]
         self._bias_var = 0.0
 
+    def _record(
+        self,
+        kind: Literal["init", "update", "coast"],
+        z: list[float] | None,
+        q: tuple[float, float, float],
+        r: tuple[float, ...] | None,
+        restart: int,
+    ) -> None:
+        assert self.trace is not None
+        kf = self._kf
+        step = FilterStep(
+            kind, _tuple3(kf.x), _tuple3(kf.P), _tuple3(z), q, _tuple3(r), int(restart)
+        )
+        self.trace.append(step)
+
     def _publish(
         self,
         change: bool,
@@ -1732,6 +1798,13 @@ class TensionFilter:
         )
         self._last = est
         return est
+
+
+def _tuple3(v: ArrayLike | None) -> tuple[float, float, float] | None:
+    if v is None:
+        return None
+    a, b, c = (float(e) for e in np.asarray(v, dtype=np.float64).ravel())
+    return (a, b, c)
 
 
 def _sqrt_clipped(v: float) -> float:

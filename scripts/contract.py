@@ -42,6 +42,11 @@ PAYLOADS: tuple[tuple[str, type[BaseModel], str], ...] = (
     ("`tether/{drone}/follow`", messages.FollowCommand, "operator/anyone → ground station"),
     ("`tether/{drone}/params`", messages.TetherParams, "operator → ground station (added)"),
     ("`tether/{drone}/estimate`", messages.Estimate, "ground station → anyone"),
+    (
+        "`tether/{drone}/estimate_smoothed`",
+        messages.EstimateSmoothed,
+        "`replay --offline` → its output file (added)",
+    ),
     ("`follow` of Estimate and status", messages.FollowInfo, "inside Estimate and status"),
     ("`tether/{drone}/cmd/setpoint`", messages.Setpoint, "ground station → drone"),
     ("`tether/{drone}/cmd/stop`", messages.Stop, "ground station or operator → drone"),
@@ -55,7 +60,16 @@ PAYLOADS: tuple[tuple[str, type[BaseModel], str], ...] = (
 """Each payload: where it travels, its model, who sends it to whom."""
 
 ADDED_MODELS = frozenset(
-    {"TetherParams", "Event", "Status", "Truth", "TakeoffIn", "LandIn", "MocapPoseIn"}
+    {
+        "TetherParams",
+        "EstimateSmoothed",
+        "Event",
+        "Status",
+        "Truth",
+        "TakeoffIn",
+        "LandIn",
+        "MocapPoseIn",
+    }
 )
 """Payloads that are added beside the contract as a whole (every field is added)."""
 

@@ -28,6 +28,7 @@ PHYSICS = (
     "contact",
     "slow_accel",
     "airframe",
+    "smoother",
 )
 CONTRACT = ("messages", "config", "bus")
 
@@ -46,7 +47,16 @@ ROOMS: dict[str, tuple[tuple[str, ...], tuple[str, ...], tuple[str, ...]]] = {
     ),
     "recording": (
         ("recording",),
-        ("recording", "pipeline", "calibration", "airframe", "catenary", "zenoh_bus", *CONTRACT),
+        (
+            "recording",
+            "pipeline",
+            "calibration",
+            "airframe",
+            "catenary",
+            "smoother",
+            "zenoh_bus",
+            *CONTRACT,
+        ),
         ("mcap", "zstandard", "pydantic", "numpy", "matplotlib"),
     ),
     "bridges": (("bridges",), ("bridges", "zenoh_bus", *CONTRACT), ("numpy", "cflib")),

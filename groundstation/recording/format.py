@@ -38,7 +38,7 @@ _LIBRARY = "groundstation-recorder"
 ORIGINAL_PREFIX = "replay/original/"
 """Offline replay writes the recording's own estimates and commands under this prefix."""
 INPUT_KEY_RE = re.compile(r"tether/[^/]+/(telemetry|reel|follow|params)")
-OUTPUT_KEY_RE = re.compile(r"tether/[^/]+/(estimate|cmd/setpoint|cmd/stop)")
+OUTPUT_KEY_RE = re.compile(r"tether/[^/]+/(estimate|estimate_smoothed|cmd/setpoint|cmd/stop)")
 
 
 class RecordingError(RuntimeError):

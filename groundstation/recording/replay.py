@@ -23,6 +23,7 @@ from groundstation.recording.format import (
     open_writer,
 )
 from groundstation.recording.reader import iter_messages
+from groundstation.recording.smoothed import SmoothingTap
 
 _log = logging.getLogger(__name__)
 
@@ -110,6 +111,7 @@ def replay_offline(
     pipeline: PipelineLike,
     *,
     tick_period_s: float = 0.05,
+    smooth: bool = True,
 ) -> int:
     """Re-run estimation on a recording as fast as possible and write inputs plus outputs.
 
@@ -119,7 +121,9 @@ def replay_offline(
     (``tether/*/telemetry|reel|follow|params``) go through ``pipeline.handle`` with
     ``now_s`` = log time in seconds; ``pipeline.tick`` runs every ``tick_period_s`` of log
     time (as the live service's staleness check does). Outputs are written at the log time of
-    the input that produced them.
+    the input that produced them. With ``smooth`` (and the service's Pipeline) each Estimate the
+    tension filter stepped for also gets its forward-backward smoothed tension and position,
+    ``tether/{drone}/estimate_smoothed`` at the same log time (docs/smoother.md).
 
     Returns:
         The number of output samples the pipeline produced.
@@ -131,6 +135,7 @@ def replay_offline(
     channels = ChannelTable(writer)
     produced = 0
     next_tick_s: float | None = None
+    tap = SmoothingTap(pipeline) if smooth else None
 
     def write(key: str, payload: bytes, t_ns: int) -> None:
         writer.add_message(channels.channel_id(key), t_ns, payload, t_ns)
@@ -151,9 +156,14 @@ def replay_offline(
                 continue
             write(msg.key, msg.payload, msg.log_time_ns)
             if INPUT_KEY_RE.fullmatch(msg.key):
-                for out in pipeline.handle(Sample(msg.key, msg.payload), now_s):
+                outs = pipeline.handle(Sample(msg.key, msg.payload), now_s)
+                for out in outs:
                     write(out.key, out.payload, msg.log_time_ns)
                     produced += 1
+                if tap is not None:
+                    tap.after(msg.key, outs, msg.log_time_ns)
+        for key, payload, t_ns in tap.samples() if tap is not None else ():
+            write(key, payload, t_ns)  # after the pass: smoothing needs the whole of it
         writer.finish()
     except RecordingError:
         # Nothing usable in the input (or it cannot be read): no half-written output.

@@ -1,0 +1,201 @@
+"""Tests of groundstation.smoother: known answers on synthetic traces, the causal filter's
+trace, and ``replay --offline``'s smoothed series end to end."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from groundstation.config import Settings
+from groundstation.messages import EstimateSmoothed
+from groundstation.recording.reader import iter_messages
+from groundstation.recording.replay import run_replay_offline
+from groundstation.smoother import segments, smooth_tension
+from groundstation.tension import FilterStep, TensionFilter
+
+ZERO = (0.0, 0.0, 0.0)
+
+
+def _t3(v: np.ndarray) -> tuple[float, float, float]:
+    return (float(v[0]), float(v[1]), float(v[2]))
+
+
+def _update(z: np.ndarray, r: float, q: float = 0.0, restart: int = 0) -> FilterStep:
+    # x_n / p_n2 are the causal filter's; the smoother reads only z, q, r and the structure.
+    return FilterStep("update", ZERO, ZERO, _t3(z), (q, q, q), (r, r, r), restart)
+
+
+def test_constant_regimes_smooth_to_their_means() -> None:
+    """Q = 0: every step of a regime smooths to the mean of all its samples, P = R / n.
+
+    Three regimes: an init (x = z, P = R) and 59 updates, with a coast inside; a change
+    detected 20 updates after it began 40 samples in (restart = 21: the cut is 20 back);
+    a reset with a prior, whose regime smooths to the precision-weighted mean.
+    """
+    rng = np.random.default_rng(5)
+    r = 4e-4
+    a, b, c = np.array([0.01, -0.02, -0.05]), np.array([0.05, 0.0, -0.05]), np.zeros(3)
+    za = a + rng.normal(0.0, 0.02, (40, 3))
+    zb = b + rng.normal(0.0, 0.02, (60, 3))
+    zc = c + rng.normal(0.0, 0.02, (30, 3))
+    trace = [FilterStep("init", ZERO, ZERO, _t3(za[0]), ZERO, (r, r, r))]
+    trace += [_update(z, r) for z in za[1:20]]
+    trace.append(FilterStep("coast", ZERO, ZERO))
+    trace += [_update(z, r) for z in za[20:]]
+    trace += [_update(z, r) for z in zb[:20]]
+    trace.append(_update(zb[20], r, restart=21))  # detected here; began 20 updates ago
+    trace += [_update(z, r) for z in zb[21:]]
+    x0, p0 = (0.0, 0.0, -0.01), (1e-4, 1e-4, 1e-4)
+    trace.append(FilterStep("reset", x0, p0))
+    trace += [_update(z, r) for z in zc]
+
+    segs = segments(trace)
+    assert [(s.start, s.stop, s.begin) for s in segs] == [
+        (0, 41, "diffuse"),
+        (41, 101, "diffuse"),
+        (102, 132, "prior"),
+    ]
+    sm = smooth_tension(trace)
+    np.testing.assert_allclose(sm.tension_world_n[:41], np.tile(za.mean(0), (41, 1)), atol=1e-12)
+    np.testing.assert_allclose(sm.variance_n2[:41], r / 40, rtol=1e-9)
+    np.testing.assert_allclose(sm.tension_world_n[41:101], np.tile(zb.mean(0), (60, 1)), atol=1e-12)
+    np.testing.assert_allclose(sm.variance_n2[41:101], r / 60, rtol=1e-9)
+    assert np.all(np.isnan(sm.tension_world_n[101]))  # the reset
+    post = (np.array(x0) / p0[0] + zc.sum(0) / r) / (1 / p0[0] + 30 / r)
+    np.testing.assert_allclose(sm.tension_world_n[102:], np.tile(post, (30, 1)), atol=1e-12)
+    np.testing.assert_allclose(sm.variance_n2[102:], 1 / (1 / p0[0] + 30 / r), rtol=1e-9)
+
+
+def test_random_walk_equals_the_scalar_rts_and_beats_the_filter() -> None:
+    """Q > 0: filterpy's smoother equals a scalar RTS written out here, and on a random walk
+    in noise its error is well below the causal filter's."""
+    rng = np.random.default_rng(11)
+    n, q, r = 3000, 1e-6, 4e-4
+    truth = np.cumsum(rng.normal(0.0, math.sqrt(q), (n, 3)), axis=0)
+    zs = truth + rng.normal(0.0, math.sqrt(r), (n, 3))
+    trace = [FilterStep("init", ZERO, ZERO, _t3(zs[0]), ZERO, (r, r, r))]
+    trace += [_update(z, r, q) for z in zs[1:]]
+    sm = smooth_tension(trace)
+    # scalar forward pass and RTS, per axis
+    x, p = zs[0].copy(), np.full(3, r)
+    xf, pf = [x.copy()], [p.copy()]
+    for z in zs[1:]:
+        p = p + q  # P- = P + Q
+        k = p / (p + r)  # K = P-/(P- + R)
+        x, p = x + k * (z - x), (1 - k) * p
+        xf.append(x.copy())
+        pf.append(p.copy())
+    xs, ps = [xf[-1]], [pf[-1]]
+    for j in range(n - 2, -1, -1):
+        g = pf[j] / (pf[j] + q)  # G = P (P + Q)^-1
+        xs.append(xf[j] + g * (xs[-1] - xf[j]))
+        ps.append(pf[j] + g * g * (ps[-1] - (pf[j] + q)))
+    np.testing.assert_allclose(sm.tension_world_n, np.array(xs[::-1]), atol=1e-12)
+    np.testing.assert_allclose(sm.variance_n2, np.array(ps[::-1]), rtol=1e-8)
+    rms_f = np.sqrt(np.mean((np.array(xf) - truth)[100:] ** 2))
+    rms_s = np.sqrt(np.mean((sm.tension_world_n - truth)[100:] ** 2))
+    assert rms_s < 0.8 * rms_f, (rms_s, rms_f)
+
+
+def test_trace_of_the_tension_filter_matches_its_estimates() -> None:
+    """The trace records each step's state (equal to the estimate), Q, R and restarts; a
+    tug's regime is cut within a few samples of the tug."""
+    rng = np.random.default_rng(3)
+    filt = TensionFilter()
+    trace = filt.start_trace()
+    n, tug = 2000, 1000
+    truth = np.tile([-0.02, 0.005, -0.06], (n, 1))
+    truth[tug:] += [0.04, 0.0, 0.0]
+    ests = []
+    for k in range(n):
+        ests.append(filt.update(truth[k] + rng.normal(0.0, 0.012, 3), 0.004))
+        if k == 500:
+            filt.coast(0.004)
+    assert [s.kind for s in trace[:2]] == ["init", "update"]
+    assert sum(s.kind == "coast" for s in trace) == 1
+    updates = [s for s in trace if s.kind in ("init", "update")]
+    assert len(updates) == n
+    for s, e in zip(updates, ests, strict=True):
+        assert s.x_n == tuple(e.tension_world_n.tolist())
+    cuts = [s.start for s in segments(trace)[1:]]
+    assert cuts and abs(cuts[0] - (tug + 1)) <= 5, cuts  # +1: the coast
+    sm = smooth_tension(trace)
+    est = np.array([e.tension_world_n for e in ests])
+    idx = [i for i, s in enumerate(trace) if s.kind in ("init", "update")]
+    err_s = np.abs(sm.tension_world_n[idx] - truth)[tug : tug + 250, 0]
+    err_c = np.abs(est - truth)[tug : tug + 250, 0]
+    assert err_s.mean() < 0.5 * err_c.mean(), (err_s.mean(), err_c.mean())
+
+
+def _telemetry(seq: int, accel_noise_mps2: np.ndarray) -> bytes:
+    return json.dumps(
+        {
+            "seq": seq,
+            "stamp_s": seq * 0.004,
+            "accel_mps2": (np.array([0.0, 0.0, 9.81]) + accel_noise_mps2).tolist(),
+            "quat_wxyz": [1.0, 0.0, 0.0, 0.0],
+            "thrust_n": 0.2943 + 0.05,
+        }
+    ).encode()
+
+
+def _replay(tmp_path: Path, name: str, noise_mps2: float) -> tuple[dict, dict]:
+    from tests.test_recording import write_recording
+
+    rng = np.random.default_rng(17)
+    t0 = 1_700_000_000 * 10**9
+    msgs = [
+        ("tether/cf1/telemetry", _telemetry(i, rng.normal(0.0, noise_mps2, 3)), t0 + i * 4_000_000)
+        for i in range(400)
+    ]
+    src, out = tmp_path / f"{name}.mcap", tmp_path / f"{name}-out.mcap"
+    write_recording(src, msgs)
+    assert run_replay_offline(Settings(), src, out) == 0
+    est, smo = {}, {}
+    for m in iter_messages(out):
+        if m.key == "tether/cf1/estimate":
+            est[json.loads(m.payload)["seq"]] = (json.loads(m.payload), m.log_time_ns)
+        elif m.key == "tether/cf1/estimate_smoothed":
+            s = EstimateSmoothed.read(m.payload)
+            smo[s.seq] = (s, m.log_time_ns)
+    return est, smo
+
+
+def test_replay_offline_writes_the_smoothed_series(tmp_path: Path) -> None:
+    """End to end on a small recording (400 samples, 1 m/s^2 of accelerometer noise): one
+    estimate_smoothed per estimate the filter stepped for, same seq and log time, valid, a
+    position, and closer to the truth (the noiseless recording's estimate) than the causal
+    estimate over the first samples, where the causal filter has seen few."""
+    truth = np.array(_replay(tmp_path, "clean", 0.0)[0][399][0]["tension_n"])
+    est, smo = _replay(tmp_path, "noisy", 1.0)
+    assert len(est) == 400
+    airborne = {k for k, (e, _) in est.items() if not e["on_ground"]}
+    # one per estimate the filter stepped for (the trace began at the first message)
+    assert set(smo) == airborne and len(smo) > 350
+    for seq, (s, t_ns) in smo.items():
+        assert t_ns == est[seq][1] and s.stamp_s == est[seq][0]["stamp_s"]
+        assert s.position_m is not None
+    early = range(min(smo) + 5, min(smo) + 100)
+    err_c = np.mean([np.linalg.norm(np.subtract(est[k][0]["tension_n"], truth)) for k in early])
+    err_s = np.mean([np.linalg.norm(np.subtract(smo[k][0].tension_n, truth)) for k in early])
+    assert err_s < 0.5 * err_c, (err_s, err_c)
+    k = min(smo) + 5
+    assert np.all(np.array(smo[k][0].tension_std_n) < np.array(est[k][0]["tension_std_n"]))
+
+
+@pytest.mark.parametrize("smooth", [False])
+def test_replay_offline_without_smoothing_writes_none(tmp_path: Path, smooth: bool) -> None:
+    from groundstation.pipeline import Pipeline
+    from groundstation.recording.replay import replay_offline
+    from tests.test_recording import telemetry, write_recording
+
+    t0 = 1_700_000_000 * 10**9
+    msgs = [("tether/cf1/telemetry", telemetry(i), t0 + i * 4_000_000) for i in range(50)]
+    src, out = tmp_path / "in.mcap", tmp_path / "out.mcap"
+    write_recording(src, msgs)
+    replay_offline(src, out, Pipeline(Settings()), smooth=smooth)
+    assert not [m for m in iter_messages(out) if m.key.endswith("estimate_smoothed")]
