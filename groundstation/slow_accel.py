@@ -69,6 +69,7 @@ class SlowAccelParams:
             into β (error ≤ m·Δv/τ), slower to learn a bias never seen at rest.
         rest_time_constant_s: at rest, β is the running mean of the still samples, forgetting
             beyond this, s.
+        min_rest_s: a rest sets β once it has lasted this long, s.
         velocity_time_constant_s: τ_v of the accelerometer's leaky velocity (drag without
             motion capture), s.
         mocap_time_constant_s: low-pass of the motion-capture velocity (finite
@@ -85,6 +86,7 @@ class SlowAccelParams:
 
     time_constant_s: float = 60.0
     rest_time_constant_s: float = 5.0
+    min_rest_s: float = 1.0
     velocity_time_constant_s: float = 8.0
     mocap_time_constant_s: float = 0.15
     mocap_max_gap_s: float = 0.2
@@ -104,6 +106,7 @@ class SlowAccelParams:
             "release_time_constant_s",
             "time_constant_s",
             "rest_time_constant_s",
+            "min_rest_s",
             "velocity_time_constant_s",
             "mocap_time_constant_s",
             "mocap_max_gap_s",
@@ -120,8 +123,9 @@ class SlowAccelState:
 
     Attributes:
         bias_body_mps2: β, the accelerometer's slow error, body frame, m/s².
-        rest_samples: still samples at rest averaged into β since the last lift-off (the
-            running mean's count).
+        rest_mean_body_mps2: this rest's running mean of ``f − Rᵀ·g·e3``, body frame, m/s².
+        rest_s: how long this rest has lasted, s.
+        rest_samples: still samples in this rest (the running mean's count).
         air_samples: samples in the air since β was last set at rest (the running mean's
             count when no rest was seen).
         learnt_at_rest: β was set at rest at this power-on.
@@ -142,6 +146,8 @@ class SlowAccelState:
     """
 
     bias_body_mps2: Vec3 = _ZERO3
+    rest_mean_body_mps2: Vec3 = _ZERO3
+    rest_s: float = 0.0
     rest_samples: int = 0
     air_samples: int = 0
     learnt_at_rest: bool = False
@@ -261,11 +267,13 @@ def slow_accel_step(
         )
     if phase == "rest":
         # Still on the floor: a_ref = 0 exactly. A running mean of this rest's samples
-        # (a new rest starts a new mean: the drone may have been moved between flights).
-        n = st.rest_samples + 1 if st.learnt_at_rest and st.air_samples == 0 else 1
+        # (a new rest starts a new mean: the drone may have been moved between flights),
+        # which becomes β once the rest has lasted min_rest_s (a brief disarm is no
+        # measurement: a few samples of vibration would set β).
+        n = st.rest_samples + 1 if st.rest_samples > 0 and st.air_samples == 0 else 1
         gain = max(1.0 / n, dt_s / params.rest_time_constant_s) if n > 1 else 1.0
         ref = (0.0, 0.0, gravity_mps2)
-        learnt_at_rest = True
+        learnt_at_rest = st.learnt_at_rest
     else:
         n = st.air_samples + 1
         if mocap_ok:
@@ -285,12 +293,21 @@ def slow_accel_step(
     ex = accel_body_mps2[0] - (r00 * rx + r10 * ry + r20 * rz)
     ey = accel_body_mps2[1] - (r01 * rx + r11 * ry + r21 * rz)
     ez = accel_body_mps2[2] - (r02 * rx + r12 * ry + r22 * rz)
-    bx, by, bz = st.bias_body_mps2
-    bias = (bx + gain * (ex - bx), by + gain * (ey - by), bz + gain * (ez - bz))
+    if phase != "rest":
+        bx, by, bz = st.bias_body_mps2
+        bias = (bx + gain * (ex - bx), by + gain * (ey - by), bz + gain * (ez - bz))
     if phase == "rest":
+        mx, my, mz = st.rest_mean_body_mps2 if n > 1 else (ex, ey, ez)
+        mean = (mx + gain * (ex - mx), my + gain * (ey - my), mz + gain * (ez - mz))
+        rest_s = (st.rest_s if n > 1 else 0.0) + dt_s
+        bias = st.bias_body_mps2
+        if rest_s >= params.min_rest_s:
+            bias, learnt_at_rest = mean, True
         return replace(
             st,
             bias_body_mps2=bias,
+            rest_mean_body_mps2=mean,
+            rest_s=rest_s,
             rest_samples=n,
             air_samples=0,
             learnt_at_rest=learnt_at_rest,
