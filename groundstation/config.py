@@ -220,9 +220,10 @@ class FilterSection(_Section):
     """``[filter]``: tension-filter knobs beside the noise figures of ``[drone]``."""
 
     ground_thrust_ratio: float = Field(0.5, gt=0.0, lt=1.0)
-    """Below this fraction of the weight the drone is surely on the ground; at or above it,
-    on the ground until lift-off is seen (groundstation.contact: motion-capture height, the
-    IMU's climb, or the floor no longer carrying it)."""
+    """Below this fraction of the weight the drone is on the ground when seen at rest (the
+    vertical acceleration near zero for 0.2 s; in the air it is a dip and the filter coasts);
+    at or above it, on the ground until lift-off is seen (groundstation.contact:
+    motion-capture height, the IMU's climb, or the floor no longer carrying it)."""
     accel_slow_time_constant_s: float = Field(60.0, gt=0.0)
     """(added) τ, the crossover in the air, s: below ``1/(2π·τ)`` the observation rests on
     thrust, attitude and the thrust axis. Longer lets less of a sustained manoeuvre into the

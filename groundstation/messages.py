@@ -318,9 +318,10 @@ class Estimate(_Out):
     floor_contact: bool | None = None
     """(added) Part of the tether rests on the floor."""
     on_ground: bool = False
-    """(added) The floor carries the drone (disarmed, thrust below ``[filter]
-    ground_thrust_ratio`` of its weight, or spooling up before lift-off is seen; see
-    groundstation.contact): no tension estimate, ``tension_n`` zero."""
+    """(added) The floor carries the drone (disarmed; thrust below ``[filter]
+    ground_thrust_ratio`` of its weight while seen at rest; or spooling up before lift-off is
+    seen; see groundstation.contact): no tension estimate, ``tension_n`` zero. A low thrust
+    in the air (a dip, a hard descent) is not the ground: the filter coasts."""
     converged: bool = False
     """(added) The filter has seen enough samples for its std to be meaningful."""
     length_m: float | None = None
@@ -516,8 +517,9 @@ class Status(_Out):
     follow: FollowInfo | None = None
     """Follow mode, as in the Estimate."""
     contact: dict[str, Any] | None = None
-    """Ground/air state: ``on_ground`` and the ``reason`` that decided it (``disarmed``,
-    ``low_thrust``, ``resting``, ``mocap_height``, ``climbing``, ``push_free``, ``air``)."""
+    """Ground/air state: ``on_ground`` and the ``reason`` that decided it (``start``,
+    ``disarmed``, ``low_thrust``, ``resting``, ``mocap_height``, ``climbing``, ``push_free``,
+    ``air``, ``flying_at_start``, ``falling``)."""
     length_m: float | None = None
     """Tether length in use, metres."""
     length_source: str | None = None
