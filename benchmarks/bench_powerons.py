@@ -5,7 +5,7 @@ Each seed is one power-on of one airframe (docs/simulator.md): the per-boot draw
 from seed to seed, the thrust axis (the airframe's) does not, and with ``attitude_levelled``
 the reported attitude is levelled on the same misaligned accelerometer, as a Crazyflie's is.
 Every flight: disarmed on the floor 2 s, spool-up, a climb, then four of the paper's spots,
-8 s each. The calibration flights are recorded with motion capture and calibrated with
+15 s each. The calibration flights are recorded with motion capture and calibrated with
 ``groundstation calibrate`` (``run_calibrate``: the airframe model by default, ``--model full``
 beside it); the judged flights are recorded without motion capture and re-estimated offline
 (``replay --offline``'s code) with each configuration, and compared with the simulator's
@@ -42,8 +42,8 @@ from groundstation.sim.scenarios import PAPER_HOVER_SPOTS_M, SCENARIOS, Scenario
 DRONE = "cf1"
 SCENARIO = "bench_poweron"
 SPOTS = PAPER_HOVER_SPOTS_M[:4]
-DWELL_S = 8.0
-SETTLE_S = 3.0
+DWELL_S = 15.0
+SETTLE_S = 5.0
 """Judged: samples of each dwell from this long after the spot is commanded."""
 
 
@@ -59,7 +59,7 @@ def _scenario() -> str:
         wps.append(Waypoint(climb_end + i * DWELL_S, spot))
     SCENARIOS[SCENARIO] = Scenario(
         SCENARIO,
-        "power-on benchmark: floor, spool-up, climb, four paper spots 8 s each",
+        "power-on benchmark: floor, spool-up, climb, four paper spots 15 s each",
         start_m=(0.5, 0.0, 0.0),
         waypoints=tuple(wps),
         start_on_ground=True,
@@ -246,7 +246,7 @@ def main(argv: list[str] | None = None) -> int:
         f"{args.noise} m/s², attitude levelled on the accelerometer: {levelled}, per-boot "
         f"misalignment: {MISALIGNMENT}. Power-ons = "
         f"seeds {train_seeds} calibrated (with motion capture), seeds {judge_seeds} judged "
-        "(without). Each flight: 2 s on the floor, spool-up, climb, four paper spots 8 s each; "
+        "(without). Each flight: 2 s on the floor, spool-up, climb, four paper spots 15 s each; "
         f"judged from {SETTLE_S:.0f} s after each spot is commanded. Position error is 3-D "
         "(undetermined counts as infinite); tension RMSE per axis."
     )
