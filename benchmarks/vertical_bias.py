@@ -33,7 +33,7 @@ from benchmarks.bench_realistic import (
     _NullBus,
     _scenario_for_spot,
     _settings,
-    _true_calibration,
+    _true_full_calibration,
 )
 from groundstation.config import CalibrationSection
 from groundstation.pipeline import calibration_from_config
@@ -47,7 +47,7 @@ def flight_tz_mn(
 ) -> tuple[float, float]:
     """(mean raw T_z error, its vibration-noise part), mN, over the hover window."""
     scenario = _scenario_for_spot(spot)
-    cal = _true_calibration(noise_mps2, seed, {}, scenario if own else "hover")
+    cal = _true_full_calibration(noise_mps2, seed, {}, scenario if own else "hover")
     settings = _settings(noise_mps2, seed, {}, cal)
     sim = Simulator(settings, _NullBus(), scenario=scenario)  # type: ignore[arg-type]
     drone: Any = sim.drones[DRONE]
