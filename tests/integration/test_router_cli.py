@@ -71,6 +71,15 @@ def test_router_sim_serve_record_dashboard_as_five_processes(
         60,
         "airborne estimates from serve through the router",
     )
+    # The recorder subscribed (it says so once its subscriptions are declared), and
+    # estimates kept flowing after that: on a loaded machine it may start last.
+    _wait_output(record, r"recording .* to ", 60)
+    seen = len(probe.json("tether/cf1/estimate"))
+    probe.wait_for(
+        lambda: len(probe.json("tether/cf1/estimate")) > seen + 100,
+        60,
+        "estimates after the recorder subscribed",
+    )
     url = _wait_output(dash, r"dashboard: (http://127\.0\.0\.1:\d+)", 30).group(1)
     assert url == f"http://127.0.0.1:{web_port}"
     with urllib.request.urlopen(url, timeout=10) as resp:
