@@ -21,6 +21,7 @@ import argparse
 import contextlib
 import io
 import json
+import re
 import statistics
 import sys
 import tempfile
@@ -179,6 +180,11 @@ def variant_config(src: Path, dst: Path, extra_toml: str) -> Path:
         if "accel_slow = true" not in text:
             raise RuntimeError(f"{src}: no accel_slow = true to turn off")
         dst.write_text(text.replace("accel_slow = true", "accel_slow = false"))
+    elif extra_toml.strip() == "rotor_drag_n_s_per_m = 0.0":
+        new, n = re.subn(r"(?m)^rotor_drag_n_s_per_m = .*$", "rotor_drag_n_s_per_m = 0.0", text)
+        if n != 1:
+            raise RuntimeError(f"{src}: no rotor_drag_n_s_per_m to zero")
+        dst.write_text(new)
     else:
         dst.write_text(text + "\n" + extra_toml)
     return dst
@@ -211,6 +217,11 @@ def main(argv: list[str] | None = None) -> int:
                 "airframe, accelerometer mean trusted",
                 [],
                 "accel_slow = false\n",
+            ),
+            (
+                "airframe + slow accelerometer, rotor drag not applied",
+                [],
+                "rotor_drag_n_s_per_m = 0.0\n",
             ),
             ("airframe + slow accelerometer (default)", [], ""),
         ]
