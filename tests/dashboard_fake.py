@@ -15,7 +15,7 @@ import json
 import math
 import threading
 import time
-from collections.abc import Collection
+from collections.abc import Collection, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -70,6 +70,8 @@ class FakeService:
         obey_stop: bool = True,
         peers: int | None = 1,
         alone_ok: bool | None = None,
+        bases: Mapping[str, tuple[float, float, float]] | None = None,
+        estimate_error_m: tuple[float, float, float] = (0.02, -0.015, 0.01),
     ) -> None:
         self.bus = bus
         self.drones = drones
@@ -82,6 +84,10 @@ class FakeService:
         """The status' ``peers`` (None: not reported, as a service before issue 14)."""
         self.alone_ok = alone_ok
         """The status' ``alone_ok`` (None: not reported)."""
+        self.bases = {d: tuple((bases or {}).get(d, BASE_M)) for d in drones}
+        """Each drone's base exit point (BASE_M unless given); it circles its base."""
+        self.estimate_error_m = estimate_error_m
+        """The Estimate's position minus the true (motion-capture) one."""
         self.refuse_follow: str | None = None
         """When set, FollowCommands are refused with this reason (an Event), not applied."""
         self.follow_commands: list[tuple[str, dict[str, Any]]] = []
@@ -182,7 +188,7 @@ class FakeService:
                     "queue_overflow": 0,
                     "follow": state.follow.as_json(),
                     "length_m": state.length_m,
-                    "base_m": list(BASE_M),
+                    "base_m": list(self.bases[drone]),
                     "weight_n_per_m": state.weight_n_per_m,
                     "length_source": "config",
                 }
@@ -201,7 +207,12 @@ class FakeService:
             azimuth_rad = 2.0 * math.pi * k / n + 0.15 * t_s
             radius_m = 0.9 + 0.1 * k
             z_m = 1.0 + 0.1 * math.sin(0.5 * t_s + k)
-            pos = (radius_m * math.cos(azimuth_rad), radius_m * math.sin(azimuth_rad), z_m)
+            bx, by, _ = self.bases[drone]
+            pos = (
+                bx + radius_m * math.cos(azimuth_rad),
+                by + radius_m * math.sin(azimuth_rad),
+                z_m,
+            )
             out[drone] = (pos, azimuth_rad)
         return out
 
@@ -223,7 +234,8 @@ class FakeService:
             tension = (-h_n * math.cos(azimuth_rad), -h_n * math.sin(azimuth_rad), -tv_n)
             half_yaw = 0.5 * (azimuth_rad + math.pi)
             quat = (math.cos(half_yaw), 0.0, 0.0, math.sin(half_yaw))
-            estimate_pos = (pos[0] + 0.02, pos[1] - 0.015, pos[2] + 0.01)
+            ex, ey, ez = self.estimate_error_m
+            estimate_pos = (pos[0] + ex, pos[1] + ey, pos[2] + ez)
             telemetry = {
                 "seq": seq,
                 "stamp_s": t_s,
@@ -242,14 +254,16 @@ class FakeService:
                 "vertical_n": tv_n,
                 "position_m": list(estimate_pos),
                 "position_std_m": [0.03, 0.03, 0.02],
-                "radial_m": math.hypot(estimate_pos[0], estimate_pos[1]),
+                "radial_m": math.hypot(
+                    estimate_pos[0] - self.bases[drone][0], estimate_pos[1] - self.bases[drone][1]
+                ),
                 "radial_interval_m": [0.85, 0.95],
                 "azimuth_determined": True,
                 "floor_contact": False,
                 "on_ground": False,
                 "converged": True,
                 "length_m": length_m,
-                "base_m": list(BASE_M),
+                "base_m": list(self.bases[drone]),
                 "follow": follow,
             }
             self.bus.publish(f"tether/{drone}/telemetry", json.dumps(telemetry).encode())

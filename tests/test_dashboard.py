@@ -57,10 +57,13 @@ from groundstation.dashboard.scene import (
     ARROW_M_PER_N,
     LABEL_CLEARANCE_M,
     LABEL_STEP_M,
+    PANEL_PX,
     camera_framing,
     label_tiers,
     load_quadrotor_mesh,
+    panel_fraction,
     polyline_segments,
+    project,
     tension_arrow,
     tether_points,
 )
@@ -375,15 +378,47 @@ def test_polyline_segments_and_arrow() -> None:
     np.testing.assert_allclose(arrow[0], [[1.0, 0.0, 1.0], [0.8, 0.0, 0.6]], atol=1e-6)
 
 
-def test_camera_framing_sees_every_point() -> None:
-    points = np.array([[0.0, 0.0, 0.754], [1.2, -0.3, 1.0], [-0.5, 0.9, 0.4]])
+@pytest.mark.parametrize("covered_right", [0.0, 0.31, 0.5])
+@pytest.mark.parametrize("aspect", [1.0, 1.6, 2.2])
+def test_camera_framing_sees_every_point_left_of_the_panel(
+    covered_right: float, aspect: float
+) -> None:
+    # config/sim.toml's two drones (bases 3 m apart), motion-capture markers 1 m off.
+    points = np.array(
+        [
+            [0.0, 0.0, 0.754],
+            [1.2, -0.3, 1.0],
+            [0.2, 0.6, 1.4],
+            [0.0, 3.0, 0.754],
+            [-0.5, 3.9, 0.4],
+            [0.5, 2.1, 1.1],
+            [0.0, 0.0, 0.0],
+        ]
+    )
     fov_rad = math.radians(60.0)
-    position, look_at = camera_framing(points, fov_rad)
-    view = (look_at - position) / np.linalg.norm(look_at - position)
-    for p in points:
-        ray = (p - position) / np.linalg.norm(p - position)
-        assert math.degrees(math.acos(np.clip(view @ ray, -1, 1))) < math.degrees(fov_rad / 2)
+    position, look_at = camera_framing(
+        points, fov_rad, aspect=aspect, covered_right=covered_right, margin=0.1
+    )
+    ndc = project(points, position, look_at, fov_rad, aspect)
+    free_right = 1.0 - 2.0 * covered_right
+    assert np.all(ndc[:, 0] >= -0.9 - 1e-6) and np.all(ndc[:, 0] <= free_right - 0.1 + 1e-6)
+    assert np.all(np.abs(ndc[:, 1]) <= 0.9 + 1e-6)
+    # Not absurdly far: the points fill a fair share of the free window.
+    span_x = ndc[:, 0].max() - ndc[:, 0].min()
+    span_y = ndc[:, 1].max() - ndc[:, 1].min()
+    assert span_x > 0.3 * (free_right - 0.1 + 0.9) or span_y > 0.3 * 1.8
+    # Centred in the free window, not in the whole view.
+    assert 0.5 * (ndc[:, 0].max() + ndc[:, 0].min()) == pytest.approx(
+        0.5 * (free_right - 1.0), abs=0.2
+    )
     assert position[2] > look_at[2]  # from above
+
+
+def test_panel_fraction_is_bounded() -> None:
+    assert panel_fraction(1280.0) == pytest.approx(PANEL_PX / 1280.0)
+    assert panel_fraction(3840.0) == 0.3  # a HiDPI buffer: the panel's share is not less
+    assert panel_fraction(600.0) == 0.5
+    assert 0.3 <= panel_fraction(None) <= 0.5
 
 
 def test_label_tiers_separate_neighbours_only() -> None:
@@ -603,6 +638,31 @@ def test_url_binds_loopback_and_close_is_idempotent(settings: Settings, bus: InM
     dashboard.close()
     dashboard.close()
     assert time.monotonic() - t0 < 2.0
+
+
+def test_framing_takes_in_the_motion_capture_markers(dash: Dashboard, bus: InMemoryBus) -> None:
+    # An estimate a metre off motion capture: the error line's far end must be framed too.
+    fake = FakeService(bus, ("cf1", "cf2"), estimate_error_m=(0.3, -0.9, 0.35))
+    try:
+        fake.publish_once(0.0)
+        assert bus.flush()
+        dash.update(time.monotonic())
+        drones = [d for d in (dash.drone("cf1"), dash.drone("cf2")) if d is not None]
+        points = dash.scene.framing_points(drones)
+        for drone in drones:
+            assert drone.telemetry is not None and drone.telemetry.position_m is not None
+            assert drone.telemetry.position_m in points
+            assert drone.body_position() in points
+            mocap_m, body_m = drone.telemetry.position_m, drone.body_position()
+            assert body_m is not None and math.dist(mocap_m, body_m) > 0.9
+        label = _node(dash, "/drones/cf1/body/label").text
+        # One value a line: the label stays narrow.
+        assert label.splitlines()[1:] == [
+            "|T| 0.250 N",
+            f"mocap Δ {100.0 * math.dist((0.0, 0.0, 0.0), (0.3, -0.9, 0.35)):.1f} cm",
+        ]
+    finally:
+        fake.close()
 
 
 def test_update_draws_the_scene_and_fills_the_panel(

@@ -30,6 +30,7 @@ Everything is served by viser from the local package: no CDN, fonts or HDRIs fro
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import logging
 import math
@@ -37,6 +38,7 @@ import threading
 import time
 from dataclasses import dataclass
 
+import numpy as np
 import viser
 
 from groundstation.bus import Bus, Sample, Subscription
@@ -58,7 +60,7 @@ from groundstation.dashboard.model import (
 )
 from groundstation.dashboard.panel import Panel
 from groundstation.dashboard.readouts import BusView
-from groundstation.dashboard.scene import PALETTE, Scene, camera_framing
+from groundstation.dashboard.scene import PALETTE, Scene, camera_framing, panel_fraction
 from groundstation.messages import DRONE_ID_RE
 
 __all__ = [
@@ -134,6 +136,8 @@ class Dashboard:
         self.gui_lock = threading.RLock()
         """Held by the update pass and by every GUI callback that touches panel state."""
         self._panels: dict[int, Panel] = {}
+        self.framed: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        """Client id → the (position, look_at) its camera was last framed with."""
 
         self._server: viser.ViserServer | None = None
         self._scene: Scene | None = None
@@ -490,8 +494,21 @@ class Dashboard:
     # ---------------------------------------------------------------- clients
 
     def frame(self, client: viser.ClientHandle) -> None:
-        """Point ``client``'s camera at every drone and base."""
-        position, look_at = camera_framing(self.scene.framing_points(list(self._drones.values())))
+        """Point ``client``'s camera at every drone, base and motion-capture marker, in the
+        part of its view that the control panel leaves free."""
+        fov_rad, aspect, width_px = math.radians(60.0), 1.6, None
+        with contextlib.suppress(AssertionError):  # no camera message from it yet
+            camera = client.camera
+            if camera.image_width > 0 and camera.image_height > 0 and camera.fov > 0.0:
+                fov_rad, aspect = camera.fov, camera.image_width / camera.image_height
+                width_px = float(camera.image_width)
+        position, look_at = camera_framing(
+            self.scene.framing_points(list(self._drones.values())),
+            fov_rad,
+            aspect=aspect,
+            covered_right=panel_fraction(width_px),
+        )
+        self.framed[client.client_id] = (position, look_at)
         # viser moves look_at along with position; set look_at after to pin it.
         with client.atomic():
             client.camera.position = position
@@ -509,6 +526,7 @@ class Dashboard:
     def _on_client_disconnect(self, client: viser.ClientHandle) -> None:
         with self.gui_lock:
             self._panels.pop(client.client_id, None)
+            self.framed.pop(client.client_id, None)
 
     # ---------------------------------------------------------------- update thread
 
@@ -586,7 +604,10 @@ class Dashboard:
             panel.set_drones(ids)
         if not ids:
             return
-        position, look_at = camera_framing(self.scene.framing_points(list(self._drones.values())))
+        position, look_at = camera_framing(
+            self.scene.framing_points(list(self._drones.values())),
+            covered_right=panel_fraction(None),
+        )
         server.initial_camera.position = position
         server.initial_camera.look_at = look_at
         for client in server.get_clients().values():

@@ -27,11 +27,14 @@ __all__ = [
     "ARROW_M_PER_N",
     "LABEL_CLEARANCE_M",
     "LABEL_STEP_M",
+    "PANEL_PX",
     "Scene",
     "camera_framing",
     "label_tiers",
     "load_quadrotor_mesh",
+    "panel_fraction",
     "polyline_segments",
+    "project",
     "tension_arrow",
     "tether_points",
 ]
@@ -46,8 +49,8 @@ LABEL_HEIGHT_M = 0.09
 """A drone's label sits this far above its body."""
 LABEL_CLEARANCE_M = 0.6
 """Drones closer than this (horizontally) get their labels stacked at different heights."""
-LABEL_STEP_M = 0.14
-"""Height between stacked labels (two lines of screen-sized text at room distances)."""
+LABEL_STEP_M = 0.2
+"""Height between stacked labels (three lines of screen-sized text at room distances)."""
 WORLD_AXES_M = 0.3
 FADED_OPACITY = 0.25
 
@@ -125,14 +128,65 @@ def tension_arrow(
     return np.stack([start, end])[None]
 
 
+PANEL_PX = 400.0
+"""Width of viser's "large" control panel (24 em × 16 px) plus its margin, CSS pixels: it
+floats over the right of the 3D view."""
+VIEW_DIRECTION = (-0.35, -1.0, 0.55)
+"""The framing camera looks from the front-left, above, along minus this."""
+VIEW_DIRECTION_ALONG_Y = (-1.0, -0.35, 0.55)
+"""The same turned a quarter, for a set-up laid out along y (config/sim.toml's bases 3 m
+apart in y): seen from the front, its drones would stand behind one another."""
+
+
+def panel_fraction(image_width_px: float | None) -> float:
+    """The share of the canvas' width the control panel covers, for framing.
+
+    viser reports the canvas' drawing-buffer width, device pixels (CSS pixels × an adaptive
+    device-pixel ratio, unknown here), so the panel's share cannot be known exactly; it is
+    taken as at least 0.3 (400 CSS px of a 1280 px screen, or of a HiDPI screen whose buffer
+    is wider) and at most 0.5.
+    """
+    if image_width_px is None or image_width_px <= 0.0:
+        return 0.32
+    return float(np.clip(PANEL_PX / image_width_px, 0.3, 0.5))
+
+
+def _view_basis(
+    extent_m: npt.NDArray[np.float64],
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """(forward, right, up) of the framing camera for points of this (x, y, z) extent."""
+    along_y = extent_m[1] > 1.5 * extent_m[0] and extent_m[1] > 1.0
+    forward = -np.asarray(VIEW_DIRECTION_ALONG_Y if along_y else VIEW_DIRECTION, dtype=float)
+    forward /= np.linalg.norm(forward)
+    right = np.cross(forward, (0.0, 0.0, 1.0))
+    right /= np.linalg.norm(right)
+    return forward, right, np.cross(right, forward)
+
+
 def camera_framing(
-    points_m: npt.ArrayLike, fov_rad: float = math.radians(60.0), min_radius_m: float = 0.6
+    points_m: npt.ArrayLike,
+    fov_rad: float = math.radians(60.0),
+    *,
+    aspect: float = 1.6,
+    covered_right: float = 0.0,
+    margin: float = 0.12,
+    min_radius_m: float = 0.6,
 ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
-    """Camera (position, look_at) that frames all points, seen from the front-left, above.
+    """Camera (position, look_at) that frames all points in the uncovered part of the view.
+
+    Seen from the front-left, above (:data:`VIEW_DIRECTION`; from the side,
+    :data:`VIEW_DIRECTION_ALONG_Y`, for points spread along y). The nearest camera is found
+    for which every point projects inside the view less the right ``covered_right`` of its
+    width (where the control panel floats) and less ``margin`` of each half-extent (room for
+    labels), and which is no nearer than a sphere round the points needs to fit the view's
+    height (with 15 % to spare); look_at is the point the camera looks at, at that distance.
 
     Args:
-        points_m: (k, 3) world points (bases and drones), k ≥ 1.
+        points_m: (k, 3) world points (bases, drones, motion-capture markers), k ≥ 1.
         fov_rad: vertical field of view.
+        aspect: the view's width / height.
+        covered_right: share of the view's width hidden on the right, [0, 0.9].
+        margin: share of each half-extent kept free at the edges.
         min_radius_m: frame at least a sphere of this radius.
 
     Returns:
@@ -140,12 +194,75 @@ def camera_framing(
     """
     pts = np.atleast_2d(np.asarray(points_m, dtype=np.float64))
     lo, hi = pts.min(axis=0), pts.max(axis=0)
-    look_at = (lo + hi) / 2.0
+    center = (lo + hi) / 2.0
+    q = pts - center
+    forward, right, up = _view_basis(hi - lo)
+    tan_v = math.tan(fov_rad / 2.0)
+    tan_h = tan_v * aspect
+    # The free window in normalised device coordinates ([-1, 1] across the whole view).
+    x_lo, x_hi = -1.0 + margin, 1.0 - 2.0 * float(np.clip(covered_right, 0.0, 0.9)) - margin
+    y_lo, y_hi = -1.0 + margin, 1.0 - margin
+    qx, qy, qz = q @ right, q @ up, q @ forward
+
+    def window(d: float) -> tuple[float, float, float, float] | None:
+        # Camera at center + a·right + b·up − d·forward: a point's depth is qz + d, its
+        # offsets qx − a and qy − b; it is inside when x_lo ≤ (qx − a)/(z·tan_h) ≤ x_hi.
+        z = qz + d
+        if np.any(z <= 0.05):
+            return None
+        a_lo = float(np.max(qx - x_hi * tan_h * z))
+        a_hi = float(np.min(qx - x_lo * tan_h * z))
+        b_lo = float(np.max(qy - y_hi * tan_v * z))
+        b_hi = float(np.min(qy - y_lo * tan_v * z))
+        if a_lo > a_hi or b_lo > b_hi:
+            return None
+        return a_lo, a_hi, b_lo, b_hi
+
+    # Never nearer than a sphere round the points fits the view's height with room to
+    # spare: the drones move after the framing (a take-off), and a camera just in front of
+    # one near point would make it huge.
     radius_m = max(min_radius_m, 0.5 * float(np.linalg.norm(hi - lo)))
-    distance_m = 1.15 * radius_m / math.sin(fov_rad / 2.0)
-    direction = np.array([-0.35, -1.0, 0.55])
-    direction /= np.linalg.norm(direction)
-    return look_at + distance_m * direction, look_at
+    near_m = max(1.15 * radius_m / math.sin(fov_rad / 2.0), float(np.max(-qz)) + 0.5)
+    far_m = near_m
+    while window(far_m) is None:  # widening with distance: some distance fits
+        far_m *= 2.0
+    if window(near_m) is None:
+        for _ in range(40):
+            mid_m = 0.5 * (near_m + far_m)
+            if window(mid_m) is None:
+                near_m = mid_m
+            else:
+                far_m = mid_m
+        near_m = far_m
+    fit = window(near_m)
+    assert fit is not None
+    a_m, b_m = 0.5 * (fit[0] + fit[1]), 0.5 * (fit[2] + fit[3])
+    look_at = center + a_m * right + b_m * up
+    return look_at - near_m * forward, look_at
+
+
+def project(
+    points_m: npt.ArrayLike,
+    position_m: Sequence[float],
+    look_at_m: Sequence[float],
+    fov_rad: float,
+    aspect: float,
+) -> npt.NDArray[np.float64]:
+    """Normalised device coordinates (k, 2) of points seen by a camera with z up.
+
+    x from −1 (left edge) to 1 (right edge), y from −1 (bottom) to 1 (top).
+    """
+    pts = np.atleast_2d(np.asarray(points_m, dtype=np.float64))
+    position = np.asarray(position_m, dtype=np.float64)
+    forward = np.asarray(look_at_m, dtype=np.float64) - position
+    forward /= np.linalg.norm(forward)
+    right = np.cross(forward, (0.0, 0.0, 1.0))
+    right /= np.linalg.norm(right)
+    up = np.cross(right, forward)
+    rel = pts - position
+    z = rel @ forward
+    tan_v = math.tan(fov_rad / 2.0)
+    return np.stack([(rel @ right) / (z * tan_v * aspect), (rel @ up) / (z * tan_v)], axis=1)
 
 
 def label_tiers(positions_m: Mapping[str, Sequence[float]]) -> dict[str, int]:
@@ -274,7 +391,10 @@ class _DroneNodes:
 
 
 def _label_text(drone: DroneState, stale: bool, silent_s: float) -> str:
-    """Line 1: id and flags; line 2: |T| and the motion-capture error, when known."""
+    """Line 1: id and flags; line 2: |T|; line 3: the motion-capture error (when known).
+
+    One value a line keeps the label narrow: it is centred on the drone, and a long line
+    ran under the control panel or off the view's edge."""
     est = drone.estimate
     flags = []
     if stale:
@@ -290,7 +410,7 @@ def _label_text(drone: DroneState, stale: bool, silent_s: float) -> str:
     mocap = drone.telemetry.position_m if drone.telemetry is not None else None
     if mocap is not None and est is not None and est.position_m is not None and not stale:
         values.append(f"mocap Δ {100.0 * math.dist(est.position_m, mocap):.1f} cm")
-    return line1 + ("\n" + " · ".join(values) if values else "")
+    return "\n".join([line1, *values])
 
 
 class Scene:
@@ -339,7 +459,8 @@ class Scene:
             )
         # Until drones appear, frame the configured base.
         position, look_at = camera_framing(
-            [settings.base.position_m, (0.0, 0.0, floor_z_m), (1.0, 0.0, 1.0)]
+            [settings.base.position_m, (0.0, 0.0, floor_z_m), (1.0, 0.0, 1.0)],
+            covered_right=panel_fraction(None),
         )
         server.initial_camera.position = position
         server.initial_camera.look_at = look_at
@@ -357,7 +478,8 @@ class Scene:
             self._server.scene.remove_by_name(nodes.root)
 
     def framing_points(self, drones: Sequence[DroneState]) -> list[Sequence[float]]:
-        """Bases and drawn bodies of ``drones`` and a floor point: what a camera must see."""
+        """What a camera must see: bases, drawn bodies, motion-capture markers (the far end
+        of the motion-capture error line) of ``drones``, and a floor point."""
         points: list[Sequence[float]] = []
         for drone in drones:
             params = self._settings.for_drone(drone.id)
@@ -365,6 +487,8 @@ class Scene:
             body = drone.body_position()
             if body is not None:
                 points.append(body)
+            if drone.telemetry is not None and drone.telemetry.position_m is not None:
+                points.append(drone.telemetry.position_m)
         if not points:
             points.append(self._settings.base.position_m)
         points.append((points[0][0], points[0][1], self._settings.base.floor_z_m))
