@@ -86,7 +86,12 @@ def test_takeoff_reports_no_tension_on_the_ground(procs: Procs, make_probe: Any)
     assert all(abs(e["vertical_n"]) < 1e-9 for e in on_ground), "floor reaction is no tension"
     truth = _by_stamp(probe.json("tether/*/truth"))
     late = [e for e in estimates if e["stamp_s"] > 10.0 and e["position_m"]]
-    z_err = [abs(e["position_m"][2] - truth[round(e["stamp_s"], 6)]["position_m"][2]) for e in late]
+    # The truth travels on its own key: at the snapshot the newest ones may still be in flight.
+    judged = [e for e in late if round(e["stamp_s"], 6) in truth]
+    assert len(judged) > 0.9 * len(late)
+    z_err = [
+        abs(e["position_m"][2] - truth[round(e["stamp_s"], 6)]["position_m"][2]) for e in judged
+    ]
     assert float(np.median(z_err)) < 0.05
     assert max(e["horizontal_n"] for e in late) < 0.010
     assert service.stop(signal.SIGINT) == 0
