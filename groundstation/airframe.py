@@ -42,6 +42,7 @@ from groundstation.calibration import (
     CalibrationData,
     CalibrationError,
     HoverCriteria,
+    _index_runs,
     _integrated_autocorr_time,
     _robust_scale,
     _rotations,
@@ -302,7 +303,7 @@ def fit_airframe(
     dpsi = max(float(np.mean(np.abs(z) <= 1.5)), 1e-3)
     dof = max(z.size - int(free.sum()), 1)
     sigma2 = float((psi * psi).sum() / dof) / dpsi**2
-    runs = _segment_runs(data, idx)
+    runs = _index_runs(idx, data.segment)
     zr = z.reshape(-1, 3)
     tau = max(_integrated_autocorr_time(zr[:, j], runs) for j in range(3))
     try:
@@ -343,13 +344,3 @@ def fit_airframe(
         vbat_range_v=(float(vb[have_v].min()), float(vb[have_v].max())) if have_v.any() else None,
         tethered=tethered,
     )
-
-
-def _segment_runs(data: CalibrationData, idx: NDArray[np.int64]) -> list[tuple[int, int]]:
-    """Runs of consecutive indices within one segment, as ranges into ``idx``."""
-    if idx.size == 0:
-        return []
-    cut = (np.diff(idx) != 1) | (np.diff(data.segment[idx]) != 0)
-    starts = np.concatenate(([0], np.flatnonzero(cut) + 1))
-    ends = np.concatenate((starts[1:], [idx.size]))
-    return list(zip(starts.tolist(), ends.tolist(), strict=True))

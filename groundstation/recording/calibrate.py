@@ -458,7 +458,7 @@ def format_fit(drone: str, fit: CalibrationFit, files: Sequence[str]) -> str:
     return "\n".join(lines)
 
 
-def _vbat_range(fit: CalibrationFit) -> list[float] | None:
+def _vbat_range(fit: CalibrationFit | AirframeFit) -> list[float] | None:
     """The hover samples' battery range, rounded outward to the millivolt, or None."""
     if fit.vbat_range_v is None:
         return None
@@ -685,9 +685,7 @@ def format_airframe(drone: str, fit: AirframeFit, files: Sequence[str]) -> str:
 
 def _airframe_table(fit: AirframeFit, cal: Any, source: str) -> dict[str, Any]:
     v = fit.values
-    rng = fit.vbat_range_v
-    vbat = None if rng is None else [math.floor(rng[0] * 1e3) / 1e3, math.ceil(rng[1] * 1e3) / 1e3]
-    # (rounded outward to the millivolt, as the full model's range)
+    vbat = _vbat_range(fit)
     return {
         "thrust_scale": round(v["thrust_scale"], 6),
         "thrust_axis_rad": [round(v["about_x_rad"], 6), round(v["about_y_rad"], 6)],
