@@ -14,6 +14,7 @@ import contextlib
 import json
 import logging
 import threading
+import time
 from types import TracebackType
 from typing import Any
 
@@ -76,6 +77,32 @@ def _source(sample: zenoh.Sample) -> str | None:
     return None if info is None else str(info.source_id.zid)
 
 
+_CALLBACK_THREAD = "pyo3-closure"
+_open_lock = threading.Lock()
+_open_buses = 0  # buses of this process that own an open session
+
+
+def join_callback_threads(timeout_s: float = 2.0) -> int:
+    """Wait for zenoh-python's callback threads to end once their session is closed.
+
+    zenoh runs each Python callback on a daemon thread of its own (named ``pyo3-closure``)
+    that waits in Rust for the next sample. One still waiting when the interpreter finalizes
+    is torn down inside Rust code, which aborts the process ("FATAL: exception not rethrown",
+    status 134) after an otherwise clean exit. Closing the session ends their channels; this
+    lets them return before the interpreter does.
+
+    Returns:
+        How many such threads were still alive after ``timeout_s`` (0 when all ended).
+    """
+    deadline = time.monotonic() + timeout_s
+    left = 0
+    for thread in threading.enumerate():
+        if _CALLBACK_THREAD in thread.name and thread is not threading.current_thread():
+            thread.join(max(0.0, deadline - time.monotonic()))
+            left += thread.is_alive()
+    return left
+
+
 class _Handle:
     def __init__(self, entity: Any) -> None:
         self._entity = entity
@@ -98,6 +125,9 @@ class ZenohBus:
         if self._owns_session:
             # The id other processes see as ``who`` in the service's action log.
             _log.info("zenoh session %s", self.session.info.zid())
+            global _open_buses
+            with _open_lock:
+                _open_buses += 1
         self._publishers: dict[str, zenoh.Publisher] = {}
         self._source_info: dict[str, Any] = {}
         self._lock = threading.Lock()
@@ -196,3 +226,9 @@ class ZenohBus:
                 pub.undeclare()
         if self._owns_session:
             self.session.close()
+            global _open_buses
+            with _open_lock:
+                _open_buses -= 1
+                last = _open_buses == 0
+            if last:  # another open session's threads would wait for its samples
+                join_callback_threads()

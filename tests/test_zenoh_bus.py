@@ -45,3 +45,35 @@ def test_alive_lists_the_liveliness_tokens_of_this_session() -> None:
         assert bus.alive("groundstation/service/*", timeout_s=1.0) == ["groundstation/service/abc"]
         token.close()
         assert bus.alive("groundstation/service/*", timeout_s=0.5) == []
+
+
+_EXIT_SCRIPT = """
+import threading
+import time
+from groundstation.config import ZenohSection
+from groundstation.zenoh_bus import ZenohBus
+
+bus = ZenohBus(ZenohSection(mode="peer"))
+subs = [bus.subscribe(f"exit/test/{i}", lambda s: time.sleep(0.3)) for i in range(4)]
+for i in range(4):
+    bus.publish(f"exit/test/{i}", b"{}")
+time.sleep(0.1)  # every callback thread is inside its handler
+for sub in subs:
+    sub.close()
+bus.close()
+print(sum("pyo3-closure" in t.name for t in threading.enumerate()))
+"""
+
+
+def test_closing_the_last_bus_lets_zenohs_callback_threads_end_before_exit() -> None:
+    # A callback thread still waiting in Rust at interpreter finalization aborts the process
+    # (status 134, "FATAL: exception not rethrown") after a clean exit: seen in CI on
+    # `crazyflie` exiting with code 2. Closing the last bus joins them.
+    import subprocess
+    import sys
+
+    out = subprocess.run(
+        [sys.executable, "-c", _EXIT_SCRIPT], capture_output=True, text=True, timeout=60
+    )
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "0", out.stdout
