@@ -64,7 +64,22 @@ from groundstation.tension import DiagonalKalman, TensionFilter, observe_tension
 
 DOC_PATH = Path(__file__).resolve().parent.parent / "docs" / "pipeline_benchmark.md"
 KEY = "tether/d0/telemetry"
-STAGES = ("validate", "observe_tension", "filter_update", "localize", "follow_step", "estimate")
+STAGES = (
+    "validate",
+    "observation",
+    "gate",
+    "contact",
+    "slow_accel",
+    "filter",
+    "localize",
+    "follow",
+    "estimate",
+    "glue",
+)
+"""The stages of one message, as :mod:`groundstation.estimator` composes them, each timed
+inside the real path (:func:`_stage_split`); ``glue`` is what is left of the whole
+message's time: the Pipeline's routing, the estimator's counters and rates, the frozen
+records between the stages, the published Samples."""
 EXTRA = ("kalman_bare", "filterpy_bare", "localize_batch", "follow_step_itself")
 """Not in the sum: the Kalman step alone, closed form and filterpy (the floor under
 ``filter_update``), and ``localize`` over the batch (``localization.localize_batch``, BATCH
@@ -191,12 +206,6 @@ def measure(warmup: int, messages: int, repeats: int, seed: int = 0) -> dict[str
                 _follow_stamped(state, m.stamp_s)
             return len(msgs)
 
-        def run_estimate() -> int:
-            for m, e, p in zip(msgs, ests, positions, strict=True):
-                est = pipe._estimate(rt, m, e.tension_world_n, e.std_n, p, False, True)
-                assert est is not None  # the Estimate's JSON bytes
-            return len(msgs)
-
         def run_localize_batch() -> int:
             n = 0
             for i in range(0, len(ests) - BATCH + 1, BATCH):
@@ -212,14 +221,7 @@ def measure(warmup: int, messages: int, repeats: int, seed: int = 0) -> dict[str
                 n += len(chunk)
             return n
 
-        stages = {
-            "validate": _best_mean_us(run_validate, repeats),
-            "observe_tension": _best_mean_us(run_observe, repeats),
-            "filter_update": _filter_us(filt0, msgs, obs, repeats),
-            "localize": _best_mean_us(run_localize, repeats),
-            "follow_step": _best_mean_us(run_follow_off, repeats),
-            "estimate": _best_mean_us(run_estimate, repeats),
-        }
+        stages = _stage_split(warmed, samples, repeats)
         extra = {
             "kalman_bare": _kalman_us(filt0, obs, repeats),
             "filterpy_bare": _filterpy_us(filt0, msgs, obs, repeats),
@@ -248,6 +250,89 @@ def measure(warmup: int, messages: int, repeats: int, seed: int = 0) -> dict[str
         "cpus": os.cpu_count(),
         "loadavg": os.getloadavg(),
     }
+
+
+def _split_targets() -> dict[str, tuple[tuple[Any, str], ...]]:
+    from groundstation import contact as contact_mod
+    from groundstation.estimator import drone as drone_mod
+    from groundstation.estimator.filter_control import FilterControl
+
+    return {
+        "observation": ((drone_mod, "observe"),),
+        "gate": ((drone_mod, "gate_step"),),
+        "contact": ((contact_mod, "contact_step"), (contact_mod, "vertical_accel_mps2")),
+        "slow_accel": ((drone_mod, "learn_slow"),),
+        "filter": ((FilterControl, "step"),),
+        "localize": ((drone_mod, "localize_one"),),
+        "follow": ((drone_mod, "follow_decide"),),
+        "estimate": ((drone_mod.DroneEstimator, "_estimate"),),
+    }
+
+
+def _stage_split(
+    warmed: Callable[[], Pipeline], samples: list[Sample], repeats: int
+) -> dict[str, float]:
+    """µs per message of each stage inside :meth:`Pipeline.handle` (best repeat).
+
+    Each stage's functions are wrapped with a ``perf_counter_ns`` timer while a converged
+    pipeline handles the messages; a wrapper's own cost (measured on an empty function) is
+    taken off every call it timed. ``glue`` is the uninstrumented whole message's mean less
+    the stages: everything between them.
+    """
+    clock = time.perf_counter_ns
+    targets = _split_targets()
+    acc: dict[str, int] = {}
+    calls: dict[str, int] = {}
+
+    def timed(fn: Callable[..., Any], key: str) -> Callable[..., Any]:
+        def wrapper(*args: Any, **kwargs: Any) -> Any:
+            t0 = clock()
+            out = fn(*args, **kwargs)
+            acc[key] += clock() - t0
+            calls[key] += 1
+            return out
+
+        return wrapper
+
+    # The wrapper's own cost per call, ns (around an empty function).
+    acc["_"] = calls["_"] = 0
+    empty = timed(lambda: None, "_")
+    t0 = clock()
+    for _ in range(20000):
+        empty()
+    overhead_ns = max(0.0, (clock() - t0 - acc["_"]) / 20000)
+
+    best = {k: math.inf for k in STAGES}
+    for _ in range(repeats):
+        pipe = warmed()
+        handle = pipe.handle
+        t0 = clock()
+        for smp in samples:
+            handle(smp, 0.0)
+        total_us = (clock() - t0) / len(samples) / 1e3
+
+        pipe = warmed()
+        saved = [(o, a, getattr(o, a)) for pairs in targets.values() for o, a in pairs]
+        for key in (*targets, "validate"):
+            acc[key] = calls[key] = 0
+        try:
+            for key, pairs in targets.items():
+                for owner, attr in pairs:
+                    setattr(owner, attr, timed(getattr(owner, attr), key))
+            pipe.validate = timed(pipe.validate, "validate")  # type: ignore[method-assign]
+            for smp in samples:
+                pipe.handle(smp, 0.0)
+        finally:
+            for owner, attr, fn in saved:
+                setattr(owner, attr, fn)
+        split = {
+            key: max(0.0, acc[key] - overhead_ns * calls[key]) / len(samples) / 1e3
+            for key in (*targets, "validate")
+        }
+        split["glue"] = max(0.0, total_us - sum(split.values()))
+        for key in STAGES:
+            best[key] = min(best[key], split[key])
+    return best
 
 
 def _filter_us(filt0: TensionFilter, msgs: list[Telemetry], obs: list[Any], repeats: int) -> float:

@@ -911,9 +911,9 @@ def main(argv: list[str] | None = None) -> int:
     if args.fixed_tau:
         if args.only is None:
             ap.error("--fixed-tau needs --only (the page is the default filter's)")
-        import groundstation.pipeline as pipeline_mod
+        import groundstation.estimator.drone as drone_mod
 
-        pipeline_mod.TensionFilterParams = functools.partial(  # type: ignore[misc,assignment]
+        drone_mod.TensionFilterParams = functools.partial(  # type: ignore[misc,assignment]
             TensionFilterParams, hover_wander_n2_per_s=0.0
         )
     t0 = time.time()

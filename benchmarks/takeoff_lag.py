@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-import groundstation.pipeline as pipeline_mod
+import groundstation.estimator.drone as drone_mod
 from groundstation.config import load_settings
 from groundstation.evaluation import closed_loop
 
@@ -30,10 +30,10 @@ ROWS: tuple[tuple[str, dict[str, Any]], ...] = (
 
 
 def main() -> int:
-    original = pipeline_mod.TensionFilterParams
+    original = drone_mod.TensionFilterParams
     try:
         for label, kwargs in ROWS:
-            pipeline_mod.TensionFilterParams = functools.partial(original, **kwargs)  # type: ignore[misc,assignment]
+            drone_mod.TensionFilterParams = functools.partial(original, **kwargs)  # type: ignore[misc,assignment]
             errors, heights = [], []
             for seed in (10, 11):
                 s = load_settings(None, {"sim": {"mocap": False, "seed": seed}}, use_env=False)
@@ -59,7 +59,7 @@ def main() -> int:
             cells.append(f"{lo}-{lo + 1} s: {h[m, 1].mean():.3f}")
         print("true height, m (mean of both seeds): " + ", ".join(cells))
     finally:
-        pipeline_mod.TensionFilterParams = original  # type: ignore[misc]
+        drone_mod.TensionFilterParams = original  # type: ignore[misc]
     return 0
 
 

@@ -119,8 +119,10 @@ drone; below the follow threshold, and no tug-to-land can be armed without a tug
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Literal
+
+from groundstation.frozen import evolve
 
 __all__ = [
     "ContactParams",
@@ -275,6 +277,10 @@ class ContactState:
     falling_s: float = 0.0
 
 
+_START = ContactState()
+"""The state before any sample (what a rest on the ground is built from)."""
+
+
 def vertical_accel_mps2(
     accel_body_mps2: tuple[float, float, float] | list[float],
     quat_wxyz: tuple[float, float, float, float] | list[float],
@@ -365,7 +371,8 @@ def contact_step(
             if height is not None:
                 w = min(1.0, dt / params.bias_time_constant_s) if rest is not None else 1.0
                 rest = height if rest is None else rest + w * (height - rest)
-        return ContactState(
+        return evolve(
+            _START,
             on_ground=True,
             reason="disarmed" if not armed else "low_thrust",
             accel_bias_z_mps2=bias,
@@ -377,7 +384,7 @@ def contact_step(
         )
     # Low thrust not (yet) seen at rest: a dip, a hard descent, or a touch-down being
     # confirmed. The state it found holds (in the air the service coasts the filter).
-    state = replace(state, accel_smooth_mps2=smooth, still_s=still_s, falling_s=falling_s)
+    state = evolve(state, accel_smooth_mps2=smooth, still_s=still_s, falling_s=falling_s)
 
     if height is not None:
         ground_m = state.rest_height_m if state.rest_height_m is not None else floor_z_m
@@ -389,7 +396,7 @@ def contact_step(
                 on_ground = above_m < params.touchdown_height_m
             if state.rest_height_m is not None and above_m < -params.liftoff_height_m:
                 on_ground = False  # below the surface it rested on: not on it
-            return replace(
+            return evolve(
                 state,
                 on_ground=on_ground,
                 reason="resting" if on_ground else "mocap_height",
@@ -401,12 +408,12 @@ def contact_step(
 
     if not state.on_ground:
         # In the air and staying there.
-        return state if state.reason == "air" else replace(state, reason="air")
+        return state if state.reason == "air" else evolve(state, reason="air")
 
     # On the ground with the propellers carrying part of the weight: look for lift-off.
     if falling_s >= params.rest_hold_s:
         # The floor cannot pull the drone down: whatever said "ground" no longer holds.
-        return replace(state, on_ground=False, reason="falling", climb_speed_mps=0.0)
+        return evolve(state, on_ground=False, reason="falling", climb_speed_mps=0.0)
     finite_accel = math.isfinite(accel)
     # The vibration: the drone does not move, so its vertical acceleration is noise.
     # s_d = E[(a_k - a_(k-1))^2] / 2, blind to a slowly moving mean (a thrust ramp).
@@ -442,11 +449,11 @@ def contact_step(
     push_limit_n = params.push_free_n if state.rest_seen else params.climb_push_max_n
     free_s = state.push_free_s + dt if push < push_limit_n else 0.0
     if speed > climb_limit and push < params.climb_push_max_n:
-        return replace(state, on_ground=False, reason="climbing", climb_speed_mps=0.0)
+        return evolve(state, on_ground=False, reason="climbing", climb_speed_mps=0.0)
     if push < push_limit_n and free_s >= params.push_hold_s:
         reason: Reason = "push_free" if state.rest_seen else "flying_at_start"
-        return replace(state, on_ground=False, reason=reason, climb_speed_mps=0.0)
-    return replace(
+        return evolve(state, on_ground=False, reason=reason, climb_speed_mps=0.0)
+    return evolve(
         state,
         on_ground=True,
         reason="resting",

@@ -39,8 +39,10 @@ manoeuvres of a few seconds and forgets drift. See :func:`drag_velocity_world_mp
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Literal
+
+from groundstation.frozen import evolve
 
 __all__ = [
     "SlowAccelParams",
@@ -116,7 +118,7 @@ class SlowAccelParams:
                 raise ValueError(f"SlowAccelParams.{name} must be > 0, got {value!r}")
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(frozen=True)  # no slots: stepped with frozen.evolve
 class SlowAccelState:
     """One drone's slow-accelerometer state (immutable; :func:`slow_accel_step` returns the
     next).
@@ -190,14 +192,14 @@ def _mocap_step(
         if state.mocap_stamp_s is not None and stamp_s - state.mocap_stamp_s > (
             params.mocap_max_gap_s
         ):
-            return replace(state, mocap_stamp_s=None, mocap_world_m=None, mocap_samples=0)
+            return evolve(state, mocap_stamp_s=None, mocap_world_m=None, mocap_samples=0)
         return state
     prev, prev_t = state.mocap_world_m, state.mocap_stamp_s
     if prev is None or prev_t is None:
-        return replace(state, mocap_stamp_s=stamp_s, mocap_world_m=mocap_world_m, mocap_samples=1)
+        return evolve(state, mocap_stamp_s=stamp_s, mocap_world_m=mocap_world_m, mocap_samples=1)
     dt = stamp_s - prev_t
     if not (0.0 < dt <= params.mocap_max_gap_s):
-        return replace(state, mocap_stamp_s=stamp_s, mocap_world_m=mocap_world_m, mocap_samples=1)
+        return evolve(state, mocap_stamp_s=stamp_s, mocap_world_m=mocap_world_m, mocap_samples=1)
     k = min(dt / params.mocap_time_constant_s, 1.0)  # first-order low-pass gain
     v_old = state.mocap_velocity_world_mps
     raw_v = tuple((mocap_world_m[i] - prev[i]) / dt for i in range(3))
@@ -213,7 +215,7 @@ def _mocap_step(
         v_raw_old = state.mocap_raw_velocity_world_mps
         v_new = tuple(v_old[i] + k * (raw_v[i] - v_old[i]) for i in range(3))
         a_new = tuple((raw_v[i] - v_raw_old[i]) / dt for i in range(3))
-    return replace(
+    return evolve(
         state,
         mocap_stamp_s=stamp_s,
         mocap_world_m=mocap_world_m,
@@ -256,7 +258,7 @@ def slow_accel_step(
     mocap_ok = st.mocap_samples >= 3 and mocap_world_m is not None
     (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = R_world_body
     if phase == "hold":
-        return replace(
+        return evolve(
             st,
             velocity_world_mps=_ZERO3,
             velocity_source="none",
@@ -303,7 +305,7 @@ def slow_accel_step(
         bias = st.bias_body_mps2
         if rest_s >= params.min_rest_s:
             bias, learnt_at_rest = mean, True
-        return replace(
+        return evolve(
             st,
             bias_body_mps2=bias,
             rest_mean_body_mps2=mean,
@@ -370,7 +372,7 @@ def slow_accel_step(
     else:
         k = min(dt_s / params.release_time_constant_s, 1.0)
         fast = (lx - k * lx, ly - k * ly, lz - k * lz)
-    return replace(
+    return evolve(
         st,
         bias_body_mps2=bias,
         air_samples=n,

@@ -29,6 +29,7 @@ PHYSICS = (
     "slow_accel",
     "airframe",
     "smoother",
+    "frozen",
 )
 CONTRACT = ("messages", "config", "bus")
 
@@ -36,7 +37,9 @@ CONTRACT = ("messages", "config", "bus")
 ROOMS: dict[str, tuple[tuple[str, ...], tuple[str, ...], tuple[str, ...]]] = {
     "physics": (PHYSICS, PHYSICS, ("numpy", "scipy", "filterpy")),
     "contract": (CONTRACT, CONTRACT, ("pydantic", "pydantic_settings")),
-    "seam": (("pipeline",), (*PHYSICS, *CONTRACT), ("numpy",)),
+    # One drone's estimator: the stages' control around the physics (PX4 EKF2's split).
+    "estimator": (("estimator",), ("estimator", *PHYSICS, *CONTRACT), ("numpy",)),
+    "seam": (("pipeline",), ("estimator", *PHYSICS, *CONTRACT), ("numpy",)),
     "adapter": (("zenoh_bus",), CONTRACT, ("zenoh",)),
     "service": (("service",), ("pipeline", *CONTRACT, "recording"), ()),
     "sim": (("sim",), ("sim", "catenary", *CONTRACT), ("numpy",)),
@@ -66,6 +69,7 @@ ROOMS: dict[str, tuple[tuple[str, ...], tuple[str, ...], tuple[str, ...]]] = {
 NEVER = {
     # A simulator that runs the estimator's code proves nothing about it.
     "sim": (
+        "estimator",
         "tension",
         "localization",
         "pipeline",

@@ -599,7 +599,7 @@ def test_mocap_azimuth_takes_beta_from_position_m_one_by_one_and_batched(
     published position lies along +y, ``azimuth_source`` "mocap", and its radius and height
     are the tension's. The same through Pipeline.process_batch, with the localizations
     vectorised or one by one: the same bytes as Pipeline.handle."""
-    import groundstation.pipeline as pipeline_mod
+    from groundstation.estimator import localize_control
     from tests.hover_synth import hover_body
 
     tension = np.array([-0.020, 0.0, -0.060])
@@ -633,7 +633,7 @@ def test_mocap_azimuth_takes_beta_from_position_m_one_by_one_and_batched(
     assert math.hypot(x, y) == pytest.approx(math.hypot(ref[0], ref[1]), abs=1e-3)
     assert z == pytest.approx(ref[2], abs=1e-3)
 
-    monkeypatch.setattr(pipeline_mod, "BATCH_LOCALIZE_MIN", vector_min)
+    monkeypatch.setattr(localize_control, "BATCH_LOCALIZE_MIN", vector_min)
     pipe = Pipeline(settings("mocap"))
     parsed = [p for s, now_s in samples if (p := pipe.validate(s, now_s)) is not None]
     got = [o for i in range(0, len(parsed), 50) for o in pipe.process_batch(parsed[i : i + 50])]

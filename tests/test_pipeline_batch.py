@@ -26,6 +26,7 @@ import pytest
 import groundstation.pipeline as pipeline_mod
 from groundstation.bus import Sample
 from groundstation.config import Settings, load_settings
+from groundstation.estimator import localize_control
 from groundstation.pipeline import Parsed, Pipeline
 from groundstation.service import Service
 from tests.hover_synth import hover_body
@@ -171,7 +172,7 @@ def _cut(parsed: list[Parsed], rng: np.random.Generator) -> list[list[Parsed]]:
     return batches
 
 
-@pytest.mark.parametrize("vector_min", [1, pipeline_mod.BATCH_LOCALIZE_MIN])
+@pytest.mark.parametrize("vector_min", [1, localize_control.BATCH_LOCALIZE_MIN])
 @pytest.mark.parametrize("seed", [0, 1])
 def test_process_batch_publishes_what_handle_publishes(
     seed: int, vector_min: int, monkeypatch: pytest.MonkeyPatch
@@ -180,15 +181,15 @@ def test_process_batch_publishes_what_handle_publishes(
     want, plain = _plain(samples)
 
     calls: list[int] = []
-    real = pipeline_mod.localize_batch
+    real = localize_control.localize_batch
 
     def counted(*args: Any, **kwargs: Any) -> Any:
         out = real(*args, **kwargs)
         calls.append(len(out))
         return out
 
-    monkeypatch.setattr(pipeline_mod, "localize_batch", counted)
-    monkeypatch.setattr(pipeline_mod, "BATCH_LOCALIZE_MIN", vector_min)
+    monkeypatch.setattr(localize_control, "localize_batch", counted)
+    monkeypatch.setattr(localize_control, "BATCH_LOCALIZE_MIN", vector_min)
     pipe = Pipeline(settings())
     parsed = [p for s, now_s in samples if (p := pipe.validate(s, now_s)) is not None]
     got = [
@@ -260,18 +261,21 @@ def test_an_error_in_one_message_loses_only_its_outputs(monkeypatch: pytest.Monk
     parsed = [p for s, now_s in samples if (p := pipe.validate(s, now_s)) is not None]
     for p in parsed[:200]:
         pipe.process(p, p.received_s)
-    real = pipe._telemetry_back
+    # The back pass of two messages raises (DroneEstimator.back, patched on the class).
+    from groundstation.estimator.drone import DroneEstimator
+
+    real = DroneEstimator.back
     first, second = (
         next(i for i in range(k, k + 50) if parsed[i].kind == "telemetry") for k in (250, 450)
     )
     boom = {id(parsed[first].message), id(parsed[second].message)}
 
-    def back(front: Any, position: Any) -> list[Sample]:
-        if id(front[1]) in boom:
+    def back(self: Any, front: Any, position: Any) -> list[Sample]:
+        if id(front.msg) in boom:
             raise RuntimeError("boom")
-        return real(front, position)
+        return real(self, front, position)
 
-    monkeypatch.setattr(pipe, "_telemetry_back", back)
+    monkeypatch.setattr(DroneEstimator, "back", back)
     failed: list[Parsed] = []
     out = pipe.process_batch(parsed[200:400], failed.append)
     assert failed == [parsed[first]]

@@ -1,0 +1,691 @@
+"""One drone's estimator: its state, and the stages a telemetry message goes through.
+
+::
+
+    Telemetry ─▶ observation ─▶ gate ─▶ rest · contact · battery ─▶ slow accel
+              ─▶ filter ─▶ localize ─▶ follow ─▶ Estimate, Setpoint, Stop
+
+Each stage is a module of :mod:`groundstation.estimator` (control) around a physics module
+(the equations), joined by frozen dataclasses:
+
+============================  ==================================  ===========================
+stage                         control                             physics
+============================  ==================================  ===========================
+observation                   :mod:`.observation`                 ``tension.observe_tension``
+stream gate (order, gaps)     :mod:`.gate`                        —
+rest calibration              :meth:`DroneEstimator._feed_rest`   ``calibration.RestCalibrator``
+contact (ground / air)        :meth:`DroneEstimator.front`        ``contact.contact_step``
+battery, position σ checks    :mod:`.checks`                      —
+slow accelerometer error      :func:`.observation.learn_slow`     ``slow_accel``
+tension filter                :mod:`.filter_control`              ``tension.TensionFilter``
+localization                  :mod:`.localize_control`            ``localization.localize``
+follow, tug-to-land           :mod:`.follow_control`              ``follow.follow_step``
+Estimate                      :mod:`.output`                      —
+============================  ==================================  ===========================
+
+:meth:`DroneEstimator.step` runs a message through all of them. A run of messages may be
+stepped in three passes instead (:meth:`front` up to the localization's inputs, the
+localizations together, :meth:`back` from the localization on): localization holds no
+state, so the outputs are the same. The estimator reports what the operator must hear
+(drops, one-off warnings, the Stops it issues) through the callbacks it is given; it never
+touches the bus.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter, deque
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from groundstation import contact as contact_mod
+from groundstation import follow as follow_mod
+from groundstation import slow_accel as slow_mod
+from groundstation.bus import Sample
+from groundstation.calibration import RestCalibrator
+from groundstation.config import CalibrationSection, DroneParams, Settings
+from groundstation.estimator import checks, output
+from groundstation.estimator.filter_control import FilterControl
+from groundstation.estimator.follow_control import follow_decide
+from groundstation.estimator.gate import GateState, gate_step, mark_stale
+from groundstation.estimator.localize_control import LocalizeIn, fresh_angle, localize_one
+from groundstation.estimator.observation import learn_slow, observe
+from groundstation.localization import AngleObservation, PositionEstimate
+from groundstation.messages import Estimate, FollowInfo, Setpoint, Stop, Telemetry
+from groundstation.tension import (
+    DegenerateQuaternionError,
+    ObservationCalibration,
+    TensionError,
+    TensionFilter,
+    TensionFilterParams,
+)
+
+__all__ = [
+    "MOCAP_HOLD_S",
+    "DroneEstimator",
+    "Front",
+    "calibration_from_config",
+]
+
+MOCAP_HOLD_S = 0.3
+"""A motion-capture position stays the drone's external position for this long (telemetry
+stamp) after the frame that brought it, s. Real motion capture reaches a drone's telemetry
+at 70-116 Hz against the IMU's 100 Hz, in bursts, with gaps up to 150 ms (the realistic
+profile draws the same): without the hold, follow would switch to the tether-based position
+on every telemetry message without a fresh frame."""
+
+Vec3 = tuple[float, float, float]
+OnDrop = Callable[[str, str, str], None]
+"""``on_drop(drone, kind, detail)``: a message or output refused."""
+OnWarning = Callable[[str, float, str, str], None]
+"""``on_warning(drone, now_s, text, field)``: something the operator must hear, once."""
+OnStop = Callable[[str, float, str], None]
+"""``on_stop(drone, now_s, reason)``: the estimator issued a Stop (tug-to-land)."""
+
+
+def calibration_from_config(
+    section: CalibrationSection,
+) -> tuple[ObservationCalibration | None, str]:
+    """The observation's corrections from ``[calibration]``, and the label reported for them.
+
+    The label is the section's ``source``; values that differ from the defaults without a
+    source are labelled ``config`` (never ``none`` while something is applied).
+
+    Returns:
+        ``(calibration or None when it changes nothing, label)``.
+    """
+    cal = ObservationCalibration(
+        thrust_scale=section.thrust_scale,
+        thrust_axis_rad=section.thrust_axis_rad,
+        accel_bias_mps2=section.accel_bias_mps2,
+        thrust_vbat_slope_per_v=section.thrust_vbat_slope_per_v,
+        thrust_vbat_ref_v=section.thrust_vbat_ref_v,
+        rotor_drag_n_s_per_m=section.rotor_drag_n_s_per_m,
+    )
+    if cal.is_identity:
+        return None, section.source
+    return cal, section.source if section.source != "none" else "config"
+
+
+class Rate:
+    """Messages per second over a sliding window of receive times."""
+
+    def __init__(self, window_s: float = 2.0) -> None:
+        self.window_s = window_s
+        self.times: deque[float] = deque()
+
+    def add(self, now_s: float) -> None:
+        self.times.append(now_s)
+        cutoff = now_s - self.window_s
+        while self.times and self.times[0] < cutoff:
+            self.times.popleft()
+
+    def hz(self, now_s: float) -> float:
+        cutoff = now_s - self.window_s
+        n = sum(1 for t in self.times if t >= cutoff)
+        return n / self.window_s
+
+
+@dataclass(frozen=True, slots=True)
+class Front:
+    """A telemetry message stepped up to its localization (:meth:`DroneEstimator.front`).
+
+    Attributes:
+        msg: the message (without a position too uncertain to use).
+        now_s: its receive time, s.
+        tension_world_n, std_n, converged: the filter stage's output.
+        finite: the filter's output is finite (else no Estimate).
+        on_ground: the contact stage's decision (or disarmed).
+        localize_in: what to localize it from (None: nothing to localize).
+        calibration_extrapolated: the battery check's flag for this message (a later
+            message's front pass moves the drone's).
+        mocap_world_m: the motion-capture position held for this message (None: none).
+    """
+
+    msg: Telemetry
+    now_s: float
+    tension_world_n: Sequence[float]
+    std_n: Sequence[float]
+    converged: bool
+    finite: bool
+    on_ground: bool
+    localize_in: LocalizeIn | None
+    calibration_extrapolated: bool | None
+    mocap_world_m: Vec3 | None
+
+
+def _ignore(*_: Any) -> None:
+    return None
+
+
+class DroneEstimator:
+    """One drone's state and its per-message step (module doc).
+
+    Owned by the processing thread. What operators change (reel length and base, tether
+    weight, follow settings) the :class:`~groundstation.pipeline.Pipeline` writes to the
+    attributes below between messages.
+
+    Args:
+        drone: the drone's id.
+        settings: the root configuration (its per-drone values are taken here).
+        on_drop, on_warning, on_stop: what the estimator reports (see the type aliases).
+    """
+
+    def __init__(
+        self,
+        drone: str,
+        settings: Settings,
+        *,
+        on_drop: OnDrop = _ignore,
+        on_warning: OnWarning = _ignore,
+        on_stop: OnStop = _ignore,
+    ) -> None:
+        params: DroneParams = settings.for_drone(drone)
+        self.drone = drone
+        self.params = params
+        self.localization = settings.localization
+        self._on_drop, self._on_warning, self._on_stop = on_drop, on_warning, on_stop
+        self.estimate_key = f"tether/{drone}/estimate"
+        self.setpoint_key = f"tether/{drone}/cmd/setpoint"
+        self.stop_key = f"tether/{drone}/cmd/stop"
+
+        # -- the tether and the base (the reel and operators may change them)
+        self.length_m = params.tether.length_m
+        self.length_source = "config"
+        self.base_world_m = np.array(params.base.position_m, dtype=float)
+        self.weight_n_per_m = params.tether.weight_n_per_m
+        self.exit_azimuth: AngleObservation | None = None
+        """The reel's last exit azimuth (with its σ); when received below."""
+        self.exit_azimuth_received_s = -math.inf
+        self.exit_elevation: AngleObservation | None = None
+        self.exit_elevation_received_s = -math.inf
+
+        # -- the stages' states
+        self.gate = GateState()
+        self.calibration, self.calibration_source = calibration_from_config(params.calibration)
+        self.vbat_range_v = params.calibration.thrust_vbat_range_v
+        self.rest = (
+            RestCalibrator(bias_body_mps2=params.calibration.accel_bias_mps2)
+            if params.calibration.rest
+            else None
+        )
+        self.contact_params = contact_mod.ContactParams(
+            ground_thrust_ratio=params.filter.ground_thrust_ratio
+        )
+        self.contact = contact_mod.ContactState()
+        self.slow_params = (
+            slow_mod.SlowAccelParams(
+                time_constant_s=params.filter.accel_slow_time_constant_s,
+                velocity_time_constant_s=params.filter.drag_velocity_time_constant_s,
+                hover_crossover_s=params.filter.accel_hover_crossover_s,
+            )
+            if params.calibration.accel_slow
+            else None
+        )
+        """``[calibration] accel_slow``: the accelerometer's slow content replaced (None: off)."""
+        self.slow = slow_mod.SlowAccelState()
+        self.filter_control = FilterControl(
+            TensionFilterParams(
+                mass_kg=params.drone.mass_kg,
+                accel_noise_mps2=params.drone.accel_noise_mps2,
+                thrust_noise_n=params.drone.thrust_noise_n,
+            )
+        )
+        # [follow] and FollowParams share their field names (a new key fails loudly).
+        self.follow_params = follow_mod.FollowParams(**params.follow.model_dump())
+        self.follow_state = follow_mod.FollowState()
+        self.land_below_m_memory: float | None = None
+        """Last tug-to-land height, restored when tug-to-land is switched back on."""
+
+        # -- what the drone's messages told, for the status and the checks
+        self.mocap_m: Vec3 | None = None
+        """The last motion-capture ``position_m`` received, m, world frame."""
+        self.mocap_stamp_s = -math.inf
+        """The telemetry ``stamp_s`` that brought :attr:`mocap_m`, s."""
+        self.last_vbat_v: float | None = None
+        self.calibration_extrapolated: bool | None = None
+        """The last Telemetry's ``vbat_v`` outside :attr:`vbat_range_v` (None: unknown)."""
+        self.rest_missing = False
+        """``[calibration] rest_required`` and armed without a rest offset in force."""
+        self._told: set[str] = set()
+        """The one-off warnings already sent."""
+
+        # -- counters and rates
+        self.received = 0
+        self.accepted = 0
+        self.estimates = 0
+        self.setpoints = 0
+        self.stops = 0
+        self.seq_gaps = 0
+        self.drops: Counter[str] = Counter()
+        self.telemetry_rate = Rate()
+        self.estimate_rate = Rate()
+
+        # -- the last Estimate, and caches of what rarely changes
+        self.last_estimate_fields: dict[str, Any] | None = None
+        self.follow_json_cache: tuple[FollowInfo, dict[str, Any]] | None = None
+        self.follow_info_cache: tuple[follow_mod.FollowParams, tuple[Any, ...], FollowInfo] | None
+        self.follow_info_cache = None
+        self.base_cache: tuple[np.ndarray, Vec3] | None = None
+
+    # ---------------------------------------------------------------- views
+
+    @property
+    def filter(self) -> TensionFilter:
+        return self.filter_control.filter
+
+    @property
+    def change_detections(self) -> int:
+        return self.filter_control.change_detections
+
+    @property
+    def stale(self) -> bool:
+        return self.gate.stale
+
+    @property
+    def last_seq(self) -> int | None:
+        return self.gate.last_seq
+
+    @property
+    def last_stamp_s(self) -> float | None:
+        return self.gate.last_stamp_s
+
+    @property
+    def last_seen_s(self) -> float | None:
+        return self.gate.last_seen_s
+
+    @property
+    def last_estimate(self) -> Estimate | None:
+        """The last published Estimate as a model (built on demand, not per message)."""
+        if self.last_estimate_fields is None or self.follow_json_cache is None:
+            return None
+        return Estimate(**{**self.last_estimate_fields, "follow": self.follow_json_cache[0]})
+
+    def fresh_mocap(self, stamp_s: float) -> Vec3 | None:
+        """The motion-capture position if a frame came within :data:`MOCAP_HOLD_S`."""
+        if self.mocap_m is not None and 0.0 <= stamp_s - self.mocap_stamp_s <= MOCAP_HOLD_S:
+            return self.mocap_m
+        return None
+
+    def trusted_position(self) -> bool | None:
+        """The last message had a position follow may fly to: motion capture held for it,
+        or a calibration in force (None: no message yet)."""
+        stamp_s = self.gate.last_stamp_s
+        if stamp_s is None:
+            return None
+        return self.fresh_mocap(stamp_s) is not None or self.calibration_source != "none"
+
+    # ---------------------------------------------------------------- the step
+
+    def step(self, msg: Telemetry, now_s: float) -> list[Sample]:
+        """One telemetry message through every stage; the samples to publish."""
+        front = self.front(msg, now_s)
+        if front is None:
+            return []
+        x = front.localize_in
+        return self.back(front, localize_one(self.localization, x) if x is not None else None)
+
+    def front(self, msg: Telemetry, now_s: float) -> Front | None:
+        """A message up to its localization: observation, gate, rest, contact, battery,
+        slow accelerometer, filter. None for a refused message (reported)."""
+        self.received += 1
+        if checks.position_too_uncertain(msg, self.localization.position_max_std_m):
+            self._warn_position(msg, now_s)
+            msg = msg.model_copy(update={"position_m": None})
+        slow = self.slow if self.slow_params is not None else None
+        rest_offset = None
+        if self.rest is not None and slow is None and self.rest.offset is not None:
+            ox, oy, _ = self.rest.offset.offset_body_mps2.tolist()
+            rest_offset = (ox, oy)
+        # Malformed content first (whatever its seq), then the stream's order.
+        try:
+            observed = observe(
+                msg,
+                mass_kg=self.params.drone.mass_kg,
+                calibration=self.calibration,
+                rest_offset_xy_mps2=rest_offset,
+                slow=slow,
+                ground_thrust_ratio=self.contact_params.ground_thrust_ratio,
+            )
+        except DegenerateQuaternionError as exc:
+            self._drop("bad_quaternion", str(exc))
+            return None
+        except TensionError as exc:
+            self._drop("bad_observation", str(exc))
+            return None
+        gate, verdict = gate_step(
+            self.gate, seq=msg.seq, stamp_s=msg.stamp_s, now_s=now_s, drone=self.drone
+        )
+        if verdict.drop_kind is not None:
+            self._drop(verdict.drop_kind, verdict.detail)
+            return None
+        self.gate = gate
+        self.seq_gaps += verdict.seq_gap
+        if verdict.resumed:
+            self.filter_control.restart()
+        dt_s = verdict.dt_s
+        if msg.position_m is not None:
+            self.mocap_m = msg.position_m
+            self.mocap_stamp_s = msg.stamp_s
+        self.accepted += 1
+        self.telemetry_rate.add(now_s)
+        if self.rest is not None:
+            self._feed_rest(msg, now_s)
+
+        # Ground or air, with hysteresis: between ground_thrust_ratio and the weight the
+        # floor may still carry the drone (its push is no tension) until lift-off is seen.
+        obs = observed.observation
+        self.contact = contact = contact_mod.contact_step(
+            self.contact,
+            self.contact_params,
+            dt_s=dt_s,
+            armed=msg.armed,
+            thrust_n=obs.thrust_n,  # calibrated
+            mass_kg=self.params.drone.mass_kg,
+            vertical_accel_mps2=contact_mod.vertical_accel_mps2(msg.accel_mps2, msg.quat_wxyz),
+            height_m=msg.position_m[2] if msg.position_m is not None else None,
+            floor_z_m=self.params.base.floor_z_m,
+        )
+        # Issue 23: a low thrust alone (no observation) is no ground; the contact decides.
+        on_ground = contact.on_ground or not msg.armed
+        self._check_battery(msg.vbat_v, on_ground, now_s)
+        if self.slow_params is not None:
+            self.slow = learn_slow(
+                self.slow,
+                self.slow_params,
+                msg,
+                observed,
+                dt_s=dt_s,
+                on_ground=on_ground,
+                calibration=self.calibration,
+            )
+        filtered = self.filter_control.step(
+            on_ground=on_ground, contact_reason=contact.reason, observation=obs, dt_s=dt_s
+        )
+        if not filtered.finite:
+            self._drop("non_finite_estimate", "filter produced NaN/inf")
+        est = filtered.estimate
+        localize_in = None
+        if est is not None and filtered.converged:
+            localize_in = LocalizeIn(
+                est.tension_world_n,
+                est.cov_n2,
+                self.weight_n_per_m,
+                self.length_m,
+                self.base_world_m,
+                self.params.base.floor_z_m,
+                self._fresh(self.exit_azimuth, self.exit_azimuth_received_s, now_s),
+                self._fresh(self.exit_elevation, self.exit_elevation_received_s, now_s)
+                if self.localization.elevation
+                else None,
+                msg.position_m,
+            )
+        return Front(
+            msg,
+            now_s,
+            filtered.tension_world_n,
+            filtered.std_n,
+            filtered.converged,
+            filtered.finite,
+            on_ground,
+            localize_in,
+            self.calibration_extrapolated,
+            self.fresh_mocap(msg.stamp_s),
+        )
+
+    def back(self, front: Front, position: PositionEstimate | None) -> list[Sample]:
+        """A message from its localization on: follow, the Estimate, Setpoint and Stop."""
+        msg = front.msg
+        # This message's flag, as its front pass left it (in a batch, later messages'
+        # front passes have moved it since).
+        self.calibration_extrapolated = front.calibration_extrapolated
+        self.follow_state, decision = follow_decide(
+            self.follow_state,
+            self.follow_params,
+            stamp_s=msg.stamp_s,
+            tension_world_n=front.tension_world_n,
+            converged=front.converged,
+            position=position,
+            mocap_world_m=front.mocap_world_m,
+            trusted_without_mocap=self.calibration_source != "none",
+            base_world_m=self.base_world_m,
+            length_m=self.length_m,
+            floor_z_m=self.params.base.floor_z_m,
+            weight_n_per_m=self.weight_n_per_m,
+            on_ground=front.on_ground,
+        )
+        out: list[Sample] = []
+        estimate = self._estimate(front, position) if front.finite else None
+        if estimate is not None:
+            self.estimates += 1
+            self.estimate_rate.add(front.now_s)
+            out.append(Sample(self.estimate_key, estimate))
+        if decision is None:
+            return out
+        setpoint = decision.setpoint_world_m
+        if setpoint is not None and all(map(math.isfinite, output.vec3(setpoint))):
+            sp = Setpoint(stamp_s=msg.stamp_s, position_m=output.vec3(setpoint))
+            self.setpoints += 1
+            out.append(Sample(self.setpoint_key, sp.to_json()))
+        if decision.stop_reason is not None:
+            self.stops += 1
+            stop = Stop(stamp_s=msg.stamp_s, reason=decision.stop_reason, kind="land")
+            out.append(Sample(self.stop_key, stop.to_json()))
+            self._on_stop(self.drone, front.now_s, decision.stop_reason)
+        return out
+
+    def mark_stale(self) -> bool:
+        """The drone fell silent: its next message resumes the stream, and follow is off.
+
+        Returns:
+            Whether follow was on (the operator must hear it was switched off).
+        """
+        self.gate = mark_stale(self.gate)
+        was_on = self.follow_state.enabled
+        self.follow_state = follow_mod.mark_stale(self.follow_state)
+        return was_on
+
+    # ---------------------------------------------------------------- stage helpers
+
+    def _fresh(
+        self, angle: AngleObservation | None, received_s: float, now_s: float
+    ) -> AngleObservation | None:
+        return fresh_angle(angle, received_s, now_s, self.localization.reel_stale_after_s)
+
+    def _drop(self, kind: str, detail: str) -> None:
+        self._on_drop(self.drone, kind, detail)
+
+    def _warn_once(self, key: str, now_s: float, text: str, field: str) -> None:
+        if key not in self._told:
+            self._told.add(key)
+            self._on_warning(self.drone, now_s, text, field)
+
+    def _warn_position(self, msg: Telemetry, now_s: float) -> None:
+        std = msg.position_std_m
+        assert std is not None
+        self._warn_once(
+            "position_untrusted",
+            now_s,
+            f"{self.drone}'s position_m ({msg.position_source or 'mocap'}) has σ "
+            f"{[round(v, 3) for v in std]} m, above [localization] position_max_std_m "
+            f"{self.localization.position_max_std_m:g} m: not used (follow flies on the "
+            "tether's position)",
+            "position_std_m",
+        )
+
+    def _feed_rest(self, msg: Telemetry, now_s: float) -> None:
+        """Feed an accepted sample to the rest calibration (only after the gate: a repeated
+        or out-of-order message must not enter the still window); with ``[calibration]
+        rest_required``, warn once when the drone arms without a rest offset in force."""
+        rest = self.rest
+        assert rest is not None
+        was_armed = rest.armed
+        rest.update(msg.stamp_s, msg.accel_mps2, msg.quat_wxyz, msg.armed, msg.gyro_rps)
+        if not self.params.calibration.rest_required:
+            return
+        missing = checks.rest_missing_at_arming(
+            was_armed=bool(was_armed),
+            armed=msg.armed,
+            offset_in_force=rest.offset is not None,
+            missing_before=self.rest_missing,
+        )
+        if missing and not self.rest_missing:
+            self._warn_once(
+                "rest_missing",
+                now_s,
+                f"{self.drone}: armed without a rest offset in force, but its calibration "
+                "relies on one ([calibration] rest_required: the thrust axis was fitted with "
+                "the x/y accelerometer bias left to the rest calibration): the x/y bias is "
+                "the configured one, not this power-on's. Let the drone sit disarmed and "
+                "still on the floor for 1 s before arming (status rest_calibration; told "
+                "once)",
+                "armed",
+            )
+        self.rest_missing = missing
+
+    def _check_battery(self, vbat_v: float | None, on_ground: bool, now_s: float) -> None:
+        """Flag a battery outside the calibrated range on every message; tell it once."""
+        self.last_vbat_v = vbat_v
+        outside = checks.battery_outside(self.vbat_range_v, vbat_v, on_ground)
+        self.calibration_extrapolated = outside
+        if outside:
+            assert self.vbat_range_v is not None and vbat_v is not None
+            lo, hi = self.vbat_range_v
+            self._warn_once(
+                "battery",
+                now_s,
+                f"{self.drone}: battery {vbat_v:.3f} V outside the range the thrust map was "
+                f"calibrated over ({lo:.3f}–{hi:.3f} V, [calibration] "
+                "thrust_vbat_range_v): thrust, tension and position are extrapolated "
+                "(calibration_extrapolated in Estimate and status; told once)",
+                "vbat_v",
+            )
+
+    def _estimate(self, front: Front, position: PositionEstimate | None) -> bytes | None:
+        """The Estimate's JSON, or None (a non-finite field: dropped and counted)."""
+        follow = self.follow_info()
+        cached = self.follow_json_cache
+        if cached is None or cached[0] is not follow:
+            cached = self.follow_json_cache = (follow, follow.model_dump())
+        base = self.base_cache
+        if base is None or base[0] is not self.base_world_m:
+            base = self.base_cache = (self.base_world_m, output.vec3(self.base_world_m))
+        fields = output.estimate_fields(
+            seq=front.msg.seq,
+            stamp_s=front.msg.stamp_s,
+            tension_world_n=front.tension_world_n,
+            std_n=front.std_n,
+            position=position,
+            follow_json=cached[1],
+            on_ground=front.on_ground,
+            converged=front.converged,
+            length_m=self.length_m,
+            base_m=base[1],
+            calibration=self.calibration_source,
+            calibration_extrapolated=self.calibration_extrapolated,
+        )
+        try:
+            payload = output.encode(fields)
+        except ValueError as exc:  # a non-finite field the checks above did not cover
+            self._drop("non_finite_estimate", str(exc))
+            return None
+        self.last_estimate_fields = fields
+        return payload
+
+    def follow_info(self) -> FollowInfo:
+        """The Estimate's ``follow`` object (also the status's)."""
+        fs = self.follow_state
+        fp = self.follow_params
+        # FollowInfo changes only when follow changes state: reuse it (it is frozen). The
+        # params are compared by identity, so their floats are the very same objects.
+        flags = (fs.enabled, fs.active, fs.landing_armed, fs.stopped, fs.reason)
+        cached = self.follow_info_cache
+        if cached is not None and cached[0] is fp and cached[1] == flags:
+            return cached[2]
+        follow = FollowInfo(
+            enabled=fs.enabled,
+            active=fs.active,
+            threshold_n=fp.threshold_n,
+            land_below_m=fp.land_below_m,
+            landing_armed=fs.landing_armed,
+            stopped=fs.stopped,
+            reason=fs.reason,
+        )
+        self.follow_info_cache = (fp, flags, follow)
+        return follow
+
+    # ---------------------------------------------------------------- health
+
+    def status(self, now_s: float, drops: dict[str, int]) -> dict[str, Any]:
+        """Health of the drone as a JSON-ready dict (``tether/{drone}/status``)."""
+        last_seen_s = self.gate.last_seen_s
+        return {
+            "drone": self.drone,
+            "stale": self.gate.stale,
+            "telemetry_hz": self.telemetry_rate.hz(now_s),
+            "estimate_hz": self.estimate_rate.hz(now_s),
+            "last_seen_age_s": None if last_seen_s is None else max(0.0, now_s - last_seen_s),
+            "received": self.received,
+            "accepted": self.accepted,
+            "estimates": self.estimates,
+            "setpoints": self.setpoints,
+            "stops": self.stops,
+            "seq_gaps": self.seq_gaps,
+            "drops": drops,
+            "invalid": sum(v for k, v in drops.items() if k != "queue_overflow"),
+            "queue_overflow": drops.get("queue_overflow", 0),
+            "filter": {
+                "initialized": self.filter.initialized,
+                "change_detections": self.change_detections,
+                **_noise_status(self.filter),
+            },
+            "follow": self.follow_info().model_dump(),
+            "contact": {"on_ground": self.contact.on_ground, "reason": self.contact.reason},
+            "length_m": self.length_m,
+            "length_source": self.length_source,
+            "base_m": list(map(float, self.base_world_m)),
+            "weight_n_per_m": self.weight_n_per_m,
+            "calibration": self.calibration_source,
+            "calibration_extrapolated": self.calibration_extrapolated,
+            "calibration_vbat_range_v": (
+                None if self.vbat_range_v is None else list(self.vbat_range_v)
+            ),
+            "vbat_v": self.last_vbat_v,
+            "rest_calibration": self._rest_status(),
+        }
+
+    def _rest_status(self) -> dict[str, Any] | None:
+        """The rest calibration: off (None), or the offset in force (or none yet); with
+        ``[calibration] rest_required``, whether the drone armed without one."""
+        rest = self.rest
+        if rest is None:
+            return None
+        off = rest.offset
+        out: dict[str, Any] = {"in_force": False}
+        if off is not None:
+            out = {
+                "in_force": True,
+                "offset_mps2": [float(v) for v in off.offset_body_mps2[:2]],
+                "std_mps2": [float(v) for v in off.std_mps2[:2]],
+                "duration_s": off.duration_s,
+                "stamp_s": off.stamp_s,
+            }
+        if self.params.calibration.rest_required:
+            out["required"] = True
+            out["missing_at_arming"] = self.rest_missing
+        return out
+
+
+def _noise_status(filt: TensionFilter) -> dict[str, Any]:
+    """The filter's measured observation noise for ``status`` (None before any sample)."""
+    s2, rho, _ = filt.noise_model()
+    est = filt.estimate
+    tau = est.time_constant_s if est is not None else math.nan
+    return {
+        "noise_std_n": [math.sqrt(v) for v in s2],
+        "noise_autocorrelation": list(rho),
+        "time_constant_s": tau if math.isfinite(tau) else None,
+    }

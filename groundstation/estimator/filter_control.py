@@ -1,0 +1,142 @@
+"""Tension-filter stage: when the filter steps, coasts, restarts or learns its noise.
+
+Control around :class:`groundstation.tension.TensionFilter` (the equations, ``eq:KF``),
+given the contact stage's ground/air decision and the observation:
+
+- **On the ground** the floor carries the drone: no tension is estimated (zeros, not
+  converged). The filter restarts once per stay (again if the prior changes), from the
+  prior that a tether resting on the floor pulls with next to nothing
+  (:data:`LIFTOFF_PRIOR_STD_N`) when the drone was seen resting (disarmed, or low thrust
+  held still), else from its first observation in the air (a service started mid-flight).
+  Observations taken on the floor, propellers spinning, teach the filter the propellers'
+  vibration (:meth:`TensionFilter.learn_noise`), so the restart weighs its first samples
+  with the flight's noise.
+- **In the air** an observation updates the filter; none (thrust below the ratio: a dip, a
+  hard descent, a touch-down not yet confirmed) coasts it on its last estimate.
+- A non-finite estimate restarts the filter before the drone's next message.
+
+:class:`FilterControl` owns the drone's TensionFilter (a mutable object, stepped in place:
+copying its windows each message would cost more than the step) and the two flags above;
+:meth:`FilterControl.step` returns a frozen :class:`FilterOutput`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from groundstation.tension import (
+    TensionEstimate,
+    TensionFilter,
+    TensionFilterParams,
+    TensionObservation,
+)
+
+__all__ = ["LIFTOFF_PRIOR_STD_N", "FilterControl", "FilterOutput"]
+
+LIFTOFF_PRIOR_STD_N = (0.005, 0.005, 0.005)
+"""Prior standard deviation of the tension at lift-off, N (per world axis)."""
+_ZEROS3 = (0.0, 0.0, 0.0)
+_RESTING = ("disarmed", "low_thrust")
+"""Contact reasons that mean the drone was seen resting on the floor."""
+
+
+@dataclass(frozen=True, slots=True)
+class FilterOutput:
+    """The filter stage's output for one message.
+
+    Attributes:
+        tension_world_n: the tension, world frame, N (zeros on the ground or before the
+            first observation).
+        std_n: its standard deviation per axis, N.
+        converged: enough observations since the last restart to use it.
+        finite: False when the filter produced NaN/inf (it has restarted; no Estimate).
+        estimate: the filter's estimate this step (None on the ground or before the first
+            observation), with the covariance localization needs.
+    """
+
+    tension_world_n: Sequence[float]
+    std_n: Sequence[float]
+    converged: bool
+    finite: bool = True
+    estimate: TensionEstimate | None = None
+
+
+_GROUND = FilterOutput(_ZEROS3, _ZEROS3, False)
+
+
+def _floats3(v: object) -> list[float]:
+    tolist = getattr(v, "tolist", None)
+    return tolist() if tolist is not None else [float(x) for x in v]  # type: ignore[attr-defined]
+
+
+class FilterControl:
+    """One drone's tension filter and when it runs (module doc)."""
+
+    __slots__ = ("change_detections", "filter", "prior", "rested")
+
+    def __init__(self, params: TensionFilterParams) -> None:
+        self.filter = TensionFilter(params)
+        self.rested = False
+        """Seen certainly on the ground (disarmed, low thrust) since the last lift-off: the
+        filter then restarts from the lift-off prior."""
+        self.prior: bool | None = None
+        """The filter was restarted for this stay on the ground with (True) or without
+        (False) the lift-off prior; None: not since its last step or restart elsewhere."""
+        self.change_detections = 0
+        """Tension changes (tugs) the filter detected."""
+
+    def restart(self) -> None:
+        """Forget the tension (a resumed stream, a non-finite estimate)."""
+        self.filter.reset()
+        self.prior = None
+
+    def step(
+        self,
+        *,
+        on_ground: bool,
+        contact_reason: str,
+        observation: TensionObservation,
+        dt_s: float,
+    ) -> FilterOutput:
+        """One accepted message (module doc)."""
+        filt = self.filter
+        tension_obs = observation.tension_world_n
+        if on_ground:
+            if contact_reason in _RESTING:
+                self.rested = True
+            # Once per stay on the ground (again if the prior changes), not per sample.
+            if filt.initialized or self.prior != self.rested:
+                if self.rested:
+                    filt.reset(prior_world_n=_ZEROS3, prior_std_n=LIFTOFF_PRIOR_STD_N)
+                else:
+                    filt.reset()
+                self.prior = self.rested
+            if tension_obs is not None:
+                filt.learn_noise(tension_obs, dt_s)
+            return _GROUND
+        self.rested = False
+        self.prior = None
+        if tension_obs is None:
+            est = filt.coast(dt_s)
+            if est is None:  # nothing to coast before the first observation
+                return _GROUND
+        else:
+            est = filt.update(tension_obs, dt_s, thrust_axis_world=observation.thrust_axis_world)
+        if est.change_detected:
+            self.change_detections += 1
+        # Python floats from here on: a handful of numbers per message, for which numpy's
+        # per-call overhead would cost more than the arithmetic.
+        tension = _floats3(est.tension_world_n)
+        std = _floats3(est.std_n)
+        if not (_finite3(tension) and _finite3(std)):
+            # Restarted here, not at the Estimate: before the drone's next message is
+            # filtered (in a batch, before its localization).
+            self.restart()
+            return FilterOutput(tension, std, est.converged, False, None)
+        return FilterOutput(tension, std, est.converged, True, est)
+
+
+def _finite3(v: Sequence[float]) -> bool:
+    return math.isfinite(v[0]) and math.isfinite(v[1]) and math.isfinite(v[2])

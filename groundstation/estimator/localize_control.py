@@ -1,0 +1,111 @@
+"""Localization stage: which inputs a converged tension is localized with.
+
+Control around :func:`groundstation.localization.localize` (the equations: the catenary's
+``eq:catenary_*`` and the azimuth sources). The stage decides *what* it is given: the
+tension and its covariance, the tether (weight, length, base, floor), the reel's exit
+angles only while fresh (``[localization] reel_stale_after_s``: the reel reports at its own
+rate; the elevation only with ``[localization] elevation``), and the motion-capture
+position of the message (the ``mocap`` azimuth source).
+
+Localization holds no state, so the inputs of many messages can be localized together
+(:func:`localize_many`, one vectorised call once there are :data:`BATCH_LOCALIZE_MIN`),
+with the same floats as one by one (:func:`localize_one`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from groundstation.config import LocalizationSection
+from groundstation.localization import (
+    AngleObservation,
+    PositionEstimate,
+    localize,
+    localize_batch,
+)
+
+__all__ = ["BATCH_LOCALIZE_MIN", "LocalizeIn", "fresh_angle", "localize_many", "localize_one"]
+
+BATCH_LOCALIZE_MIN = 12
+"""Localizations from which :func:`localize_many` computes them in one vectorised call
+(:func:`localization.localize_batch`: numpy's per-call overhead is paid once, then a few µs
+per case; docs/pipeline_benchmark.md)."""
+
+Vec3 = tuple[float, float, float]
+
+
+@dataclass(frozen=True, slots=True)
+class LocalizeIn:
+    """What one message is localized from.
+
+    Attributes:
+        tension_world_n: the filtered tension, world frame, N, shape (3,).
+        cov_n2: its covariance, N², shape (3, 3).
+        weight_n_per_m: the tether's weight per length, N/m.
+        length_m: the tether's length out, m.
+        base_world_m: where it leaves the base, world frame, m, shape (3,).
+        floor_z_m: the floor's height, m.
+        exit_azimuth: the reel's exit azimuth while fresh (None: none).
+        exit_elevation: the reel's exit elevation while fresh and used (None: none).
+        mocap_world_m: this message's motion-capture position, m (None: none).
+    """
+
+    tension_world_n: np.ndarray
+    cov_n2: np.ndarray
+    weight_n_per_m: float
+    length_m: float
+    base_world_m: np.ndarray
+    floor_z_m: float
+    exit_azimuth: AngleObservation | None
+    exit_elevation: AngleObservation | None
+    mocap_world_m: Vec3 | None
+
+
+def fresh_angle(
+    angle: AngleObservation | None, received_s: float, now_s: float, stale_after_s: float
+) -> AngleObservation | None:
+    """A reel's exit angle received at ``received_s``, if still in use at ``now_s``."""
+    return angle if received_s >= now_s - stale_after_s else None
+
+
+def localize_one(section: LocalizationSection, x: LocalizeIn) -> PositionEstimate | None:
+    """The drone's position from one message's inputs (None: not determined)."""
+    return localize(
+        x.tension_world_n,
+        x.cov_n2,
+        x.weight_n_per_m,
+        x.length_m,
+        x.base_world_m,
+        x.floor_z_m,
+        azimuth=section.azimuth,
+        exit_azimuth=x.exit_azimuth,
+        exit_elevation=x.exit_elevation,
+        mocap_world_m=x.mocap_world_m,
+        mocap_std_m=section.mocap_std_m,
+    )
+
+
+def localize_many(
+    section: LocalizationSection, inputs: list[LocalizeIn]
+) -> list[PositionEstimate | None]:
+    """:func:`localize_one` of each, computed together once there are enough to pay for it
+    (:func:`localization.localize_batch`, which gives the same floats)."""
+    if len(inputs) < BATCH_LOCALIZE_MIN:
+        return [localize_one(section, x) for x in inputs]
+    exit_az = [x.exit_azimuth for x in inputs]
+    exit_el = [x.exit_elevation for x in inputs]
+    return localize_batch(
+        np.array([x.tension_world_n for x in inputs]),
+        np.array([x.cov_n2 for x in inputs]),
+        np.array([x.weight_n_per_m for x in inputs], dtype=float),
+        np.array([x.length_m for x in inputs], dtype=float),
+        np.array([x.base_world_m for x in inputs]),
+        np.array([x.floor_z_m for x in inputs], dtype=float),
+        azimuth=section.azimuth,
+        exit_azimuth=exit_az if any(v is not None for v in exit_az) else None,
+        exit_elevation=exit_el if any(v is not None for v in exit_el) else None,
+        mocap_world_m=[x.mocap_world_m for x in inputs] if section.azimuth == "mocap" else None,
+        mocap_std_m=section.mocap_std_m,
+    )

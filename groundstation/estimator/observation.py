@@ -1,0 +1,127 @@
+"""Observation stage: one Telemetry message to a tension observation (``eq:NE_tether``).
+
+Control around the physics of :func:`groundstation.tension.observe_tension` (the equation)
+and :mod:`groundstation.slow_accel` (the accelerometer's slow error, our bias estimator):
+
+1. the accelerometer reading, less the rest calibration's x/y offset when that is in force
+   (``[calibration] rest`` without the slow stage: with it, the slow stage owns every
+   per-power-on error of the accelerometer, the rest offset is measured and reported only);
+2. with the slow stage on (``[calibration] accel_slow``), less β and, while hovering, the
+   low band L (:func:`slow_accel.correct_accel_body_mps2`); the rotor drag's velocity from
+   the same state;
+3. :func:`observe_tension` with the calibration in force.
+
+After the contact stage has decided ground or air, :func:`learn_slow` feeds the same
+sample back into the slow stage (rest, air or hold).
+
+Pure functions of frozen inputs; a malformed reading raises
+:class:`~groundstation.tension.TensionError` (the drone counts it as a drop).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from groundstation import slow_accel as slow_mod
+from groundstation.messages import Telemetry
+from groundstation.tension import ObservationCalibration, TensionObservation, observe_tension
+
+__all__ = ["Observed", "learn_slow", "observe"]
+
+Vec3 = tuple[float, float, float]
+
+
+@dataclass(frozen=True, slots=True)
+class Observed:
+    """The observation stage's output for one message.
+
+    Attributes:
+        observation: the tension observation (None tension below the thrust ratio).
+        accel_read_body_mps2: the accelerometer as read, less a rest offset in force and
+            before the slow correction (what the slow stage learns from), body, m/s².
+    """
+
+    observation: TensionObservation
+    accel_read_body_mps2: Vec3
+
+
+def observe(
+    msg: Telemetry,
+    *,
+    mass_kg: float,
+    calibration: ObservationCalibration | None,
+    rest_offset_xy_mps2: tuple[float, float] | None,
+    slow: slow_mod.SlowAccelState | None,
+    ground_thrust_ratio: float,
+) -> Observed:
+    """The tension observation of one message (module doc, steps 1–3).
+
+    Args:
+        msg: the validated Telemetry.
+        mass_kg: the drone's mass, kg.
+        calibration: the sensor corrections in force (None: none).
+        rest_offset_xy_mps2: the rest calibration's x/y offset to subtract (None: none in
+            force, or the slow stage is on).
+        slow: the slow stage's state (None: ``[calibration] accel_slow`` off).
+        ground_thrust_ratio: below this fraction of the weight no tension is observed.
+
+    Raises:
+        TensionError: a degenerate quaternion or a non-finite reading.
+    """
+    accel = msg.accel_mps2
+    if rest_offset_xy_mps2 is not None:
+        ox, oy = rest_offset_xy_mps2
+        accel = (accel[0] - ox, accel[1] - oy, accel[2])
+    accel_read = accel
+    velocity = None
+    if slow is not None:
+        accel = slow_mod.correct_accel_body_mps2(slow, accel)
+        velocity = slow_mod.drag_velocity_world_mps(slow)
+    obs = observe_tension(
+        accel,
+        msg.quat_wxyz,
+        msg.thrust_n,
+        mass_kg,
+        armed=msg.armed,
+        calibration=calibration,
+        vbat_v=msg.vbat_v,
+        ground_thrust_ratio=ground_thrust_ratio,
+        velocity_world_mps=velocity,
+    )
+    return Observed(obs, accel_read)
+
+
+def learn_slow(
+    state: slow_mod.SlowAccelState,
+    params: slow_mod.SlowAccelParams,
+    msg: Telemetry,
+    observed: Observed,
+    *,
+    dt_s: float,
+    on_ground: bool,
+    calibration: ObservationCalibration | None,
+) -> slow_mod.SlowAccelState:
+    """One accepted sample into the slow stage: at rest (disarmed and still), in the air
+    (observing a tension), or held (spool-up, landing, a dip)."""
+    accel_read = observed.accel_read_body_mps2
+    phase: slow_mod.Phase
+    if not msg.armed and slow_mod.is_still(accel_read, msg.gyro_rps):
+        phase = "rest"
+    elif not on_ground and observed.observation.tension_world_n is not None:
+        phase = "air"
+    else:
+        phase = "hold"
+    if calibration is not None:
+        # β is what remains beyond a configured bias, which observe_tension subtracts.
+        bx, by, bz = calibration.accel_bias_mps2
+        accel_read = (accel_read[0] - bx, accel_read[1] - by, accel_read[2] - bz)
+    return slow_mod.slow_accel_step(
+        state,
+        params,
+        dt_s=dt_s,
+        stamp_s=msg.stamp_s,
+        accel_body_mps2=accel_read,
+        R_world_body=slow_mod.rows_from_quat_wxyz(msg.quat_wxyz),
+        phase=phase,
+        mocap_world_m=msg.position_m,
+    )
