@@ -6,7 +6,9 @@
               ─▶ filter ─▶ localize ─▶ follow ─▶ Estimate, Setpoint, Stop
 
 Each stage is a module of :mod:`groundstation.estimator` (control) around a physics module
-(the equations), joined by frozen dataclasses:
+(the equations), joined by immutable records read by name (``typing.NamedTuple``: a frozen
+dataclass's ``__init__`` sets each field through ``object.__setattr__``, six times the cost,
+and a message crosses some 35 fields of them):
 
 ============================  ==================================  ===========================
 stage                         control                             physics
@@ -36,8 +38,7 @@ from __future__ import annotations
 import math
 from collections import Counter, deque
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -129,8 +130,7 @@ class Rate:
         return n / self.window_s
 
 
-@dataclass(frozen=True, slots=True)
-class Front:
+class Front(NamedTuple):
     """A telemetry message stepped up to its localization (:meth:`DroneEstimator.front`).
 
     Attributes:

@@ -17,14 +17,14 @@ given the contact stage's ground/air decision and the observation:
 
 :class:`FilterControl` owns the drone's TensionFilter (a mutable object, stepped in place:
 copying its windows each message would cost more than the step) and the two flags above;
-:meth:`FilterControl.step` returns a frozen :class:`FilterOutput`.
+:meth:`FilterControl.step` returns an immutable :class:`FilterOutput`.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from typing import NamedTuple
 
 from groundstation.tension import (
     TensionEstimate,
@@ -42,8 +42,7 @@ _RESTING = ("disarmed", "low_thrust")
 """Contact reasons that mean the drone was seen resting on the floor."""
 
 
-@dataclass(frozen=True, slots=True)
-class FilterOutput:
+class FilterOutput(NamedTuple):
     """The filter stage's output for one message.
 
     Attributes:

@@ -12,7 +12,7 @@ state and a frozen :class:`GateVerdict`; a refused message leaves the state as i
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from typing import NamedTuple
 
 __all__ = ["MAX_GAP_S", "GateState", "GateVerdict", "gate_step", "mark_stale"]
 
@@ -21,8 +21,7 @@ MAX_GAP_S = 1.0
 have changed meanwhile."""
 
 
-@dataclass(frozen=True, slots=True)
-class GateState:
+class GateState(NamedTuple):
     """What the gate remembers of one drone's stream.
 
     Attributes:
@@ -39,8 +38,7 @@ class GateState:
     stale: bool = True
 
 
-@dataclass(frozen=True, slots=True)
-class GateVerdict:
+class GateVerdict(NamedTuple):
     """The gate's decision on one message.
 
     Attributes:

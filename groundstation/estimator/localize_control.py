@@ -14,7 +14,7 @@ with the same floats as one by one (:func:`localize_one`).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -36,8 +36,7 @@ per case; docs/pipeline_benchmark.md)."""
 Vec3 = tuple[float, float, float]
 
 
-@dataclass(frozen=True, slots=True)
-class LocalizeIn:
+class LocalizeIn(NamedTuple):
     """What one message is localized from.
 
     Attributes:

@@ -20,7 +20,7 @@ Pure functions of frozen inputs; a malformed reading raises
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from typing import NamedTuple
 
 from groundstation import slow_accel as slow_mod
 from groundstation.messages import Telemetry
@@ -31,8 +31,7 @@ __all__ = ["Observed", "learn_slow", "observe"]
 Vec3 = tuple[float, float, float]
 
 
-@dataclass(frozen=True, slots=True)
-class Observed:
+class Observed(NamedTuple):
     """The observation stage's output for one message.
 
     Attributes:
