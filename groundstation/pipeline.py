@@ -44,6 +44,7 @@ from groundstation.estimator.follow_control import (
     follow_stamped,
     refuse_command,
 )
+from groundstation.estimator.localize_control import exit_azimuth_default_std_rad
 from groundstation.localization import AngleObservation
 from groundstation.messages import (
     Event,
@@ -105,35 +106,6 @@ class Parsed:
     """The sender's zenoh session id, where the sample carried it."""
     ignored: tuple[str, ...] = ()
     """Unknown fields of a follow/params command (ignored, but told to the sender)."""
-
-
-EXIT_AZIMUTH_MIN_COS = 0.02
-"""Floor of ``cos(elevation)`` in :func:`exit_azimuth_default_std_rad` (at most 50 times the
-configured σ: some 1.5 rad for 0.03 rad, i.e. no azimuth)."""
-
-
-def exit_azimuth_default_std_rad(std_rad: float, elevation_rad: float | None) -> float:
-    """σ of a Reel ``exit_azimuth_rad`` sent without ``exit_azimuth_std_rad``, rad.
-
-    ``[localization] exit_azimuth_std_rad`` is the σ of the tether's *direction* at the
-    exit, across it; the azimuth of that direction is the angle of its horizontal
-    projection, which shrinks as ``cos(elevation)``: the same sideways error is
-    ``std / cos(elevation)`` of azimuth, and near plumb (elevation ±90°) any azimuth is
-    noise. So ``std / max(cos(elevation), EXIT_AZIMUTH_MIN_COS)`` with the exit elevation
-    known (this Reel message's, or the last one received within ``reel_stale_after_s``).
-    Without an elevation it stays ``std``, as for a tether leaving level: a reel that sends
-    an azimuth without elevation and may point up steeply should send its own σ.
-
-    Args:
-        std_rad: The configured σ, rad.
-        elevation_rad: The exit elevation, rad, or None when unknown.
-
-    Returns:
-        The σ to fuse the exit azimuth with, rad.
-    """
-    if elevation_rad is None or not math.isfinite(elevation_rad):
-        return std_rad
-    return std_rad / max(math.cos(elevation_rad), EXIT_AZIMUTH_MIN_COS)
 
 
 class Pipeline:

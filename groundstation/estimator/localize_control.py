@@ -14,6 +14,7 @@ with the same floats as one by one (:func:`localize_one`).
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -26,7 +27,14 @@ from groundstation.localization import (
     localize_batch,
 )
 
-__all__ = ["BATCH_LOCALIZE_MIN", "LocalizeIn", "fresh_angle", "localize_many", "localize_one"]
+__all__ = [
+    "BATCH_LOCALIZE_MIN",
+    "LocalizeIn",
+    "exit_azimuth_default_std_rad",
+    "fresh_angle",
+    "localize_many",
+    "localize_one",
+]
 
 BATCH_LOCALIZE_MIN = 12
 """Localizations from which :func:`localize_many` computes them in one vectorised call
@@ -60,6 +68,35 @@ class LocalizeIn(NamedTuple):
     exit_azimuth: AngleObservation | None
     exit_elevation: AngleObservation | None
     mocap_world_m: Vec3 | None
+
+
+EXIT_AZIMUTH_MIN_COS = 0.02
+"""Floor of ``cos(elevation)`` in :func:`exit_azimuth_default_std_rad` (at most 50 times the
+configured σ: some 1.5 rad for 0.03 rad, i.e. no azimuth)."""
+
+
+def exit_azimuth_default_std_rad(std_rad: float, elevation_rad: float | None) -> float:
+    """σ of a Reel ``exit_azimuth_rad`` sent without ``exit_azimuth_std_rad``, rad.
+
+    ``[localization] exit_azimuth_std_rad`` is the σ of the tether's *direction* at the
+    exit, across it; the azimuth of that direction is the angle of its horizontal
+    projection, which shrinks as ``cos(elevation)``: the same sideways error is
+    ``std / cos(elevation)`` of azimuth, and near plumb (elevation ±90°) any azimuth is
+    noise. So ``std / max(cos(elevation), EXIT_AZIMUTH_MIN_COS)`` with the exit elevation
+    known (this Reel message's, or the last one received within ``reel_stale_after_s``).
+    Without an elevation it stays ``std``, as for a tether leaving level: a reel that sends
+    an azimuth without elevation and may point up steeply should send its own σ.
+
+    Args:
+        std_rad: The configured σ, rad.
+        elevation_rad: The exit elevation, rad, or None when unknown.
+
+    Returns:
+        The σ to fuse the exit azimuth with, rad.
+    """
+    if elevation_rad is None or not math.isfinite(elevation_rad):
+        return std_rad
+    return std_rad / max(math.cos(elevation_rad), EXIT_AZIMUTH_MIN_COS)
 
 
 def fresh_angle(
