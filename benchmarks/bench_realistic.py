@@ -115,6 +115,11 @@ def _tug_scenario() -> str:
     return name
 
 
+FILTER_OVERRIDES: dict[str, Any] = {}
+"""``[filter]`` values every flight of this module is served with (benchmarks.hover_exit
+sets ``accel_hover_exit_window_s``); empty: the defaults."""
+
+
 def _settings(
     noise_mps2: float,
     seed: int,
@@ -128,6 +133,8 @@ def _settings(
     }
     if calibration is not None:
         over["calibration"] = calibration
+    if FILTER_OVERRIDES:
+        over["filter"] = dict(FILTER_OVERRIDES)
     return load_settings(None, over, use_env=False)
 
 

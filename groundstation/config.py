@@ -232,6 +232,11 @@ class FilterSection(_Section):
     """(added) While the drone hovers (1 s mean acceleration < 0.2 m/s², speed < 0.3 m/s),
     the hover model replaces the accelerometer below ``1/(2π·this)``: its vibration noise
     leaves the tension filter's band (groundstation.slow_accel), s; 0: off."""
+    accel_hover_exit_window_s: float = Field(0.0, ge=0.0)
+    """(added) A second, shorter mean for the hover test: the hover also ends when the
+    acceleration's mean over this window exceeds 4 of its own σ (tugs end it in ~0.1 s instead
+    of the 1 s mean's ~0.5 s: tug t90 about halved on the realistic simulator, hover error
+    ~15 % larger; docs/estimator_design.md), s; 0: off."""
     drag_velocity_time_constant_s: float = Field(8.0, gt=0.0)
     """(added) Without motion capture the rotor-drag term's velocity is the accelerometer's
     leaky integral with this time constant, s (groundstation.slow_accel)."""

@@ -84,6 +84,12 @@ class SlowAccelParams:
         quasi_static_speed_mps: ... and the drag's velocity below this, m/s.
         release_time_constant_s: leaving quasi-static, the hover model hands the band back
             to the accelerometer over this, s.
+        fast_window_s: the short mean of the same acceleration, s: quasi-static also needs
+            it small, so a tug or a manoeuvre ends the hover in a fraction of a second
+            instead of the 1 s mean's second (0: off, the 1 s mean alone).
+        fast_sigmas: "small" for the short mean: below this many of its own standard
+            deviations (from the vibration measured around the 1 s mean), and never below
+            ``quasi_static_accel_mps2``: the vibration alone does not end a hover.
     """
 
     time_constant_s: float = 60.0
@@ -96,12 +102,18 @@ class SlowAccelParams:
     quasi_static_accel_mps2: float = 0.2
     quasi_static_speed_mps: float = 0.3
     release_time_constant_s: float = 0.5
+    fast_window_s: float = 0.0
+    fast_sigmas: float = 4.0
 
     def __post_init__(self) -> None:
         if not (self.hover_crossover_s >= 0.0):
             raise ValueError(
                 f"SlowAccelParams.hover_crossover_s must be >= 0, got {self.hover_crossover_s!r}"
             )
+        for name in ("fast_window_s", "fast_sigmas"):
+            value = getattr(self, name)
+            if not (value >= 0.0 and math.isfinite(value)):
+                raise ValueError(f"SlowAccelParams.{name} must be finite and >= 0, got {value!r}")
         for name in (
             "quasi_static_accel_mps2",
             "quasi_static_speed_mps",
@@ -141,6 +153,9 @@ class SlowAccelState:
         fast_body_mps2: L, the accelerometer's low band that the hover model replaces while
             quasi-static (zero otherwise), body frame, m/s².
         accel_1s_body_mps2: the 1 s mean of ``f − β − Rᵀ·g·e3``, body frame, m/s².
+        accel_fast_body_mps2: its mean over ``fast_window_s``, body frame, m/s².
+        vibration_var_mps4: the variance per axis of ``f − β − Rᵀ·g·e3`` around its 1 s
+            mean (the vibration), (m/s²)², a 2 s mean.
         quasi_static: the drone hovers (both below their thresholds).
         regime_velocity_world_mps: the velocity the hover test uses: motion capture's, or a
             leaky integral with a 2 s leak (a bias not yet learnt drifts it 2 s × less than
@@ -163,6 +178,8 @@ class SlowAccelState:
     mocap_samples: int = 0
     fast_body_mps2: Vec3 = _ZERO3
     accel_1s_body_mps2: Vec3 = _ZERO3
+    accel_fast_body_mps2: Vec3 = _ZERO3
+    vibration_var_mps4: float = 0.0
     quasi_static: bool = False
     regime_velocity_world_mps: Vec3 = _ZERO3
 
@@ -264,6 +281,7 @@ def slow_accel_step(
             velocity_source="none",
             fast_body_mps2=_ZERO3,
             accel_1s_body_mps2=_ZERO3,
+            accel_fast_body_mps2=_ZERO3,
             quasi_static=False,
             regime_velocity_world_mps=_ZERO3,
         )
@@ -317,6 +335,7 @@ def slow_accel_step(
             velocity_source="none",
             fast_body_mps2=_ZERO3,
             accel_1s_body_mps2=_ZERO3,
+            accel_fast_body_mps2=_ZERO3,
             quasi_static=False,
             regime_velocity_world_mps=_ZERO3,
         )
@@ -360,11 +379,26 @@ def slow_accel_step(
         leak2 = math.exp(-dt_s / 2.0)
         rv = (ox * leak2 + awx * dt_s, oy * leak2 + awy * dt_s, oz * leak2 + awz * dt_s)
     vx, vy, vz = rv
+    # The vibration around the 1 s mean (per axis), and the short mean: its standard
+    # deviation is the vibration's times sqrt(k / (2 − k)) for an exponential mean of gain k
+    # over white noise.
+    dx, dy, dz = ex - a1[0], ey - a1[1], ez - a1[2]
+    kv = min(dt_s / 2.0, 1.0)
+    var = st.vibration_var_mps4
+    var += kv * ((dx * dx + dy * dy + dz * dz) / 3.0 - var)
+    qs2 = params.quasi_static_accel_mps2**2
     quasi = (
         params.hover_crossover_s > 0.0
-        and a1[0] * a1[0] + a1[1] * a1[1] + a1[2] * a1[2] < params.quasi_static_accel_mps2**2
+        and a1[0] * a1[0] + a1[1] * a1[1] + a1[2] * a1[2] < qs2
         and vx * vx + vy * vy + vz * vz < params.quasi_static_speed_mps**2
     )
+    af = _ZERO3
+    if params.fast_window_s > 0.0:
+        kf = min(dt_s / params.fast_window_s, 1.0)
+        fx, fy, fz = st.accel_fast_body_mps2
+        af = (fx + kf * (ex - fx), fy + kf * (ey - fy), fz + kf * (ez - fz))
+        limit2 = max(qs2, params.fast_sigmas**2 * var * kf / (2.0 - kf))
+        quasi = quasi and af[0] * af[0] + af[1] * af[1] + af[2] * af[2] < limit2
     lx, ly, lz = st.fast_body_mps2
     if quasi:
         k = min(dt_s / params.hover_crossover_s, 1.0)
@@ -380,6 +414,8 @@ def slow_accel_step(
         velocity_source=source,
         fast_body_mps2=fast,
         accel_1s_body_mps2=a1,
+        accel_fast_body_mps2=af,
+        vibration_var_mps4=var,
         quasi_static=quasi,
         regime_velocity_world_mps=(rv[0], rv[1], rv[2]),
     )

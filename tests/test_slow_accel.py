@@ -224,3 +224,55 @@ def test_while_hovering_the_hover_model_takes_the_low_band() -> None:
         hover,
     )
     assert not off.quasi_static and off.fast_body_mps2 == (0.0, 0.0, 0.0)
+
+
+def _hover_then_push(
+    params: SlowAccelParams, push_mps2: float, vibration_mps2: float = 0.3, seed: int = 0
+) -> list[bool]:
+    """Hover with white vibration for 5 s, then a sustained push along x: the quasi-static
+    flag at each sample (dt 4 ms)."""
+    rng = np.random.default_rng(seed)
+    state = SlowAccelState()
+    flags = []
+    for i in range(2000):
+        push = push_mps2 if i >= 1250 else 0.0
+        ax, ay, az = rng.normal(0.0, vibration_mps2, 3)
+        state = slow_accel_step(
+            state,
+            params,
+            dt_s=0.004,
+            stamp_s=i * 0.004,
+            accel_body_mps2=(ax + push, ay, G + az),
+            R_world_body=LEVEL,
+            phase="air",
+            mocap_world_m=None,
+        )
+        flags.append(state.quasi_static)
+    return flags
+
+
+def test_the_short_window_ends_a_hover_sooner_without_ending_it_on_vibration() -> None:
+    slow_only = SlowAccelParams()  # fast_window_s 0: the 1 s mean alone
+    fast = SlowAccelParams(fast_window_s=0.3)
+    for params in (slow_only, fast):
+        for vibration in (0.3, 1.0):
+            hover = _hover_then_push(params, 0.0, vibration)[750:]  # from 3 s: vibration only
+            assert np.mean(hover) > 0.95, "vibration alone must not end the hover"
+
+    def exit_s(flags: list[bool]) -> float:
+        after = flags[1250:]
+        return 0.004 * next(i for i, q in enumerate(after) if not q)
+
+    # A 0.5 m/s² push (a 15 mN tug on a 30 g drone): the 1 s mean reaches 0.2 m/s² after
+    # ~0.5 s, the 0.3 s mean after ~0.15 s.
+    slow_exit = exit_s(_hover_then_push(slow_only, 0.5))
+    fast_exit = exit_s(_hover_then_push(fast, 0.5))
+    assert slow_exit > 0.35
+    assert fast_exit < 0.5 * slow_exit
+
+
+def test_without_the_short_window_the_hover_test_is_the_1s_mean_alone() -> None:
+    # fast_window_s 0 (the default) changes nothing the short mean would: same flags as a
+    # short window whose limit can never be reached.
+    never = SlowAccelParams(fast_window_s=0.3, fast_sigmas=1e6)
+    assert _hover_then_push(SlowAccelParams(), 0.5) == _hover_then_push(never, 0.5)

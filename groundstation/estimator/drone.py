@@ -221,6 +221,7 @@ class DroneEstimator:
                 time_constant_s=params.filter.accel_slow_time_constant_s,
                 velocity_time_constant_s=params.filter.drag_velocity_time_constant_s,
                 hover_crossover_s=params.filter.accel_hover_crossover_s,
+                fast_window_s=params.filter.accel_hover_exit_window_s,
             )
             if params.calibration.accel_slow
             else None
