@@ -264,7 +264,7 @@ def _split_targets() -> dict[str, tuple[tuple[Any, str], ...]]:
         "slow_accel": ((drone_mod, "learn_slow"),),
         "filter": ((FilterControl, "step"),),
         "localize": ((drone_mod, "localize_one"),),
-        "follow": ((drone_mod, "follow_decide"),),
+        "follow": ((drone_mod, "follow_stamped"), (drone_mod, "follow_decide")),
         "estimate": ((drone_mod.DroneEstimator, "_estimate"),),
     }
 

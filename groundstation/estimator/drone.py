@@ -50,7 +50,7 @@ from groundstation.calibration import RestCalibrator
 from groundstation.config import CalibrationSection, DroneParams, Settings
 from groundstation.estimator import checks, output
 from groundstation.estimator.filter_control import FilterControl
-from groundstation.estimator.follow_control import follow_decide
+from groundstation.estimator.follow_control import follow_decide, follow_stamped
 from groundstation.estimator.gate import GateState, gate_step, mark_stale
 from groundstation.estimator.localize_control import LocalizeIn, fresh_angle, localize_one
 from groundstation.estimator.observation import learn_slow, observe
@@ -443,21 +443,12 @@ class DroneEstimator:
         # This message's flag, as its front pass left it (in a batch, later messages'
         # front passes have moved it since).
         self.calibration_extrapolated = front.calibration_extrapolated
-        self.follow_state, decision = follow_decide(
-            self.follow_state,
-            self.follow_params,
-            stamp_s=msg.stamp_s,
-            tension_world_n=front.tension_world_n,
-            converged=front.converged,
-            position=position,
-            mocap_world_m=front.mocap_world_m,
-            trusted_without_mocap=self.calibration_source != "none",
-            base_world_m=self.base_world_m,
-            length_m=self.length_m,
-            floor_z_m=self.params.base.floor_z_m,
-            weight_n_per_m=self.weight_n_per_m,
-            on_ground=front.on_ground,
-        )
+        fs = self.follow_state
+        if not (fs.enabled or fs.active) and math.isfinite(msg.stamp_s):
+            # Follow off and idle (follow_decide's first rule, without its call's cost).
+            self.follow_state, decision = follow_stamped(fs, msg.stamp_s), None
+        else:
+            self.follow_state, decision = self._follow(front, position)
         out: list[Sample] = []
         estimate = self._estimate(front, position) if front.finite else None
         if estimate is not None:
@@ -477,6 +468,25 @@ class DroneEstimator:
             out.append(Sample(self.stop_key, stop.to_json()))
             self._on_stop(self.drone, front.now_s, decision.stop_reason)
         return out
+
+    def _follow(
+        self, front: Front, position: PositionEstimate | None
+    ) -> tuple[follow_mod.FollowState, follow_mod.FollowDecision | None]:
+        return follow_decide(
+            self.follow_state,
+            self.follow_params,
+            stamp_s=front.msg.stamp_s,
+            tension_world_n=front.tension_world_n,
+            converged=front.converged,
+            position=position,
+            mocap_world_m=front.mocap_world_m,
+            trusted_without_mocap=self.calibration_source != "none",
+            base_world_m=self.base_world_m,
+            length_m=self.length_m,
+            floor_z_m=self.params.base.floor_z_m,
+            weight_n_per_m=self.weight_n_per_m,
+            on_ground=front.on_ground,
+        )
 
     def mark_stale(self) -> bool:
         """The drone fell silent: its next message resumes the stream, and follow is off.
