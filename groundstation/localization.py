@@ -35,22 +35,27 @@ Departures from the paper:
   first observation instead.
 * **Uncertainty.** The tension covariance is carried to (r, z), and with the tension's
   azimuth to the horizontal position, by the unscented transform (7 sigma points,
-  kappa = 0) through one vectorised catenary call, so the large non-linearity of r in H
+  kappa = 0) through the closed-form catenary of each, so the large non-linearity of r in H
   near a taut tether, and the correlation of r with the direction under an anisotropic
   noise, are respected; the other azimuth sources add their variance across.
 
-Cost: :func:`try_localize` runs once per telemetry message. Its 3-vector and 3x3
-arithmetic is done in Python floats, and the one catenary call on 8 points goes to
-``catenary.locate_free``, the body of :func:`catenary.locate` without its input checks,
-which this module has already made (see :func:`_locate_points`); the elevation's fusion
-adds a 2x2 Gauss-Newton and a 5-point call. :func:`try_localize_batch` does the common case
-of many messages at once over arrays (the service's batched drain), with the same results
-to the bit; numpy's per-call overhead is then paid once per batch instead of per message.
+Cost: :func:`try_localize` runs once per telemetry message, on 3-vectors and a 3x3, all in
+Python floats (numpy's ~1 us per call would cost more than the arithmetic): the catenary of
+each sigma point is ``catenary.locate_free_floats`` (``locate_with_floor_floats`` near the
+floor), the body of :func:`catenary.locate` without its input checks, which this module has
+already made. The common case (a freely hanging tether, the azimuth from the tension alone
+and certain) is ``_localize_tension_free``: the general path's operations less those whose
+result it knows (terms weighted by 0, the reach at ``k sigma_H``), the same floats
+(``tests/test_localization_fast.py``). :func:`try_localize_batch` does many messages at once
+over arrays (the service's batched drain), with the same results to the bit (its ``hypot``
+is ``math.hypot``'s, :func:`_hypot`); numpy's per-call overhead is then paid once per batch.
 """
 
 from __future__ import annotations
 
 import math
+import struct
+import sys
 from dataclasses import dataclass
 from typing import Literal
 
@@ -85,6 +90,8 @@ MIN_HORIZONTAL_N = 1e-9
 """H at or below this is treated as zero whatever its covariance (a noise-free plumb
 tether has H ~ 1e-17 N from rounding, with a meaningless direction)."""
 
+_FLOAT64 = np.dtype(np.float64)
+_ndarray = np.ndarray
 _N = 3  # state dimension of the unscented transform
 _SIGMA_SCALE = math.sqrt(_N)  # sqrt(n + kappa), kappa = 0
 _SIGMA_WEIGHT = 1.0 / (2 * _N)
@@ -143,37 +150,30 @@ class LocalizationFailure:
     reason: str
 
 
-def _frozen(a: ArrayLike) -> FloatArray:
-    out = np.array(a, dtype=np.float64)
-    out.setflags(write=False)
-    return out
+_new_object = object.__new__
+_set_attr = object.__setattr__
+_pack15 = struct.Struct("=15d").pack
+_SHAPE_3X3 = (3, 3)
 
 
-def _locate_floor(
-    horizontal_n: FloatArray,
-    vertical_n: FloatArray,
-    weight_n_per_m: float,
-    length_m: float,
-    base_z_m: float,
-    floor_z_m: float,
-) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
-    loc = catenary.locate_with_floor(
-        horizontal_n, vertical_n, weight_n_per_m, length_m, base_z_m, floor_z_m
-    )
-    r = np.asarray(loc.r_m, dtype=np.float64)
+def _frozen_arrays(*values: float) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Position (3), std (3) and covariance (3x3, row-major) from 15 floats, read-only.
 
-    def full(value: object) -> FloatArray:
-        arr = np.asarray(value, dtype=np.float64)
-        return arr if arr.shape == r.shape else np.broadcast_to(arr, r.shape)
+    Views of one array over an immutable bytes object, read-only from the start: where
+    ``np.array`` and ``setflags`` per array cost ~1 us each on the per-message path, this
+    is one array and three slices.
+    """
+    buf = np.frombuffer(_pack15(*values))
+    return buf[:3], buf[3:6], buf[6:].reshape(_SHAPE_3X3)
 
-    return (
-        r,
-        full(loc.z_m),
-        full(loc.r_min_m),
-        full(loc.r_max_m),
-        full(loc.floor_contact),
-        full(loc.floor_run_m),
-    )
+
+def _estimate(fields: dict[str, object]) -> PositionEstimate:
+    """``PositionEstimate(**fields)`` with every field given, without the frozen
+    dataclass's ``__init__``, which sets each field through ``object.__setattr__`` (~0.1 us
+    a field, 13 fields, once per message). The result is an ordinary, equal instance."""
+    obj: PositionEstimate = _new_object(PositionEstimate)
+    _set_attr(obj, "__dict__", fields)
+    return obj
 
 
 def _sqrt_psd(cov: FloatArray) -> FloatArray:
@@ -193,9 +193,12 @@ def _finite_floats(value: object, shape: tuple[int, ...]) -> list[float] | None:
     """
     kind = type(value)
     if kind is np.ndarray:
-        if value.shape != shape or value.dtype != np.float64:  # type: ignore[attr-defined]
+        # `is` first: the builtin dtypes are singletons (an unpickled array's is not), and
+        # comparing with the dtype, not np.float64, spares a conversion.
+        dtype = value.dtype  # type: ignore[attr-defined]
+        if (dtype is not _FLOAT64 and dtype != _FLOAT64) or value.shape != shape:  # type: ignore[attr-defined]
             return None
-        flat: list[float] = value.ravel().tolist()  # type: ignore[attr-defined]
+        flat: list[float] = value.tolist() if len(shape) == 1 else value.ravel().tolist()  # type: ignore[attr-defined]
     elif (kind is tuple or kind is list) and len(shape) == 1 and len(value) == shape[0]:  # type: ignore[arg-type]
         try:
             flat = [float(v) for v in value]  # type: ignore[attr-defined]
@@ -235,46 +238,37 @@ def _cholesky3(c: list[float]) -> list[float] | None:
 
 
 def _locate_points(
-    horizontal_n: FloatArray,
-    vertical_n: FloatArray,
+    horizontal_n: list[float],
+    vertical_n: list[float],
     weight_n_per_m: float,
     length_m: float,
     base_z_m: float,
     floor_z_m: float,
-) -> tuple[list[float], list[float], list[float], list[float], list[float], list[float]]:
-    """r, z, r_min, r_max, floor_contact (0/1), floor_run for the few points of one
-    estimate, as lists of floats.
+) -> tuple[list[float], list[float], list[float], list[float], list[bool], list[float]]:
+    """r, z, r_min, r_max, floor_contact, floor_run for the few points of one estimate.
 
-    The free-hanging solution comes first, and the floor-aware
-    :func:`catenary.locate_with_floor` (twice the cost) only when some free solution comes
-    within 1 um of the floor; away from the floor both give the same answer. The
-    free-hanging solution comes from ``catenary.locate_free``, the body of
-    :func:`catenary.locate` after its input checks: ``try_localize`` has already checked
-    omega, L and z_i, and the caller checks H >= 0 and T_v finite for every point, so the
-    checks (about two thirds of ``locate``'s cost on 7 points) would only repeat them.
+    The free-hanging solution comes first, and the floor-aware one
+    (:func:`catenary.locate_with_floor_floats`) only when some free solution comes within
+    1 um of the floor; away from the floor both give the same answer. Both are the
+    catenary's float versions, without input checks: ``try_localize`` has already checked
+    omega, L and z_i, and the caller checks H >= 0 and T_v finite for every point.
     """
-    a = horizontal_n / weight_n_per_m  # eq:a_param
-    s2 = vertical_n / weight_n_per_m  # eq:s2_param
-    r_arr, z_arr = catenary.locate_free(
-        a, s2, np.asarray(length_m, dtype=np.float64), np.asarray(base_z_m, dtype=np.float64)
-    )
-    r: list[float] = r_arr.tolist()
-    z: list[float] = z_arr.tolist()
+    a = [h / weight_n_per_m for h in horizontal_n]  # eq:a_param
+    s2 = [v / weight_n_per_m for v in vertical_n]  # eq:s2_param
+    r, z = catenary.locate_free_floats(a, s2, length_m, base_z_m)
     if floor_z_m != -math.inf:
         # Lowest point of the free curve (NOTES): the drone when s2 < 0, the base when
         # s2 > L, else the vertex, sqrt(a^2 + s2^2) - a below the drone.
         limit = floor_z_m + 1e-6
-        hyp = np.hypot(a, s2).tolist()
-        for ai, si, zi, hi in zip(a.tolist(), s2.tolist(), z, hyp, strict=True):
-            lowest = zi if si < 0.0 else (base_z_m if si > length_m else zi - (hi - ai))
+        hypot = math.hypot
+        for ai, si, zi in zip(a, s2, z, strict=True):
+            lowest = zi if si < 0.0 else (base_z_m if si > length_m else zi - (hypot(ai, si) - ai))
             if not lowest > limit:
-                floor = _locate_floor(
+                return catenary.locate_with_floor_floats(
                     horizontal_n, vertical_n, weight_n_per_m, length_m, base_z_m, floor_z_m
                 )
-                r, z, r_min, r_max, contact, run = (v.tolist() for v in floor)
-                return r, z, r_min, r_max, contact, run
     zeros = [0.0] * len(r)
-    return r, z, r, r, zeros, zeros
+    return r, z, r, r, [False] * len(r), zeros
 
 
 @dataclass(frozen=True)
@@ -460,9 +454,86 @@ def try_localize(
     Returns:
         The estimate, or a :class:`LocalizationFailure` with the reason. Never NaN.
     """
+    return _try_localize(
+        tension_world_n,
+        tension_cov_n2,
+        weight_n_per_m,
+        length_m,
+        base_world_m,
+        floor_z_m,
+        plumb_k,
+        azimuth,
+        exit_azimuth,
+        exit_elevation,
+        mocap_world_m,
+        mocap_std_m,
+    )
+
+
+def _try_localize(
+    tension_world_n: ArrayLike | None,
+    tension_cov_n2: ArrayLike,
+    weight_n_per_m: float,
+    length_m: float,
+    base_world_m: ArrayLike,
+    floor_z_m: float,
+    plumb_k: float,
+    azimuth: AzimuthMode,
+    exit_azimuth: AngleObservation | None,
+    exit_elevation: AngleObservation | None,
+    mocap_world_m: ArrayLike | None,
+    mocap_std_m: float,
+) -> PositionEstimate | LocalizationFailure:
+    """:func:`try_localize`, its arguments by position (``localize`` calls it too)."""
     # This runs once per telemetry message on 3-vectors and a 3x3: the arithmetic is on
-    # Python floats, and numpy is kept for the one vectorised catenary call (8 points),
-    # where it pays.
+    # Python floats (numpy's ~1 us per call would cost more than the arithmetic), and the
+    # common case (_localize_tension_free) leaves out what it knows the result of. Its
+    # inputs as the pipeline gives them (float64 arrays, float scalars) are read and
+    # checked here at the least cost; anything else takes the general path below.
+    T = tension_world_n
+    C = tension_cov_n2
+    B = base_world_m
+    if (
+        type(T) is _ndarray
+        and type(C) is _ndarray
+        and type(B) is _ndarray
+        and T.dtype is _FLOAT64
+        and C.dtype is _FLOAT64
+        and B.dtype is _FLOAT64
+        and T.shape == (3,)
+        and C.shape == (3, 3)
+        and B.shape == (3,)
+        and type(weight_n_per_m) is float
+        and type(length_m) is float
+        and type(floor_z_m) is float
+        and type(plumb_k) is float
+        and (
+            azimuth == "tension"
+            or (azimuth == "auto" and (exit_azimuth is None or _valid_angle(exit_azimuth) is None))
+        )
+        and (exit_elevation is None or _valid_angle(exit_elevation) is None)
+    ):
+        tx, ty, tz = T.tolist()
+        (c00, c01, c02), (c10, c11, c12), (c20, c21, c22) = C.tolist()
+        bx, by, bz = B.tolist()
+        # The general path's checks, all passed (a non-finite sum: some value is not
+        # finite, or the sum overflows; the general path tells which).
+        if (
+            math.isfinite(
+                tx + ty + tz + bx + by + bz + c00 + c01 + c02 + c10 + c11 + c12 + c20 + c21 + c22
+            )
+            and 0.0 < weight_n_per_m < math.inf
+            and 0.0 < length_m < math.inf
+            and (floor_z_m == -math.inf or (math.isfinite(floor_z_m) and not bz < floor_z_m))
+        ):
+            common = _localize_tension_free(
+                tx, ty, tz,
+                0.5 * (c00 + c00), 0.5 * (c01 + c10), 0.5 * (c02 + c20),
+                0.5 * (c11 + c11), 0.5 * (c12 + c21), 0.5 * (c22 + c22),
+                weight_n_per_m, length_m, bx, by, bz, floor_z_m, plumb_k,
+            )  # fmt: skip
+            if common is not None:
+                return common
     if tension_world_n is None:
         return LocalizationFailure("no tension estimate")
     if azimuth not in AZIMUTH_MODES:
@@ -500,6 +571,10 @@ def try_localize(
     cxy, cxz, cyz = 0.5 * (c01 + c10), 0.5 * (c02 + c20), 0.5 * (c12 + c21)
     cxx, cyy, czz = 0.5 * (c00 + c00), 0.5 * (c11 + c11), 0.5 * (c22 + c22)
     cov = [cxx, cxy, cxz, cxy, cyy, cyz, cxz, cyz, czz]
+    # Python floats from here on, as numpy's .tolist() gave them before (an np.float64
+    # omega would make every result an np.float64).
+    weight_n_per_m, length_m = float(weight_n_per_m), float(length_m)
+    floor_z_m, plumb_k = float(floor_z_m), float(plumb_k)
 
     # eq:a_param, eq:s2_param act through H and T_v (catenary.locate divides by omega).
     horizontal_n = math.hypot(tx, ty)
@@ -520,15 +595,17 @@ def try_localize(
     py = [ty, ty + b0, ty + b1, ty + b2, ty - b0, ty - b1, ty - b2]
     pz = [tz, tz + c0, tz + c1, tz + c2, tz - c0, tz - c1, tz - c2]
     n_pts = 2 * _N + 1
-    h_pts: list[float] = np.hypot(px, py).tolist()
+    hypot = math.hypot
+    h_pts = [hypot(x, y) for x, y in zip(px, py, strict=True)]
     h_all = [*h_pts, max(plumb_k * sigma_h_n, horizontal_n)]
-    v_all = [-v for v in pz] + [vertical_n]
+    v_all = [-v for v in pz]
+    v_all.append(vertical_n)
     try:
         if not (_all_finite(h_all) and _all_finite(v_all)):
             # Out of the fast path's preconditions (overflow): catenary.locate says why.
             catenary.locate(h_all, v_all, weight_n_per_m, length_m, bz)
         r, z, r_min, r_max, contact, run = _locate_points(
-            np.array(h_all), np.array(v_all), weight_n_per_m, length_m, bz, floor_z_m
+            h_all, v_all, weight_n_per_m, length_m, bz, floor_z_m
         )
     except (catenary.CatenaryError, ValueError, FloatingPointError) as exc:
         return LocalizationFailure(
@@ -552,7 +629,7 @@ def try_localize(
     var_r, cov_rz, var_z = _SIGMA_WEIGHT * var_r, _SIGMA_WEIGHT * cov_rz, _SIGMA_WEIGHT * var_z
     r_reach = max(r_max[n_pts], r[n_pts])
     interval = (r_min[0], r_max[0])
-    floor_contact = bool(contact[0] > 0.5)
+    floor_contact = contact[0]
     floor_run_m = run[0]
 
     # The base's exit elevation refines (a, s2) while the tether hangs free.
@@ -639,10 +716,16 @@ def try_localize(
         for xi, yi, hi, ri, zi in zip(
             px[1:], py[1:], h_pts[1:], r[1:n_pts], z[1:n_pts], strict=True
         ):
-            beta_i = beta
-            if hi > 0.0:
-                beta_i += w_t * _wrap(math.atan2(-yi + 0.0, -xi) - beta_t)
-            dx, dy = ri * math.cos(beta_i) - hx0, ri * math.sin(beta_i) - hy0
+            if not hi > 0.0:
+                cx, cy = ux, uy
+            elif w_t == 1.0:
+                # The tension alone (beta = beta_t): beta_i is the point's own azimuth,
+                # whose cosine and sine are -x_i / h_i and -y_i / h_i.
+                cx, cy = -xi / hi, -yi / hi
+            else:
+                beta_i = beta + w_t * _wrap(math.atan2(-yi + 0.0, -xi) - beta_t)
+                cx, cy = math.cos(beta_i), math.sin(beta_i)
+            dx, dy = ri * cx - hx0, ri * cy - hy0
             dz = zi - z[0]
             dxx += dx * dx
             dxy += dx * dy
@@ -678,20 +761,192 @@ def try_localize(
     std = [math.sqrt(max(v, 0.0)) for v in (sxx, syy, var_z)]
     if not determined:
         interval = (0.0, max(r_reach, interval[1]))
-    return PositionEstimate(
-        position_world_m=_frozen(position),
-        std_world_m=_frozen(std),
-        cov_world_m2=_frozen(np.array(pos_cov).reshape(3, 3)),
-        radial_m=r0,
-        radial_interval_m=interval,
-        azimuth_rad=beta if determined else None,
-        azimuth_determined=determined,
-        floor_contact=floor_contact,
-        floor_run_m=floor_run_m,
-        case="plumb" if not determined else ("floor" if floor_contact else "free"),
-        azimuth_std_rad=std_beta,
-        azimuth_source=source,
-        elevation_used=elevation_used,
+    position_arr, std_arr, cov_arr = _frozen_arrays(*position, *std, *pos_cov)
+    return _estimate(
+        {
+            "position_world_m": position_arr,
+            "std_world_m": std_arr,
+            "cov_world_m2": cov_arr,
+            "radial_m": r0,
+            "radial_interval_m": interval,
+            "azimuth_rad": beta if determined else None,
+            "azimuth_determined": determined,
+            "floor_contact": floor_contact,
+            "floor_run_m": floor_run_m,
+            "case": "plumb" if not determined else ("floor" if floor_contact else "free"),
+            "azimuth_std_rad": std_beta,
+            "azimuth_source": source,
+            "elevation_used": elevation_used,
+        }
+    )
+
+
+def _localize_tension_free(
+    tx: float,
+    ty: float,
+    tz: float,
+    cxx: float,
+    cxy: float,
+    cxz: float,
+    cyy: float,
+    cyz: float,
+    czz: float,
+    weight_n_per_m: float,
+    length_m: float,
+    bx: float,
+    by: float,
+    bz: float,
+    floor_z_m: float,
+    plumb_k: float,
+) -> PositionEstimate | None:
+    """:func:`try_localize`'s common case, a freely hanging tether whose azimuth comes from
+    the tension alone and is certain (rho = 1), with the very operations of its general
+    path, in its order, less those whose result is known: the reach at H = k sigma_H and
+    the azimuth-unknown covariance (weighted by 1 - rho = 0), the other sources' share of
+    the azimuth variance (0 with one source), the cross-covariance of r and z (unused
+    here). None when the case is not this one (a point within 1 um of the floor, a
+    singular covariance, H near zero, an uncertain azimuth, anything not finite): the
+    caller then takes the general path. ``tests/test_localization_fast.py`` checks that
+    both give the same floats.
+
+    Inputs as in :func:`try_localize` after its checks: the tension's components, the
+    symmetrised covariance's, omega, L, the base and the floor.
+    """
+    hypot, asinh, isfinite, sqrt = math.hypot, math.asinh, math.isfinite, math.sqrt
+    horizontal_n = hypot(tx, ty)
+    if not horizontal_n > MIN_HORIZONTAL_N:
+        return None
+    # The azimuth: opposite the horizontal pull; its std is the pull's sideways std over H
+    # (_fuse_angles of one source: beta = atan2(sin, cos) of beta_t + 0 / 1).
+    ux_t, uy_t = -tx / horizontal_n, -ty / horizontal_n
+    var_side = uy_t * uy_t * cxx - 2.0 * ux_t * uy_t * cxy + ux_t * ux_t * cyy
+    std_t = sqrt(0.0 if var_side < 0.0 else var_side) / horizontal_n  # max(var_side, 0.0)
+    # rho = 1 (std <= 1 / (2 k)), which implies a determined azimuth (std <= 1 / k).
+    if not (0.0 < std_t <= 0.5 / plumb_k):
+        return None
+    beta_t = math.atan2(uy_t + 0.0, ux_t)
+    beta = beta_t + 0.0 / 1.0
+    beta = math.atan2(math.sin(beta), math.cos(beta))
+    ux, uy = math.cos(beta), math.sin(beta)
+
+    # Sigma points T, T +- sqrt(3) S e_i, S the lower Cholesky factor (_cholesky3).
+    if not cxx > 0.0:
+        return None
+    l00 = sqrt(cxx)
+    l10 = cxy / l00
+    l20 = cxz / l00
+    d1 = cyy - l10 * l10
+    if not d1 > 0.0:
+        return None
+    l11 = sqrt(d1)
+    l21 = (cyz - l20 * l10) / l11
+    d2 = czz - l20 * l20 - l21 * l21
+    if not d2 > 0.0:
+        return None
+    if not (cxx < 1e150 and cyy < 1e150):
+        # Keeps the general path's sigma_H (and the reach at k sigma_H that this path
+        # leaves out) finite and its (cxx - cyy) ** 2 from raising OverflowError.
+        return None
+    k = _SIGMA_SCALE
+    a0, b0, b1, c0, c1, c2 = k * l00, k * l10, k * l11, k * l20, k * l21, k * sqrt(d2)
+    # -(x, y, z) of the points 1..6 (-(t + d) is -t - d to the bit); S's zero entries
+    # add 0.0 as the general path does.
+    nx, ny, nz = -tx, -ty, -tz
+    pts = (
+        (nx - a0, ny - b0, nz - c0),
+        (nx - 0.0, ny - b1, nz - c1),
+        (nx - 0.0, ny - 0.0, nz - c2),
+        (nx + a0, ny + b0, nz + c0),
+        (nx + 0.0, ny + b1, nz + c1),
+        (nx + 0.0, ny + 0.0, nz + c2),
+    )
+
+    # catenary.locate_free_floats of point 0 and of each sigma point, with the floor test
+    # of _locate_points; any point near the floor: the general path.
+    omega, big_l = weight_n_per_m, length_m
+    has_floor = floor_z_m != -math.inf
+    limit = floor_z_m + 1e-6
+    a = horizontal_n / omega  # eq:a_param
+    s2 = -tz / omega  # eq:s2_param
+    t = big_l - s2
+    hyp_s = hypot(a, s2)
+    # a * asinh(s / a) per term (catenary._a_asinh), finite exactly when the sum is (else
+    # None below: the general path).
+    r_0 = a * asinh(s2 / a) + a * asinh(t / a) if a > 0.0 else 0.0  # eq:posfull_radial
+    z0 = bz + (2.0 * s2 - big_l) * big_l / (hyp_s + hypot(a, t))  # eq:posfull_z
+    if has_floor and not ((z0 if s2 < 0.0 else (bz if s2 > big_l else z0 - (hyp_s - a))) > limit):
+        return None
+    r0 = r_0 if not r_0 < 0.0 else 0.0  # r >= 0
+    var_r = var_z = 0.0
+    dxx = dxy = dyy = dxz = dyz = 0.0
+    hx0, hy0 = r0 * ux, r0 * uy
+    for xi, yi, vi in pts:  # xi, yi: -x, -y; vi = -z = T_v
+        hi = hypot(xi, yi)
+        a = hi / omega
+        s2 = vi / omega
+        t = big_l - s2
+        hyp_s = hypot(a, s2)
+        ri = a * asinh(s2 / a) + a * asinh(t / a) if a > 0.0 else 0.0
+        zi = bz + (2.0 * s2 - big_l) * big_l / (hyp_s + hypot(a, t))
+        if has_floor and not (
+            (zi if s2 < 0.0 else (bz if s2 > big_l else zi - (hyp_s - a))) > limit
+        ):
+            return None
+        # The unscented transform: (r, z), and the horizontal offset along the point's
+        # own azimuth (the tension is the only source), cos and sin of which are
+        # -x_i / h_i and -y_i / h_i.
+        dr, dz = ri - r0, zi - z0
+        var_r += dr * dr
+        var_z += dz * dz
+        if hi > 0.0:
+            dx, dy = ri * (xi / hi) - hx0, ri * (yi / hi) - hy0
+        else:
+            dx, dy = ri * ux - hx0, ri * uy - hy0
+        dxx += dx * dx
+        dxy += dx * dy
+        dyy += dy * dy
+        dxz += dx * dz
+        dyz += dy * dz
+    w = _SIGMA_WEIGHT
+    var_z = w * var_z
+    sxx, sxy, syy, sxz, syz = w * dxx, w * dxy, w * dyy, w * dxz, w * dyz
+    values = [
+        bx + r0 * ux,
+        by + r0 * uy,
+        z0,
+        sqrt(sxx),
+        sqrt(syy),
+        sqrt(var_z),
+        sxx,
+        sxy,
+        sxz,
+        sxy,
+        syy,
+        syz,
+        sxz,
+        syz,
+        var_z,
+    ]
+    # Every r and z finite (var_r, var_z and the rest), as the general path requires.
+    if not (isfinite(sum(values)) and isfinite(r_0 + w * var_r)):
+        return None
+    position_arr, std_arr, cov_arr = _frozen_arrays(*values)
+    return _estimate(
+        {
+            "position_world_m": position_arr,
+            "std_world_m": std_arr,
+            "cov_world_m2": cov_arr,
+            "radial_m": r0,
+            "radial_interval_m": (r_0, r_0),
+            "azimuth_rad": beta,
+            "azimuth_determined": True,
+            "floor_contact": False,
+            "floor_run_m": 0.0,
+            "case": "free",
+            "azimuth_std_rad": std_t,
+            "azimuth_source": "tension",
+            "elevation_used": False,
+        }
     )
 
 
@@ -714,18 +969,16 @@ def _free_stats(
     k = math.sqrt(2.0)  # sqrt(n + kappa), n = 2, kappa = 0
     da = [0.0, k * l00, 0.0, -k * l00, 0.0]
     ds = [0.0, k * l10, k * l11, -k * l10, -k * l11]
-    a_pts = np.abs(np.array([a + d for d in da]))  # H = omega |a| >= 0
-    s_pts = np.array([s2 + d for d in ds])
-    r_arr, z_arr = catenary.locate_free(
-        a_pts, s_pts, np.asarray(length_m, dtype=np.float64), np.asarray(base_z_m, dtype=np.float64)
-    )
+    a_pts = [abs(a + d) for d in da]  # H = omega |a| >= 0
+    s_pts = [s2 + d for d in ds]
+    r_l, z_l = catenary.locate_free_floats(a_pts, s_pts, length_m, base_z_m)
     if floor_z_m != -math.inf:
-        vertex = z_arr - (np.hypot(a_pts, s_pts) - a_pts)
-        lowest = np.where(s_pts < 0.0, z_arr, np.where(s_pts > length_m, base_z_m, vertex))
-        if not bool(np.all(lowest > floor_z_m + 1e-6)):
-            return None
-    r_l: list[float] = r_arr.tolist()
-    z_l: list[float] = z_arr.tolist()
+        limit = floor_z_m + 1e-6
+        for ai, si, zi in zip(a_pts, s_pts, z_l, strict=True):
+            vertex = zi - (math.hypot(ai, si) - ai)
+            lowest = zi if si < 0.0 else (base_z_m if si > length_m else vertex)
+            if not lowest > limit:
+                return None
     if not (_all_finite(r_l) and _all_finite(z_l)):
         return None
     r0, z0 = r_l[0], z_l[0]
@@ -772,7 +1025,7 @@ def localize(
         The estimate, or None when there is no tension estimate or the math failed
         (:func:`try_localize` gives the reason).
     """
-    out = try_localize(
+    out = _try_localize(
         tension_world_n,
         tension_cov_n2,
         weight_n_per_m,
@@ -780,13 +1033,13 @@ def localize(
         base_world_m,
         floor_z_m,
         plumb_k,
-        azimuth=azimuth,
-        exit_azimuth=exit_azimuth,
-        exit_elevation=exit_elevation,
-        mocap_world_m=mocap_world_m,
-        mocap_std_m=mocap_std_m,
+        azimuth,
+        exit_azimuth,
+        exit_elevation,
+        mocap_world_m,
+        mocap_std_m,
     )
-    return out if isinstance(out, PositionEstimate) else None
+    return out if type(out) is PositionEstimate else None
 
 
 def try_localize_batch(
@@ -953,16 +1206,17 @@ def _localize_arrays_body(
     P = np.concatenate([T[:, :, None], T[:, :, None] + S, T[:, :, None] - S], axis=2)
     px, py, pz = P[:, 0], P[:, 1], P[:, 2]
     n_pts = 2 * _N + 1
-    h_pts = np.hypot(px, py)
+    h_pts = _hypot(px, py)
     h_all = np.concatenate([h_pts, np.maximum(plumb_k * sigma_h_n, horizontal_n)[:, None]], axis=1)
     v_all = np.concatenate([-pz, vertical_n[:, None]], axis=1)
     # _locate_points: the free-hanging solution of all 8 M points in one call ...
     a = h_all / omega[:, None]  # eq:a_param
     s2 = v_all / omega[:, None]  # eq:s2_param
     big_l1, bz1 = big_l[:, None], bz[:, None]
-    r, z = catenary.locate_free(a, s2, big_l1, bz1)
+    hyp_s2 = _hypot(a, s2)
+    r, z = _locate_free_arrays(a, s2, big_l1, bz1, hyp_s2)
     # ... where no lowest point comes within 1 um of the floor (else: try_localize's).
-    lowest = np.where(s2 < 0.0, z, np.where(s2 > big_l1, bz1, z - (np.hypot(a, s2) - a)))
+    lowest = np.where(s2 < 0.0, z, np.where(s2 > big_l1, bz1, z - (hyp_s2 - a)))
     ok &= (floor == -math.inf) | (lowest > (floor + 1e-6)[:, None]).all(axis=1)
     ok &= np.isfinite(h_all.sum(axis=1) + v_all.sum(axis=1) + r.sum(axis=1) + z.sum(axis=1))
 
@@ -987,15 +1241,15 @@ def _localize_arrays_body(
     # along its own azimuth (through the tension's share w_t of the fused one).
     r0, z0 = np.maximum(r[:, 0], 0.0), z[:, 0]
     hx0, hy0 = r0 * ux, r0 * uy
+    # The tension is the only source (w_t = 1): each point's own azimuth, as try_localize.
     xi, yi, hi = px[:, 1:], py[:, 1:], h_pts[:, 1:]
-    ang = np.array(list(map(math.atan2, (-yi + 0.0).ravel().tolist(), (-xi).ravel().tolist())))
-    wrapped = _wrap_array(ang.reshape(m, 2 * _N) - beta_t[:, None])
-    beta_i = np.where(hi > 0.0, beta[:, None] + w_t[:, None] * wrapped, beta[:, None])
+    cx = np.where(hi > 0.0, -xi / hi, ux[:, None])
+    cy = np.where(hi > 0.0, -yi / hi, uy[:, None])
     ri, zi = r[:, 1:n_pts], z[:, 1:n_pts]
     dr = ri - r0[:, None]
     dz = zi - z0[:, None]
-    dx = ri * np.cos(beta_i) - hx0[:, None]
-    dy = ri * np.sin(beta_i) - hy0[:, None]
+    dx = ri * cx - hx0[:, None]
+    dy = ri * cy - hy0[:, None]
     # The sums of products over the six points, left to right as try_localize adds them
     # (cov_rz is not needed here: only the elevation's branch uses it).
     left = np.stack([dr, dz, dx, dx, dy, dx, dy])
@@ -1057,6 +1311,70 @@ def _localize_arrays_body(
                 elevation_used=False,
             )
         )
+    return out
+
+
+def _locate_free_arrays(
+    a: FloatArray, s2: FloatArray, big_l: FloatArray, z_i: FloatArray, hyp_s2: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """``catenary.locate_free`` with ``math.hypot``'s floats (:func:`_hypot`), as
+    ``catenary.locate_free_floats`` gives them to :func:`try_localize`; ``hyp_s2`` is
+    ``hypot(a, s2)``, which the caller needs too."""
+    t = big_l - s2
+    r = catenary._a_asinh(a, s2) + catenary._a_asinh(a, t)  # eq:posfull_r_0 + eq:posfull_radial
+    z = z_i + (2.0 * s2 - big_l) * big_l / (hyp_s2 + _hypot(a, t))  # eq:posfull_z
+    return r, z
+
+
+_SPLIT = 134217729.0  # 2^27 + 1: Dekker's split, x = hi + lo with 26-bit halves
+_DBL_MIN = sys.float_info.min
+
+
+def _hypot(x: FloatArray, y: FloatArray) -> FloatArray:
+    """``math.hypot`` over arrays, to the bit (numpy's ``hypot`` is the C library's, which
+    differs from it by an ulp at times, and the batch must give try_localize's floats).
+
+    CPython's ``vector_norm`` for two coordinates: both scaled by the power of two that
+    brings the larger into [0.5, 1), squared and summed without loss (Dekker's product,
+    Knuth's fast two-sum), the square root corrected once by the residual, scaled back.
+    Where the larger is below 2^-960 (subnormal ranges, which CPython handles with one
+    more scaling) ``math.hypot`` itself is called on those elements. Inputs are finite or
+    not; inf wins over NaN, as in ``math.hypot``.
+    """
+    x = np.abs(x)
+    y = np.abs(y)
+    m = np.maximum(x, y)
+    _, e = np.frexp(m)
+    scale = np.ldexp(1.0, -e)
+    csum = np.ones_like(m)
+    frac1 = np.zeros_like(m)
+    frac2 = np.zeros_like(m)
+    for v in (x * scale, y * scale):
+        hi = v * v
+        c = _SPLIT * v
+        vh = c - (c - v)
+        vl = v - vh
+        lo = ((vh * vh - hi) + 2.0 * vh * vl) + vl * vl  # v^2 = hi + lo exactly
+        total = csum + hi
+        frac2 = frac2 + ((csum - total) + hi)  # csum + hi = total + this, exactly
+        csum = total
+        frac1 = frac1 + lo
+    h = np.sqrt(csum - 1.0 + (frac1 + frac2))
+    hi = -h * h
+    c = _SPLIT * h
+    hh = c - (c - h)
+    hl = h - hh
+    lo = ((-hh * hh - hi) - 2.0 * hh * hl) - hl * hl  # -h^2 = hi + lo exactly
+    total = csum + hi
+    frac2 = frac2 + ((csum - total) + hi)
+    csum = total
+    frac1 = frac1 + lo
+    h = h + (csum - 1.0 + (frac1 + frac2)) / (2.0 * h)
+    out = h / scale
+    odd = ~(m > 2.0**-960) | ~(m < math.inf)  # tiny, zero, inf or NaN: math.hypot itself
+    if odd.any():
+        idx = np.nonzero(odd)
+        out[idx] = list(map(math.hypot, x[idx].tolist(), y[idx].tolist()))
     return out
 
 
