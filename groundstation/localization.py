@@ -503,10 +503,10 @@ def _try_localize(
         and T.shape == (3,)
         and C.shape == (3, 3)
         and B.shape == (3,)
-        and type(weight_n_per_m) is float
-        and type(length_m) is float
-        and type(floor_z_m) is float
-        and type(plumb_k) is float
+        and isinstance(weight_n_per_m, float)  # float or np.float64
+        and isinstance(length_m, float)
+        and isinstance(floor_z_m, float)
+        and isinstance(plumb_k, float)
         and (
             azimuth == "tension"
             or (azimuth == "auto" and (exit_azimuth is None or _valid_angle(exit_azimuth) is None))
@@ -516,6 +516,9 @@ def _try_localize(
         tx, ty, tz = T.tolist()
         (c00, c01, c02), (c10, c11, c12), (c20, c21, c22) = C.tolist()
         bx, by, bz = B.tolist()
+        # Python floats (an np.float64 omega would make every result an np.float64)
+        weight_n_per_m, length_m = float(weight_n_per_m), float(length_m)
+        floor_z_m, plumb_k = float(floor_z_m), float(plumb_k)
         # The general path's checks, all passed (a non-finite sum: some value is not
         # finite, or the sum overflows; the general path tells which).
         if (

@@ -231,3 +231,24 @@ def test_plumb_k_is_respected_by_the_common_case(monkeypatch: pytest.MonkeyPatch
     for k in (0.5, PLUMB_K, 30.0, 300.0, 3000.0):
         got = try_localize(**kw, plumb_k=k)
         assert _same(got, _general({**kw, "plumb_k": k}, monkeypatch)), k
+
+
+def test_numpy_scalars_and_lists_give_the_same_floats() -> None:
+    """np.float64 scalars and list inputs give what float64 arrays and floats give: the
+    same floats, of Python's float type (as numpy's .tolist() gave them before)."""
+    for kw in _cases(7, 40):
+        want = try_localize(**kw)
+        as_numpy = {
+            **kw,
+            "weight_n_per_m": np.float64(kw["weight_n_per_m"]),
+            "length_m": np.float64(kw["length_m"]),
+            "floor_z_m": np.float64(kw["floor_z_m"]),
+        }
+        as_lists = {
+            **kw,
+            "tension_world_n": list(kw["tension_world_n"]),
+            "tension_cov_n2": np.asarray(kw["tension_cov_n2"]).tolist(),
+            "base_world_m": tuple(kw["base_world_m"]),
+        }
+        for other in (as_numpy, as_lists):
+            assert _same(try_localize(**other), want), (other, want)
