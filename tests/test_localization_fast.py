@@ -252,3 +252,34 @@ def test_numpy_scalars_and_lists_give_the_same_floats() -> None:
         }
         for other in (as_numpy, as_lists):
             assert _same(try_localize(**other), want), (other, want)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_catenary_float_versions_against_the_array_versions(seed: int) -> None:
+    """catenary.locate_free_floats and locate_with_floor_floats (the per-message path) give
+    catenary.locate_free and locate_with_floor's results (numpy's, whose hypot is the C
+    library's: an ulp apart at times) on every regime, floor contact and clamping included."""
+    rng = np.random.default_rng(seed)
+    n = 4000
+    length = rng.uniform(0.3, 3.0, n)
+    omega = rng.choice([0.05, 0.2], n)
+    h = np.where(rng.random(n) < 0.1, 0.0, 10 ** rng.uniform(-6.0, 2.0, n))
+    tv = omega * length * rng.uniform(-0.5, 1.5, n)
+    base_z = rng.uniform(0.0, 1.5, n)
+    floor = base_z - rng.uniform(0.0, 2.0, n)
+    r_a, z_a = catenary.locate_free(h / omega, tv / omega, length, base_z)
+    want = catenary.locate_with_floor(h, tv, omega, length, base_z, floor)
+    contacts = 0
+    for i in range(n):
+        w_i, l_i, b_i, f_i = float(omega[i]), float(length[i]), float(base_z[i]), float(floor[i])
+        (r,), (z,) = catenary.locate_free_floats([h[i] / w_i], [tv[i] / w_i], l_i, b_i)
+        assert r == pytest.approx(r_a[i], rel=1e-13, abs=1e-15)
+        assert z == pytest.approx(z_a[i], rel=1e-13, abs=1e-15)
+        got = catenary.locate_with_floor_floats([float(h[i])], [float(tv[i])], w_i, l_i, b_i, f_i)
+        (rm,), (zm,), (lo,), (hi,), (contact,), (run,) = got
+        assert contact == bool(want.floor_contact[i])
+        for g, w in ((rm, want.r_m), (zm, want.z_m), (lo, want.r_min_m), (hi, want.r_max_m)):
+            assert g == pytest.approx(float(w[i]), rel=1e-12, abs=1e-14), i
+        assert run == pytest.approx(float(want.floor_run_m[i]), rel=1e-12, abs=1e-14)
+        contacts += contact
+    assert 0.1 * n < contacts < 0.9 * n
