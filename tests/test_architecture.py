@@ -22,6 +22,10 @@ STDLIB = set(sys.stdlib_module_names)
 PHYSICS = (
     "catenary",
     "tension",
+    "tension_kalman",
+    "tension_noise",
+    "tension_change",
+    "tension_drift",
     "localization",
     "follow",
     "calibration",
@@ -71,6 +75,10 @@ NEVER = {
     "sim": (
         "estimator",
         "tension",
+        "tension_kalman",
+        "tension_noise",
+        "tension_change",
+        "tension_drift",
         "localization",
         "pipeline",
         "follow",

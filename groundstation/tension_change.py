@@ -1,0 +1,609 @@
+"""The tension filter's change tests: when has the tension stepped (a tug)?
+
+The paper's filter (``eq:sysk1``, ``eq:sysk2``, ``eq:Kalman_vars``) assumes a constant
+tension; these tests find where that assumption broke, so that
+:class:`groundstation.tension.TensionFilter` restarts from the samples since the change
+(x = their mean, P = R / n: what the Kalman filter itself gives from an uninformative prior
+with Q = 0 over them). A departure from the paper, whose filter has no change test. Two
+tests, the reasoning and the numbers of both in the ``TensionFilter`` docstring:
+
+* :class:`ChangeTest`, the fast one: a GLR on the filter's whitened innovations over
+  windows of up to ``change_max_window_s``, ``max_n |sum of the last n w|^2 / n``
+  (chi-square, 3 dof, per window under no change);
+* :class:`StepTest`, the long-window one: the mean of the last n observations against the
+  mean of the m before them, ``G_n = sum_i d_n,i^2 / (r_i (1/n + 1/m))``, windows sized by
+  the noise (:meth:`StepTest.design`) and its threshold from :func:`scan_threshold`.
+
+Both divide their statistic by a *youth factor* (:func:`youth_factor`,
+:func:`step_youth_factor`) while the noise estimate is young. Pure: numpy and Python floats.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+from groundstation.tension_noise import NoiseEstimate
+
+__all__ = [
+    "ChangeTest",
+    "LazyChangeStatistic",
+    "StepTest",
+    "scan_threshold",
+    "step_youth_factor",
+    "youth_factor",
+]
+
+FloatArray = NDArray[np.float64]
+
+
+def scan_threshold(
+    false_alarms_per_h: float, n_lo: float, n_hi: float, dt_s: float, dof: int = 3
+) -> float:
+    """Threshold of a sliding chi-square scan over windows [n_lo, n_hi] for a false-alarm rate.
+
+    For white Gaussian noise of known variance, ``max_n |S_n|^2 / n`` over the windows
+    ending at each sample crosses h at a rate of about (the Brownian scan approximation)::
+
+        nu(h) = h^(d/2) e^(-h/2) / (2^(d/2) Gamma(d/2)) * (h/2) * (1/n_lo - 1/n_hi)
+
+    per sample, d = ``dof``; this solves ``nu(h) = false_alarms_per_h * dt_s / 3600`` by
+    Newton's method on its logarithm (decreasing in h beyond d + 2). The rate per hour
+    does not depend on the sample rate: windows in samples grow with it, looks per
+    second too.
+
+    Args:
+        false_alarms_per_h: Target rate, 1/h, > 0.
+        n_lo: Shortest window, samples, > 0.
+        n_hi: Longest window, samples, > n_lo.
+        dt_s: Sample spacing, s, > 0.
+        dof: Degrees of freedom of each window's statistic.
+
+    Returns:
+        The threshold h, dimensionless (at least d + 2).
+    """
+    span = 1.0 / n_lo - 1.0 / n_hi
+    if not (false_alarms_per_h > 0.0 and dt_s > 0.0 and span > 0.0):
+        raise ValueError(
+            f"scan_threshold needs a rate, dt_s > 0 and 0 < n_lo < n_hi, got "
+            f"{false_alarms_per_h!r}, {dt_s!r}, {n_lo!r}, {n_hi!r}"
+        )
+    half = 0.5 * dof
+    # log nu(h) = (d/2 + 1) log h - h/2 - log(2^(d/2 + 1) Gamma(d/2)) + log(span)
+    target = math.log(false_alarms_per_h * dt_s / 3600.0)
+    const = math.log(span) - (half + 1.0) * math.log(2.0) - math.lgamma(half)
+    h = max(2.0 * (const - target), dof + 4.0)
+    for _ in range(30):
+        f = (half + 1.0) * math.log(h) - 0.5 * h + const - target
+        step = f / ((half + 1.0) / h - 0.5)
+        h = max(h - step, dof + 2.0)
+        if abs(step) < 1e-9 * h:
+            break
+    return h
+
+
+def youth_factor(noise_samples: int) -> float:
+    """Variance factor of the change tests while the noise estimate is young, >= 1.
+
+    R is the long-run variance, so every window sum has at most the variance the tests
+    assume (short windows of positively correlated noise have less): the statistic counts
+    effective samples and errs toward silence. While the noise estimate is young (k
+    differences) an upper bound on its error, ``1 + 3 sqrt(2 / k)`` (the scatter of a
+    k-sample mean square), fading out by 1000 samples. Without it the first flight's first
+    samples fired on 2 m/s^2 noise: the estimate is 30 % low after 20 samples.
+
+    Args:
+        noise_samples: Differences the noise estimate has taken, k.
+    """
+    k = noise_samples
+    if k < 1000:
+        return 1.0 + 3.0 * math.sqrt(2.0 / max(k, 1)) * (1.0 - k / 1000.0)
+    return 1.0
+
+
+def step_youth_factor(youth: float, blocks: int) -> float:
+    """The youth factor of the step test, >= 1: the fast test's times the noise shape's.
+
+    Long windows see the noise's long-run variance whole, so they also suffer the error of
+    kappa = r / s_d while it has few blocks B: its relative standard error is
+    ``sqrt(1.3 / B)`` (3 axes pooled, the squared second differences of neighbouring
+    blocks correlated), 2 of which are allowed for beyond what the threshold already
+    allows at B = 239 (the equilibrium count of its 30 s average), at most 1.8 (2.65 /
+    1.5: vibration against the prior 1.5).
+
+    Args:
+        youth: The fast test's factor (:func:`youth_factor`).
+        blocks: Blocks the noise shape has been averaged over, B.
+    """
+    if blocks >= 239:
+        return youth
+    excess = 2.0 * (math.sqrt(1.3 / max(blocks, 1)) - math.sqrt(1.3 / 239.0))
+    return youth * min(1.0 + excess, 1.8)
+
+
+class _Ring:
+    """Fixed-size history of a regime's observations and whitened innovations.
+
+    The innovations are kept as their running sum ``C_t = w_1 + ... + w_t`` (rows of
+    ``cum``, row ``pos`` the newest, row ``pos - n`` holding ``C_(t-n)``), so the sum of
+    the last n is one difference, ``S_n = C_t - C_(t-n)``, for every n at once (one numpy
+    subtraction when a statistic is needed, nothing per window per step). The buffer is
+    append-only: rows once written never change, so a statistic can be computed later from
+    it (:class:`LazyChangeStatistic`). When it is full, the live rows move to a new buffer,
+    less the oldest live row (so ``C`` stays of the size of one buffer's innovations, and
+    a difference loses no digits however long the flight). The observations are kept as
+    Python tuples: they are read only at a detection.
+
+    Args:
+        size: Capacity, samples.
+    """
+
+    def __init__(self, size: int) -> None:
+        self.size = size
+        self.obs: list[tuple[float, float, float]] = [(0.0, 0.0, 0.0)] * size
+        self.head = 0  # next observation slot to write
+        self.count = 0  # valid entries (innovations) since the regime began
+        self._rows = 4 * size
+        self._new_buffer(np.zeros((3, self._rows)))
+        self.pos = 0
+        self.c = (0.0, 0.0, 0.0)  # C_t, the newest row, as floats
+        # The last size + 1 rows again, as floats: C_(t-n) = recent[(t - n) % (size + 1)].
+        self._recent: list[tuple[float, float, float]] = [(0.0, 0.0, 0.0)] * (size + 1)
+        self._t = 0
+
+    def _new_buffer(self, cum: FloatArray) -> None:
+        # Laid out (3, rows): each axis a contiguous row, so every operation on a stretch of
+        # windows is a 1-D one (numpy's fast path).
+        self.cum = cum
+        self._x, self._y, self._z = cum[0], cum[1], cum[2]  # views, for scalar writes
+
+    @property
+    def start(self) -> int:
+        """Rows left before the live rows move to a new buffer (jumps up when they do)."""
+        return self._rows - 1 - self.pos
+
+    def _move(self) -> None:
+        """The last ``size + 1`` rows to the front of a new buffer, less the oldest of them."""
+        pos, keep = self.pos, self.size
+        live = self.cum[:, pos - keep : pos + 1]
+        base = live[:, :1].copy()
+        cum = np.zeros((3, self._rows))
+        np.subtract(live, base, out=cum[:, : keep + 1])  # C - C_base: differences unchanged
+        self._new_buffer(cum)
+        self.pos = keep
+        c0, c1, c2 = self.c
+        b0, b1, b2 = base[:, 0].tolist()
+        self.c = (c0 - b0, c1 - b1, c2 - b2)  # the same rounding as the row
+        self._recent = [(r0 - b0, r1 - b1, r2 - b2) for r0, r1, r2 in self._recent]
+
+    def push(
+        self,
+        obs_n: tuple[float, float, float] | list[float],
+        innov: tuple[float, float, float] | list[float],
+    ) -> None:
+        """Takes one observation (N) and its whitened innovation (dimensionless)."""
+        head = self.head
+        self.obs[head] = obs_n  # type: ignore[assignment]  # only read, never changed
+        self.head = head + 1 if head + 1 < self.size else 0
+        if self.pos + 1 == self._rows:
+            self._move()
+        c0, c1, c2 = self.c
+        w0, w1, w2 = innov
+        c0, c1, c2 = self.c = (c0 + w0, c1 + w1, c2 + w2)  # C_t = C_(t-1) + w_t
+        pos = self.pos = self.pos + 1
+        self._x[pos] = c0
+        self._y[pos] = c1
+        self._z[pos] = c2
+        t = self._t = self._t + 1
+        self._recent[t % (self.size + 1)] = (c0, c1, c2)
+        if self.count < self.size:
+            self.count += 1
+
+    def back(self, n: int) -> tuple[float, float, float]:
+        """``C_(t-n)``, 0 <= n <= count."""
+        return self._recent[(self._t - n) % (self.size + 1)]
+
+    def latest_first(self, n: int) -> NDArray[np.intp]:
+        """Indices into :attr:`obs` of the ``n`` most recent entries, newest first."""
+        return (self.head - 1 - np.arange(n)) % self.size
+
+    def mean_of_latest(self, n: int) -> list[float]:
+        """The mean of the ``n`` most recent observations, N, per axis."""
+        obs = self.obs
+        rows = np.array([obs[i] for i in self.latest_first(n).tolist()])
+        mean: list[float] = rows.mean(axis=0).tolist()
+        return mean
+
+    def window_sums(self, n: int) -> FloatArray:
+        """Sums of the newest 1 .. ``n`` whitened innovations, shape (3, n)."""
+        pos = self.pos
+        out: FloatArray = self.cum[:, pos : pos + 1] - self.cum[:, pos - n : pos][:, ::-1]
+        return out
+
+
+def _squared_sums(cum: FloatArray, pos: int, n_min: int, n_max: int) -> FloatArray:
+    """``|S_n|^2 = |C_t - C_(t-n)|^2`` for n = n_min .. n_max, in that order.
+
+    Element by element (no reduction whose rounding could depend on the length), so a value
+    is the same whatever ``n_max``: the eager and the lazy statistic agree to the bit.
+    """
+    a, b = pos - n_max, pos - n_min + 1  # C_(t-n) for n = n_max .. n_min
+    x, y, z = cum[0], cum[1], cum[2]
+    d = x[a:b] - x[pos]  # -S_n per axis, n descending
+    d *= d
+    e = y[a:b] - y[pos]
+    e *= e
+    d += e
+    e = z[a:b] - z[pos]
+    e *= e
+    d += e
+    out: FloatArray = d[::-1]
+    return out
+
+
+class LazyChangeStatistic:
+    """The fast test's statistic of one step, computed when first read.
+
+    ``max(max_n |S_n|^2 / (n youth), other)`` over n = n_min .. n_valid, from the ring's
+    append-only buffer as it was at that step (:class:`_Ring`). The filter needs only to
+    know that no window crossed the threshold, which :class:`ChangeTest` certifies without
+    computing every window; the value itself is computed only if someone reads
+    :attr:`groundstation.tension.TensionEstimate.change_statistic`.
+    """
+
+    __slots__ = ("_args", "other")
+
+    def __init__(
+        self,
+        test: ChangeTest,
+        cum: FloatArray,
+        pos: int,
+        count: int,
+        dt_mean_s: float,
+        youth: float,
+    ) -> None:
+        self._args = (test, cum, pos, count, dt_mean_s, youth)
+        self.other = 0.0
+        """The step test's statistic on the fast test's scale, maxed with this one."""
+
+    def __call__(self, name: str = "change_statistic") -> float:
+        test, cum, pos, count, dt_mean_s, youth = self._args
+        n_min = test.min_window
+        n_valid = test.window_cap(dt_mean_s, count)
+        if n_valid < n_min:
+            return max(0.0, self.other)
+        ss = _squared_sums(cum, pos, n_min, n_valid)
+        stat, _ = _best_window(ss, n_min, test.inv_n, youth)
+        return max(stat, self.other)
+
+
+def _best_window(ss: FloatArray, n_min: int, inv_n: FloatArray, youth: float) -> tuple[float, int]:
+    """``(max_n |S_n|^2 / (n youth), its n)`` from :func:`_squared_sums`."""
+    stats = ss * inv_n[: len(ss)]  # |S_n|^2 / n
+    best = int(stats.argmax())
+    return float(stats[best]) / youth, n_min + best
+
+
+class ChangeTest:
+    """The fast change test: a GLR on whitened innovations (tug detection).
+
+    Each innovation nu is whitened by the Cholesky factor of S = P- + R
+    (:meth:`groundstation.tension_kalman.DiagonalKalman.update`), so that at constant
+    tension w ~ N(0, I). A step k samples ago shifts the mean of the last k whitened
+    innovations. For every window n in [``min_window``, min(history,
+    ``max_window_s`` / dt_mean)] the statistic ``|S_n|^2 / n``, S_n the sum of the last n
+    w, is chi-square with 3 dof under no change (when the noise is white; smaller for
+    positively correlated noise on short windows, since R is the long-run variance). The
+    largest, divided by the youth factor, is compared with ``threshold``; its window is the
+    maximum-likelihood change point.
+
+    *Cost: a certificate instead of every window at every step.* ``|S_n|^2 / (n youth) >
+    threshold`` needs ``|C_t - C_(t-n)| > sqrt(threshold n)`` (youth >= 1): C_t outside a
+    ball around each window's start C_(t-n), whose radius only grows as the window does.
+    So once every window has been evaluated at a step t0 (:meth:`evaluate`), none can
+    cross before C_t has moved from C_t0 by the smallest slack ``sigma = min_n (sqrt(threshold
+    n) - |C_t0 - C_(t0-n)|)`` (triangle inequality); a window that starts later lowers sigma
+    by its own slack when it enters, measured from C_t0 too. While ``|C_t - C_t0| <=
+    sigma`` (:meth:`push` says so, a few float operations) no window can detect, and the
+    statistic is left to :class:`LazyChangeStatistic`; otherwise every window is evaluated
+    again, exactly as before. At hover that is every ~10 samples.
+
+    Args:
+        min_window: Shortest window, samples (a single outlier cannot trigger it).
+        max_window_s: Longest window, s.
+        size: Capacity of the history, samples.
+        threshold: The detection threshold on the statistic, dimensionless.
+    """
+
+    def __init__(self, min_window: int, max_window_s: float, size: int, threshold: float) -> None:
+        self.min_window = min_window
+        self.max_window_s = max_window_s
+        self.threshold = threshold
+        self.ring = _Ring(size)
+        n = np.arange(min_window, size + 1, dtype=np.float64)
+        self.inv_n = 1.0 / n  # 1 / n for the windows n = min_window .. size
+        # The radius of each window's ball, a hair smaller than sqrt(threshold n) so that
+        # rounding cannot certify a window that the exact statistic puts just above it.
+        self._radius = np.sqrt(threshold * n) * (1.0 - 1e-9) - 1e-12
+        self._radius_min = float(self._radius[0])
+        self._anchor = (0.0, 0.0, 0.0)  # C_t0
+        self._sigma = -1.0  # the slack; < 0: no certificate
+
+    def clear(self) -> None:
+        """Forgets the windows (a new regime): none can detect until they fill again."""
+        self.ring.count = 0
+        self._anchor = self.ring.c
+        self._sigma = math.inf
+
+    def push(
+        self,
+        z_n: tuple[float, float, float] | list[float],
+        w: tuple[float, float, float] | list[float],
+    ) -> bool:
+        """Takes one observation (N) and its whitened innovation (dimensionless).
+
+        Returns:
+            True when no window can be above the threshold.
+        """
+        ring = self.ring
+        ring.push(z_n, w)
+        sigma = self._sigma
+        if sigma < 0.0:
+            return False
+        a0, a1, a2 = self._anchor
+        n_min = self.min_window
+        if ring.count >= n_min:
+            # The window of n_min samples that enters now: its slack, from C_t0.
+            b0, b1, b2 = ring._recent[(ring._t - n_min) % (ring.size + 1)]  # ring.back(n_min)
+            d0, d1, d2 = a0 - b0, a1 - b1, a2 - b2
+            slack = self._radius_min - math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+            if slack < sigma:
+                sigma = self._sigma = slack
+                if sigma < 0.0:
+                    return False
+        c0, c1, c2 = ring.c
+        d0, d1, d2 = c0 - a0, c1 - a1, c2 - a2
+        return d0 * d0 + d1 * d1 + d2 * d2 <= sigma * sigma
+
+    def window_cap(self, dt_mean_s: float, count: int) -> int:
+        """The longest window with ``count`` innovations at a mean sample spacing, samples."""
+        n = count
+        if dt_mean_s == dt_mean_s and dt_mean_s > 0.0:
+            n_cap = max(self.min_window, int(self.max_window_s / dt_mean_s))
+            if n_cap < n:
+                n = n_cap
+        return n
+
+    def lazy_statistic(self, dt_mean_s: float, youth: float) -> LazyChangeStatistic:
+        """This step's statistic (as :meth:`evaluate` gives it), computed when read."""
+        ring = self.ring
+        return LazyChangeStatistic(self, ring.cum, ring.pos, ring.count, dt_mean_s, youth)
+
+    def evaluate(self, dt_mean_s: float, youth: float) -> tuple[float, int]:
+        """``(max_n |S_n|^2 / (n youth), its n)`` over every window, and a new certificate;
+        ``(0.0, 0)`` while the history is shorter than the shortest window.
+
+        Args:
+            dt_mean_s: Mean sample spacing, s (NaN: unknown, the whole history is used).
+            youth: The youth factor (:func:`youth_factor`), >= 1.
+        """
+        ring = self.ring
+        n_min = self.min_window
+        self._anchor = ring.c
+        if ring.count < n_min:
+            self._sigma = math.inf
+            return 0.0, 0
+        n_valid = self.window_cap(dt_mean_s, ring.count)
+        # Every window the ring holds (those beyond the cap may come into it).
+        ss = _squared_sums(ring.cum, ring.pos, n_min, ring.count)
+        self._sigma = float((self._radius[: len(ss)] - np.sqrt(ss)).min())
+        return _best_window(ss[: n_valid - n_min + 1], n_min, self.inv_n, youth)
+
+    def mean_of_window(self, n: int) -> list[float]:
+        """The mean of the last ``n`` observations, N (the restart's x)."""
+        return self.ring.mean_of_latest(n)
+
+
+class _History:
+    """Running sums of the observations since the regime began, for the step test.
+
+    Row j holds ``C_j = z_1 + ... + z_j`` (N), so the sum of any stretch of past samples
+    is one difference of two rows, whatever its length.
+    """
+
+    def __init__(self, size: int) -> None:
+        self.size = size
+        self.rows: FloatArray = np.zeros((size, 3))
+        self._flat = self.rows.reshape(-1)  # a view, for scalar writes
+        self.cum = (0.0, 0.0, 0.0)
+        self.head = 0  # next slot to write
+        self.count = 0  # valid rows
+
+    def clear(self) -> None:
+        # The running sum restarts too, so it never grows beyond one regime's samples.
+        self.count = 0
+        self.cum = (0.0, 0.0, 0.0)
+
+    def push(self, y: tuple[float, float, float] | list[float]) -> None:
+        c0, c1, c2 = self.cum
+        c0, c1, c2 = self.cum = (c0 + y[0], c1 + y[1], c2 + y[2])
+        head = self.head
+        flat, i = self._flat, 3 * head
+        flat[i] = c0
+        flat[i + 1] = c1
+        flat[i + 2] = c2
+        self.head = head + 1 if head + 1 < self.size else 0
+        if self.count < self.size:
+            self.count += 1
+
+    def back(self, k: NDArray[np.intp]) -> FloatArray:
+        """``C_(t-k)`` for each k (k = 1: the newest row pushed), shape (len(k), 3)."""
+        out: FloatArray = self.rows[(self.head - k) % self.size]
+        return out
+
+
+class StepTest:
+    """The long-window step test: slow steps that the fast test cannot see in its 1 s.
+
+    For the last n samples (the one just taken included) against the m before them
+    (m up to ``reference_s``, within the regime), per world axis::
+
+        d_n = zbar_post - zbar_pre,   G_n = sum_i d_n,i^2 / (r_i (1/n + 1/m))
+
+    a two-sample GLR for a step at unknown time (chi-square, 3 dof, under no change). It
+    reads the observations, not the innovations, so what the filter did after the step
+    costs it nothing. Windows from :meth:`design`, the threshold from :func:`scan_threshold`
+    for ``false_alarms_per_h``; evaluated every n_lo / 20 samples (a detection at most 5 %
+    of the shortest window late, at a fraction of the cost).
+
+    Args:
+        sizing_threshold: Non-centrality that sizes the windows.
+        min_step_n: The step the windows are sized for, N.
+        false_alarms_per_h: False detections per hour of hover, 1/h.
+        max_window_s: Cap on the longest window, s.
+        reference_s: Longest reference stretch before a window, s.
+        history_size: Capacity of the history, samples.
+        fast_min_window: The fast test's shortest window, samples.
+        fast_max_window_s: The fast test's longest window, s (the test is off within it).
+    """
+
+    def __init__(
+        self,
+        sizing_threshold: float,
+        min_step_n: float,
+        false_alarms_per_h: float,
+        max_window_s: float,
+        reference_s: float,
+        history_size: int,
+        fast_min_window: int,
+        fast_max_window_s: float,
+    ) -> None:
+        self.sizing_threshold = sizing_threshold
+        self.min_step_n = min_step_n
+        self.false_alarms_per_h = false_alarms_per_h
+        self.max_window_s = max_window_s
+        self.reference_s = reference_s
+        self.history_size = history_size
+        self.fast_min_window = fast_min_window
+        self.fast_max_window_s = fast_max_window_s
+        self.hist = _History(history_size)
+        # Window lengths: integers spaced by at most 5 % (a step k samples old is seen by a
+        # window within 2.5 % of k: at most 2.5 % of its statistic lost), ~40 windows per
+        # factor 4 of length instead of every integer.
+        grid = [1]
+        while grid[-1] < history_size - 1:
+            grid.append(min(max(grid[-1] + 1, round(grid[-1] * 1.05)), history_size - 1))
+        self._grid = np.array(grid, dtype=np.intp)
+        self._grid.setflags(write=False)
+        self._grid_list = grid
+        self._threshold_cache: tuple[tuple[int, int] | None, float] = (None, math.inf)
+        self._fast_cache = (math.nan, 0)  # (dt_mean, the fast test's longest window)
+        self._countdown = 0
+
+    def clear(self) -> None:
+        """Forgets the history (a new regime)."""
+        self.hist.clear()
+
+    def restart(self, window: int) -> None:
+        """A restart ``window`` samples ago: those samples stay as the next reference."""
+        h = self.hist
+        if window < h.count:
+            h.count = window
+
+    def push(self, z_n: tuple[float, float, float] | list[float]) -> None:
+        """Takes one observation, N."""
+        self.hist.push(z_n)
+
+    def design(self, r_n2: float, dt_s: float) -> tuple[float, float, float] | None:
+        """Windows and threshold at a noise level and rate (``TensionFilter.step_test_design``).
+
+        ``n_max = sizing_threshold * r / min_step_n^2`` samples, at most ``max_window_s``
+        and half the history; windows from n_max / 4; the threshold from
+        :func:`scan_threshold`. None (the test off) while n_max lies within the fast test's
+        longest window.
+        """
+        n_fast = max(self.fast_min_window, int(self.fast_max_window_s / dt_s))
+        n_max = min(
+            self.sizing_threshold * r_n2 / (self.min_step_n * self.min_step_n),
+            self.max_window_s / dt_s,
+            0.5 * self.history_size,
+        )
+        if n_max <= n_fast:
+            return None
+        # The threshold moves with log(n_max): recomputed once n_max or dt moves by 1 %.
+        key = (round(50.0 * math.log(n_max)), round(50.0 * math.log(dt_s)))
+        if self._threshold_cache[0] != key:
+            h = scan_threshold(self.false_alarms_per_h, 0.25 * n_max, n_max, dt_s)
+            self._threshold_cache = (key, h)
+        return 0.25 * n_max, n_max, self._threshold_cache[1]
+
+    def statistic(
+        self,
+        z: tuple[float, float, float] | list[float],
+        r: tuple[float, float, float],
+        dt_mean_s: float,
+        youth: float,
+        noise: NoiseEstimate | None,
+    ) -> tuple[float, int, list[float], float]:
+        """``(G, n, mean of the last n z, threshold)``, G the largest over the windows.
+
+        G = 0 while the test is off, between its evaluations, or while the history holds
+        less than its shortest window.
+
+        Args:
+            z: The observation just taken (not yet pushed), N.
+            r: The long-run noise variance per axis, N^2.
+            dt_mean_s: Mean sample spacing, s.
+            youth: The fast test's youth factor (:func:`youth_factor`), >= 1.
+            noise: The on-line noise estimate, or None when the noise is not estimated.
+                With it r is the larger per axis of r and the long-run variance over six
+                times the memory (the short one's scatter is what a long window would read
+                as evidence, the long one lags a rise), and the youth factor is the step
+                test's (:func:`step_youth_factor`).
+        """
+        h = self.hist
+        if h.count < 2 or not (dt_mean_s == dt_mean_s and dt_mean_s > 0.0):
+            return 0.0, 0, [], math.inf
+        r0, r1, r2 = r
+        r_max = max(r0, r1, r2)
+        if dt_mean_s != self._fast_cache[0]:
+            n_fast = max(self.fast_min_window, int(self.fast_max_window_s / dt_mean_s))
+            self._fast_cache = (dt_mean_s, n_fast)
+        if (
+            self.sizing_threshold * r_max / (self.min_step_n * self.min_step_n)
+            <= self._fast_cache[1]
+        ):
+            return 0.0, 0, [], math.inf  # off: n_max <= n_fast, as design() would find
+        design = self.design(r_max, dt_mean_s)
+        if design is None:
+            return 0.0, 0, [], math.inf
+        n_lo, n_max, threshold = design
+        if self._countdown > 0:
+            self._countdown -= 1
+            return 0.0, 0, [], threshold
+        self._countdown = int(0.05 * n_lo) - 1
+        if noise is not None:
+            q0, q1, q2 = noise.long_run_slow()
+            r0, r1, r2 = max(r0, q0), max(r1, q1), max(r2, q2)
+            youth = step_youth_factor(youth, noise.blocks)
+        grid = self._grid
+        lo = int(np.searchsorted(grid, n_lo, side="left"))
+        # a window needs at least one sample before it
+        hi = int(np.searchsorted(grid, min(n_max, h.count - 1.0), side="right"))
+        if hi <= lo:
+            return 0.0, 0, [], threshold
+        n_int = grid[lo:hi]
+        m_int = np.minimum(h.count - n_int, max(1, int(self.reference_s / dt_mean_s)))
+        c = h.cum
+        now = np.array([c[0] + z[0], c[1] + z[1], c[2] + z[2]])
+        at_n = h.back(n_int)
+        n = n_int.astype(np.float64)[:, None]
+        m = m_int.astype(np.float64)[:, None]
+        post = (now - at_n) / n  # zbar_post: the last n samples
+        d = post - (at_n - h.back(n_int + m_int)) / m  # - zbar_pre: the m before them
+        var = np.array([r0, r1, r2]) * (1.0 / n + 1.0 / m)  # r (1/n + 1/m)
+        stats = np.einsum("ij,ij->i", d, d / var) / youth
+        best = int(stats.argmax())
+        return float(stats[best]), int(n_int[best]), post[best].tolist(), threshold

@@ -1,0 +1,253 @@
+"""The tension filter's observation noise, measured on line (per world axis).
+
+What an average of n observations suffers is the *long-run* variance r (the spectral density
+at zero frequency times the rate): ``Var(mean of n) -> r / n``, with
+``r = s2 (1 + 2 sum_k rho_k)`` for per-sample variance s2 and autocorrelations rho_k. The
+paper's filter is told R (``eq:Kalman_vars``); :class:`groundstation.tension.TensionFilter`
+uses ``R = diag(r)`` with r measured here, colour included (:class:`NoiseEstimate`).
+Pure: Python floats only.
+"""
+
+from __future__ import annotations
+
+import math
+
+__all__ = ["MIN_NOISE_VAR_N2", "NoiseEstimate", "NoiseStatus", "per_sample"]
+
+MIN_NOISE_VAR_N2 = 1e-10
+"""Floor of every noise variance, N^2 (10 uN per sample): keeps S = P- + R positive definite
+on a stream that repeats one value."""
+
+
+class NoiseEstimate:
+    """On-line observation noise per world axis: short-range and long-run variance.
+
+    Vibration noise is not white (lag-1 autocorrelation up to 0.3 on real flights) and not
+    a pure AR(1) either (the realistic simulator mixes white noise with an AR(0.6) part:
+    lag-1 0.2 but r = 2.0 s2, where an AR(1) with that lag-1 has 1.5 s2), so r is measured
+    directly, in two parts, both blind to a slowly moving tension:
+
+    * ``s_d = E[(y_t - y_(t-1))^2] / 2 = s2 (1 - rho_1)`` over ``noise_time_constant_s``
+      = 5 s: the noise level, which moves with throttle and battery;
+    * ``kappa = r / s_d``, the noise's shape, from second differences of block means
+      (blocks of 0.25 s, i.e. 25 samples at 100 Hz, long against the vibration's
+      correlation time): for independent blocks of n_j samples
+      ``E[(m_j - 2 m_(j-1) + m_(j-2))^2] = r (1/n_j + 4/n_(j-1) + 1/n_(j-2))``, which a
+      tension ramp does not reach. Pooled over the axes and averaged over six times as long
+      (30 s, 120 blocks: +-8 %), from a prior kappa = 1.5 (weight 10 blocks, 2.5 s) between
+      white noise (kappa = 1) and real vibration (AR(1) with rho = 0.3: 2.65; the realistic
+      simulator's: 2.5); the change test's youth factor covers the rest.
+
+    Then ``r = s_d kappa``. Each mean is an exponential average (a running mean for the
+    first samples, started from the prior), winsorised at 16 times its current value once
+    warm, so a tug's one large difference moves it by a few per mille. For ``status`` the
+    per-sample s2 comes from the variance within blocks and ``rho_1 = 1 - s_d / s2``.
+
+    Per message this is a few dozen float operations, written out per axis (numpy's
+    per-call overhead would cost more than the arithmetic).
+
+    Args:
+        prior_var_n2: Prior per-sample variance per world axis, N^2.
+        prior_samples: Weight of the prior, samples.
+    """
+
+    BLOCK_S = 0.25
+    SLOW = 6.0
+    KAPPA_PRIOR = 1.5
+    KAPPA_PRIOR_BLOCKS = 10.0
+
+    def __init__(self, prior_var_n2: tuple[float, float, float], prior_samples: float) -> None:
+        self.d1 = [2.0 * v for v in prior_var_n2]
+        self.d1_slow = list(self.d1)  # the same over SLOW times the memory (the step test)
+        self.s2 = list(prior_var_n2)
+        self.prior_samples = prior_samples
+        self.samples = 0  # differences taken
+        self.prev1: tuple[float, float, float] | None = None  # y_(t-1)
+        self.alpha_cache = (math.nan, math.nan, math.nan)
+        # long-run part: kappa, the mean over blocks and axes of r_block / s_d
+        self.kappa = self.KAPPA_PRIOR
+        self.blocks = 0
+        self.break_chain()
+
+    def break_chain(self) -> None:
+        """Forgets the previous sample and the block in progress (a gap, a reset)."""
+        self.prev1 = None
+        self.block_sum = [0.0, 0.0, 0.0]
+        self.block_sq = [0.0, 0.0, 0.0]
+        self.block_n = 0
+        self.block_t = 0.0
+        self.means: list[tuple[list[float], int]] = []  # the last two block means, counts
+
+    def push(
+        self,
+        y: tuple[float, float, float] | list[float],
+        dt: float,
+        time_constant_s: float,
+        warm: int,
+    ) -> tuple[float, float, float]:
+        """Takes one observation.
+
+        Args:
+            y: The observation per world axis, N.
+            dt: Time since the previous one, s.
+            time_constant_s: Memory of the level ``s_d``, s.
+            warm: Differences after which the squared differences are winsorised.
+
+        Returns:
+            :meth:`long_run` after it, N^2.
+        """
+        y0, y1, y2 = y
+        p1 = self.prev1
+        self.prev1 = (y0, y1, y2)
+        if p1 is not None:
+            self.samples += 1
+            if self.alpha_cache[0] != dt:
+                self.alpha_cache = (
+                    dt,
+                    -math.expm1(-dt / time_constant_s),
+                    -math.expm1(-dt / (self.SLOW * time_constant_s)),
+                )
+            _, a_fast, a_slow = self.alpha_cache
+            run = 1.0 / (self.samples + self.prior_samples)
+            alpha = a_fast if a_fast > run else run  # max(run, a_fast)
+            alpha_slow = a_slow if a_slow > run else run
+            d1, d1s = self.d1, self.d1_slow
+            # e_i = (y_t - y_(t-1))^2 per axis, winsorised at 16 times its mean once warm
+            e0, e1, e2 = y0 - p1[0], y1 - p1[1], y2 - p1[2]
+            e0, e1, e2 = e0 * e0, e1 * e1, e2 * e2
+            a0, a1, a2 = d1
+            b0, b1, b2 = d1s
+            if self.samples > warm:
+                f0, f1, f2 = e0, e1, e2
+                if e0 > 16.0 * a0:
+                    e0 = 16.0 * a0
+                if e1 > 16.0 * a1:
+                    e1 = 16.0 * a1
+                if e2 > 16.0 * a2:
+                    e2 = 16.0 * a2
+                if f0 > 16.0 * b0:
+                    f0 = 16.0 * b0
+                if f1 > 16.0 * b1:
+                    f1 = 16.0 * b1
+                if f2 > 16.0 * b2:
+                    f2 = 16.0 * b2
+            else:
+                f0, f1, f2 = e0, e1, e2
+            # 2 s_d <- 2 s_d + alpha (e - 2 s_d), fast and slow
+            self.d1 = [a0 + alpha * (e0 - a0), a1 + alpha * (e1 - a1), a2 + alpha * (e2 - a2)]
+            self.d1_slow = [
+                b0 + alpha_slow * (f0 - b0),
+                b1 + alpha_slow * (f1 - b1),
+                b2 + alpha_slow * (f2 - b2),
+            ]
+            self.block_t += dt
+        bs, bq = self.block_sum, self.block_sq
+        bs[0] += y0
+        bs[1] += y1
+        bs[2] += y2
+        bq[0] += y0 * y0
+        bq[1] += y1 * y1
+        bq[2] += y2 * y2
+        self.block_n += 1
+        if self.block_t >= self.BLOCK_S and self.block_n >= 3:
+            self._end_block(time_constant_s)
+        return self.long_run()
+
+    def _end_block(self, time_constant_s: float) -> None:
+        n = self.block_n
+        mean = [v / n for v in self.block_sum]
+        # Within-block variance (for status only), over the same memory as s_d.
+        alpha = max(1.0 / (self.blocks + 2.0), self.BLOCK_S / time_constant_s)
+        s2 = list(self.s2)  # a new list: a NoiseStatus may hold the old one
+        for i in range(3):
+            within = max(self.block_sq[i] / n - mean[i] * mean[i], 0.0) * n / (n - 1)
+            s2[i] += alpha * (within - s2[i])
+        self.s2 = s2
+        self.means.append((mean, n))
+        if len(self.means) == 3:
+            (m2, n2), (m1, n1), (m0, n0) = self.means
+            # E[(m0 - 2 m1 + m2)^2] = r (1/n0 + 4/n1 + 1/n2) for independent blocks
+            weight = 1.0 / n0 + 4.0 / n1 + 1.0 / n2
+            self.blocks += 1
+            beta = max(
+                1.0 / (self.blocks + self.KAPPA_PRIOR_BLOCKS),
+                self.BLOCK_S / (6.0 * time_constant_s),
+            )
+            ratio = 0.0
+            for i in range(3):
+                sd = 0.5 * self.d1[i]
+                e = (m0[i] - 2.0 * m1[i] + m2[i]) ** 2 / weight / sd if sd > 0.0 else 1.0
+                ratio += min(e, 16.0 * self.kappa) / 3.0
+            self.kappa += beta * (ratio - self.kappa)
+            del self.means[0]
+        self.block_sum = [0.0, 0.0, 0.0]
+        self.block_sq = [0.0, 0.0, 0.0]
+        self.block_n = 0
+        self.block_t = 0.0
+
+    def long_run_slow(self) -> tuple[float, float, float]:
+        """The long-run variance with the level averaged ``SLOW`` times as long, N^2."""
+        k = max(self.kappa, 0.5)
+        v0, v1, v2 = (max(0.5 * d * k, MIN_NOISE_VAR_N2) for d in self.d1_slow)
+        return v0, v1, v2
+
+    def long_run(self) -> tuple[float, float, float]:
+        """The long-run variance ``r = s_d kappa`` per axis (floored), N^2: the filter's R."""
+        k = max(self.kappa, 0.5)
+        floor = MIN_NOISE_VAR_N2
+        a0, a1, a2 = self.d1
+        # s_d = E[(y_t - y_(t-1))^2] / 2; r = max(s_d k, floor), in max's order
+        r0, r1, r2 = 0.5 * a0 * k, 0.5 * a1 * k, 0.5 * a2 * k
+        return (
+            r0 if r0 > floor else floor,
+            r1 if r1 > floor else floor,
+            r2 if r2 > floor else floor,
+        )
+
+    def model(
+        self,
+    ) -> tuple[tuple[float, float, float], tuple[float, float, float], tuple[float, float, float]]:
+        """``(s2, rho_1, r)`` per axis: per-sample variance (N^2), lag-1 autocorrelation,
+        long-run variance (N^2) (:func:`per_sample`, :meth:`long_run`)."""
+        s2, rho = per_sample(self.d1, self.s2)
+        return s2, rho, self.long_run()
+
+    def status(self) -> NoiseStatus:
+        """The noise std per sample (N) and the lag-1 autocorrelation per axis, computed
+        when first read (the estimate's ``noise_std_n``, ``noise_autocorrelation``)."""
+        return NoiseStatus(self.d1, self.s2)  # replaced, never changed in place: a snapshot
+
+
+def per_sample(
+    d1: list[float], s2: list[float]
+) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+    """The per-sample variance (N^2) and the lag-1 autocorrelation ``rho_1 = 1 - s_d / s2``
+    per axis, from ``2 s_d`` and the within-block variance."""
+    floor = MIN_NOISE_VAR_N2
+    a0, a1, a2 = d1
+    sd0, sd1, sd2 = 0.5 * a0, 0.5 * a1, 0.5 * a2
+    v0 = max(s2[0], sd0 * 0.5, floor)
+    v1 = max(s2[1], sd1 * 0.5, floor)
+    v2 = max(s2[2], sd2 * 0.5, floor)
+    return (v0, v1, v2), (
+        min(max(1.0 - sd0 / v0, -1.0), 1.0),
+        min(max(1.0 - sd1 / v1, -1.0), 1.0),
+        min(max(1.0 - sd2 / v2, -1.0), 1.0),
+    )
+
+
+class NoiseStatus:
+    """The noise std (N) and the lag-1 autocorrelation per axis of one step, computed when
+    first read (:func:`per_sample` on that step's state)."""
+
+    __slots__ = ("_d1", "_s2")
+
+    def __init__(self, d1: list[float], s2: list[float]) -> None:
+        self._d1, self._s2 = d1, s2
+
+    def __call__(self, name: str) -> tuple[float, float, float]:
+        """``noise_std_n`` (N) or ``noise_autocorrelation``, by field name."""
+        s2, rho = per_sample(self._d1, self._s2)
+        if name == "noise_std_n":
+            return math.sqrt(s2[0]), math.sqrt(s2[1]), math.sqrt(s2[2])
+        return rho
