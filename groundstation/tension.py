@@ -1456,8 +1456,6 @@ class TensionFilter:
         return est
 
 
-
-
 def _estimate(attributes: dict[str, Any]) -> TensionEstimate:
     """``TensionEstimate(**fields)`` given its instance ``__dict__`` (the lazy fields under
     their descriptors' keys), without the frozen ``__init__``'s one ``object.__setattr__``
@@ -1466,8 +1464,6 @@ def _estimate(attributes: dict[str, Any]) -> TensionEstimate:
     est = _new_object(TensionEstimate)
     _object_setattr(est, "__dict__", attributes)
     return est
-
-
 
 
 def _finite3(value: ArrayLike, name: str) -> tuple[float, float, float]:

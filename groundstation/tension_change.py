@@ -152,6 +152,7 @@ class _Ring:
         # The last size + 1 rows again, as floats: C_(t-n) = recent[(t - n) % (size + 1)].
         self._recent: list[tuple[float, float, float]] = [(0.0, 0.0, 0.0)] * (size + 1)
         self._t = 0
+        self.moves = 0  # times the live rows moved (and C was rebased)
 
     def _new_buffer(self, cum: FloatArray) -> None:
         # Laid out (3, rows): each axis a contiguous row, so every operation on a stretch of
@@ -177,6 +178,7 @@ class _Ring:
         b0, b1, b2 = base[:, 0].tolist()
         self.c = (c0 - b0, c1 - b1, c2 - b2)  # the same rounding as the row
         self._recent = [(r0 - b0, r1 - b1, r2 - b2) for r0, r1, r2 in self._recent]
+        self.moves += 1
 
     def push(
         self,
@@ -330,11 +332,13 @@ class ChangeTest:
         self._radius_min = float(self._radius[0])
         self._anchor = (0.0, 0.0, 0.0)  # C_t0
         self._sigma = -1.0  # the slack; < 0: no certificate
+        self._moves = 0  # ring.moves when the anchor was set
 
     def clear(self) -> None:
         """Forgets the windows (a new regime): none can detect until they fill again."""
         self.ring.count = 0
         self._anchor = self.ring.c
+        self._moves = self.ring.moves
         self._sigma = math.inf
 
     def push(
@@ -349,6 +353,10 @@ class ChangeTest:
         """
         ring = self.ring
         ring.push(z_n, w)
+        if ring.moves != self._moves:
+            # C was rebased: the anchor is in the old coordinates, so evaluate afresh.
+            self._moves = ring.moves
+            self._sigma = -1.0
         sigma = self._sigma
         if sigma < 0.0:
             return False
@@ -392,6 +400,7 @@ class ChangeTest:
         ring = self.ring
         n_min = self.min_window
         self._anchor = ring.c
+        self._moves = ring.moves
         if ring.count < n_min:
             self._sigma = math.inf
             return 0.0, 0

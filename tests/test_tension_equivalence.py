@@ -173,7 +173,7 @@ def test_observation_is_what_its_constructor_makes() -> None:
     rng = np.random.default_rng(4)
     for _ in range(200):
         q = rng.normal(size=4)
-        accel = rng.normal(0.0, 3.0, 3) + [0.0, 0.0, 9.81]
+        accel = rng.normal(0.0, 3.0, 3) + np.array([0.0, 0.0, 9.81])
         obs = observe_tension(accel, q, float(rng.uniform(0.2, 0.6)), 0.03)
         assert obs.tension_world_n is not None
         names = [f.name for f in dataclasses.fields(TensionObservation)]
