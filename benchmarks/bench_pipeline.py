@@ -433,7 +433,10 @@ def _drones_us(warmup: int, messages: int, repeats: int, seed: int) -> dict[str,
 def _best(results: list[dict[str, Any]]) -> dict[str, Any]:
     """Value-by-value minimum of several results (a shared machine only adds time)."""
     out = dict(results[0])
-    out["stages_us"] = {k: min(r["stages_us"][k] for r in results) for k in STAGES}
+    # (A result from before the stage split has other stage names: its stages stay blank.)
+    out["stages_us"] = {
+        k: min(r["stages_us"].get(k, math.inf) for r in results) for k in STAGES
+    }
     out["extra_us"] = {
         k: min(r.get("extra_us", {}).get(k, math.inf) for r in results) for k in EXTRA
     }
