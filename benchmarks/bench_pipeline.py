@@ -434,9 +434,7 @@ def _best(results: list[dict[str, Any]]) -> dict[str, Any]:
     """Value-by-value minimum of several results (a shared machine only adds time)."""
     out = dict(results[0])
     # (A result from before the stage split has other stage names: its stages stay blank.)
-    out["stages_us"] = {
-        k: min(r["stages_us"].get(k, math.inf) for r in results) for k in STAGES
-    }
+    out["stages_us"] = {k: min(r["stages_us"].get(k, math.inf) for r in results) for k in STAGES}
     out["extra_us"] = {
         k: min(r.get("extra_us", {}).get(k, math.inf) for r in results) for k in EXTRA
     }
