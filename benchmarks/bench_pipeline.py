@@ -457,8 +457,18 @@ def _fmt(v: float | None) -> str:
 
 
 def render(result: dict[str, Any], before: dict[str, Any] | None, argv: list[str]) -> str:
-    rows = [(n, result["stages_us"][n], (before or {}).get("stages_us", {}).get(n)) for n in STAGES]
-    rows.append(("sum of stages", result["stages_sum_us"], (before or {}).get("stages_sum_us")))
+    # Stages of a result from before the stage split were timed alone, another method:
+    # only its totals are shown beside these.
+    same_method = before is not None and all(
+        math.isfinite(before["stages_us"].get(n, math.inf)) for n in STAGES
+    )
+    rows = [
+        (n, result["stages_us"][n], before["stages_us"][n] if same_method else None)  # type: ignore[index]
+        for n in STAGES
+    ]
+    rows.append(
+        ("sum of stages", result["stages_sum_us"], before["stages_sum_us"] if same_method else None)  # type: ignore[index]
+    )
     for key, label in (
         ("total_median_us", "**Pipeline.handle, median**"),
         ("total_p90_us", "Pipeline.handle, p90"),
