@@ -33,7 +33,6 @@ from groundstation.estimator import localize_control
 from groundstation.estimator.drone import (
     MOCAP_HOLD_S,
     DroneEstimator,
-    Front,
     calibration_from_config,
 )
 from groundstation.estimator.filter_control import LIFTOFF_PRIOR_STD_N
@@ -270,21 +269,11 @@ class Pipeline:
         self, batch: Sequence[Parsed], on_error: Callable[[Parsed], None] | None = None
     ) -> list[Sample]:
         """:meth:`process` of each input in order (at its ``received_s``), the outputs
-        concatenated: the same outputs, with the localizations of a run of telemetry
-        (any drones) computed in one vectorised call.
+        concatenated (the service's drain: it publishes them after the batch).
 
-        Localization holds no state and reads nothing a later telemetry message changes,
-        so a run is stepped in three passes: every message up to its localization
-        (:meth:`DroneEstimator.front`: observation, gate, contact, filter), the
-        localizations together (:func:`localize_control.localize_many`), then every
-        message's follow step and Estimate in order (:meth:`DroneEstimator.back`). Any
-        other input (reel, params, follow, stop) changes what localization or follow read,
-        so it ends the run: the run is finished first, then that input is processed. What
-        the front pass sets for the back pass of the same message
-        (``calibration_extrapolated``) travels with it (:class:`Front`). The published
-        samples are those of :meth:`process`, in its order; only the operator-log Events
-        told from the front pass (the battery warning) may come before those of an earlier
-        message's back pass (a Stop) in the same batch.
+        Each message goes through its drone's whole step on its own: the localizations of
+        a batch were once computed in one vectorised call, which stopped paying once
+        :func:`localization.localize` was written in Python floats (docs/pipeline_benchmark.md).
 
         Args:
             batch: Validated inputs, each drone's in their order.
@@ -292,42 +281,14 @@ class Pipeline:
                 (its outputs are lost, the rest go on); None re-raises.
         """
         out: list[Sample] = []
-        run: list[tuple[DroneEstimator, Front, Parsed]] = []
-        section = self.settings.localization
-
-        def finish_run() -> None:
-            inputs = [f.localize_in for _, f, _ in run if f.localize_in is not None]
-            try:
-                located = iter(localize_control.localize_many(section, inputs))
-            except Exception:  # never expected (localize returns failures): one by one
-                located = iter([localize_control.localize_one(section, x) for x in inputs])
-            for drone, front, parsed in run:
-                position = next(located) if front.localize_in is not None else None
-                try:
-                    out.extend(drone.back(front, position))
-                except Exception:
-                    if on_error is None:
-                        raise
-                    on_error(parsed)
-            run.clear()
-
+        process = self.process
         for parsed in batch:
             try:
-                drone = self.drones.get(parsed.drone)
-                if drone is not None and isinstance(parsed.message, Telemetry):
-                    front = drone.front(parsed.message, parsed.received_s)
-                    if front is not None:
-                        run.append((drone, front, parsed))
-                    continue
-                if run:
-                    finish_run()
-                out.extend(self.process(parsed, parsed.received_s))
+                out.extend(process(parsed, parsed.received_s))
             except Exception:
                 if on_error is None:
                     raise
                 on_error(parsed)
-        if run:
-            finish_run()
         return out
 
     def tick(self, now_s: float) -> list[Sample]:

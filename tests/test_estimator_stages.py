@@ -29,7 +29,6 @@ from groundstation.estimator.gate import MAX_GAP_S, GateState, gate_step, mark_s
 from groundstation.estimator.localize_control import (
     LocalizeIn,
     fresh_angle,
-    localize_many,
     localize_one,
 )
 from groundstation.estimator.observation import learn_slow, observe
@@ -257,20 +256,28 @@ def test_a_reel_angle_is_used_only_while_fresh() -> None:
     assert fresh_angle(angle, received_s=8.9, now_s=10.0, stale_after_s=1.0) is None
 
 
-def test_localize_many_gives_the_floats_of_localize_one() -> None:
-    section = LocalizationSection()
+def test_localize_one_is_localize_with_the_sections_settings() -> None:
+    """The stage hands localization the message's inputs and the section's azimuth source
+    and motion-capture σ: the very floats of a direct call, and None where it fails."""
+    from groundstation.localization import localize
+
     rng = np.random.default_rng(3)
-    inputs = []
-    for _ in range(16):
-        t = np.array((0.05 + 0.05 * rng.random(), 0.02 * rng.standard_normal(), -0.02))
-        inputs.append(
-            LocalizeIn(t, np.eye(3) * 1e-6, 0.07, 1.6, np.zeros(3), 0.0, None, None, None)
-        )
-    one = [localize_one(section, x) for x in inputs]
-    many = localize_many(section, inputs)
-    for a, b in zip(one, many, strict=True):
-        assert a is not None and b is not None
-        np.testing.assert_allclose(a.position_world_m, b.position_world_m, rtol=1e-12)
+    for azimuth in ("tension", "mocap"):
+        section = LocalizationSection(azimuth=azimuth, mocap_std_m=0.02)
+        for _ in range(8):
+            t = np.array((0.05 + 0.05 * rng.random(), 0.02 * rng.standard_normal(), -0.02))
+            mocap = (0.3, 0.4 + 0.1 * rng.random(), 0.9)
+            x = LocalizeIn(t, np.eye(3) * 1e-6, 0.07, 1.6, np.zeros(3), 0.0, None, None, mocap)
+            got = localize_one(section, x)
+            want = localize(
+                t, np.eye(3) * 1e-6, 0.07, 1.6, np.zeros(3), 0.0,
+                azimuth=azimuth, mocap_world_m=mocap, mocap_std_m=0.02,
+            )  # fmt: skip
+            assert got is not None and want is not None
+            assert got.position_world_m.tolist() == want.position_world_m.tolist()
+            assert got.azimuth_source == azimuth
+    bad = LocalizeIn(np.full(3, np.nan), np.eye(3), 0.07, 1.6, np.zeros(3), 0.0, None, None, None)
+    assert localize_one(LocalizationSection(), bad) is None
 
 
 # ---------------------------------------------------------------- follow control

@@ -589,17 +589,13 @@ def test_exit_azimuth_without_std_grows_toward_plumb() -> None:
     assert exit_azimuth_default_std_rad(0.03, None) == 0.03
 
 
-@pytest.mark.parametrize("vector_min", [1, 10_000], ids=["vectorised", "one-by-one"])
-def test_mocap_azimuth_takes_beta_from_position_m_one_by_one_and_batched(
-    vector_min: int, monkeypatch: pytest.MonkeyPatch
-) -> None:
+def test_mocap_azimuth_takes_beta_from_position_m_one_by_one_and_batched() -> None:
     """``[localization] azimuth = "mocap"``, ``elevation = false`` (the paper's method): β
     comes from Telemetry ``position_m``, r and z from the tension. The tension pulls toward
     -x (a drone at +x by the catenary) while motion capture puts the drone at +y: the
     published position lies along +y, ``azimuth_source`` "mocap", and its radius and height
-    are the tension's. The same through Pipeline.process_batch, with the localizations
-    vectorised or one by one: the same bytes as Pipeline.handle."""
-    from groundstation.estimator import localize_control
+    are the tension's. The same through Pipeline.process_batch (the service's drain): the
+    same bytes as Pipeline.handle."""
     from tests.hover_synth import hover_body
 
     tension = np.array([-0.020, 0.0, -0.060])
@@ -633,7 +629,6 @@ def test_mocap_azimuth_takes_beta_from_position_m_one_by_one_and_batched(
     assert math.hypot(x, y) == pytest.approx(math.hypot(ref[0], ref[1]), abs=1e-3)
     assert z == pytest.approx(ref[2], abs=1e-3)
 
-    monkeypatch.setattr(localize_control, "BATCH_LOCALIZE_MIN", vector_min)
     pipe = Pipeline(settings("mocap"))
     parsed = [p for s, now_s in samples if (p := pipe.validate(s, now_s)) is not None]
     got = [o for i in range(0, len(parsed), 50) for o in pipe.process_batch(parsed[i : i + 50])]

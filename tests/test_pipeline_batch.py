@@ -8,9 +8,7 @@ a drone that starts late, one that falls silent for 1.2 s and comes back (the fi
 restarts), one whose reel reports an exit azimuth (its localizations go one by one inside
 the batch), one sending a bad quaternion, one whose battery leaves the calibrated range and
 comes back every few samples; with invalid payloads, repeated seqs, reel,
-params and follow commands mixed in. It is cut into batches of random sizes, once with the
-vectorised localization forced on every run of telemetry (``BATCH_LOCALIZE_MIN = 1``) and
-once with the service's own threshold.
+params and follow commands mixed in. It is cut into batches of random sizes.
 """
 
 from __future__ import annotations
@@ -26,7 +24,6 @@ import pytest
 import groundstation.pipeline as pipeline_mod
 from groundstation.bus import Sample
 from groundstation.config import Settings, load_settings
-from groundstation.estimator import localize_control
 from groundstation.pipeline import Parsed, Pipeline
 from groundstation.service import Service
 from tests.hover_synth import hover_body
@@ -172,24 +169,11 @@ def _cut(parsed: list[Parsed], rng: np.random.Generator) -> list[list[Parsed]]:
     return batches
 
 
-@pytest.mark.parametrize("vector_min", [1, localize_control.BATCH_LOCALIZE_MIN])
 @pytest.mark.parametrize("seed", [0, 1])
-def test_process_batch_publishes_what_handle_publishes(
-    seed: int, vector_min: int, monkeypatch: pytest.MonkeyPatch
-) -> None:
+def test_process_batch_publishes_what_handle_publishes(seed: int) -> None:
     samples = mixed_input(seed)
     want, plain = _plain(samples)
 
-    calls: list[int] = []
-    real = localize_control.localize_batch
-
-    def counted(*args: Any, **kwargs: Any) -> Any:
-        out = real(*args, **kwargs)
-        calls.append(len(out))
-        return out
-
-    monkeypatch.setattr(localize_control, "localize_batch", counted)
-    monkeypatch.setattr(localize_control, "BATCH_LOCALIZE_MIN", vector_min)
     pipe = Pipeline(settings())
     parsed = [p for s, now_s in samples if (p := pipe.validate(s, now_s)) is not None]
     got = [
@@ -199,7 +183,6 @@ def test_process_batch_publishes_what_handle_publishes(
     kinds = Counter(s.key.split("/", 2)[2] for s in want)
     assert kinds["estimate"] > 2000 and kinds["cmd/setpoint"] > 10, kinds
     assert got == want  # every byte, in the same order
-    assert sum(calls) > 1500  # most positions came from the vectorised call
     assert _drops(pipe) == _drops(plain)
     assert _drops(plain) == {"invalid": 2, "bad_quaternion": 1, "seq_repeated": 1}
     for drone, runtime in plain.drones.items():

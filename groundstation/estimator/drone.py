@@ -25,10 +25,9 @@ follow, tug-to-land           :mod:`.follow_control`              ``follow.follo
 Estimate                      :mod:`.output`                      —
 ============================  ==================================  ===========================
 
-:meth:`DroneEstimator.step` runs a message through all of them. A run of messages may be
-stepped in three passes instead (:meth:`front` up to the localization's inputs, the
-localizations together, :meth:`back` from the localization on): localization holds no
-state, so the outputs are the same. The estimator reports what the operator must hear
+:meth:`DroneEstimator.step` runs a message through all of them: :meth:`front` up to the
+localization's inputs (a :class:`Front`), the localization, :meth:`back` from the
+localization on. The estimator reports what the operator must hear
 (drops, one-off warnings, the Stops it issues) through the callbacks it is given; it never
 touches the bus.
 """
@@ -140,8 +139,7 @@ class Front(NamedTuple):
         finite: the filter's output is finite (else no Estimate).
         on_ground: the contact stage's decision (or disarmed).
         localize_in: what to localize it from (None: nothing to localize).
-        calibration_extrapolated: the battery check's flag for this message (a later
-            message's front pass moves the drone's).
+        calibration_extrapolated: the battery check's flag for this message.
         mocap_world_m: the motion-capture position held for this message (None: none).
     """
 
@@ -440,8 +438,7 @@ class DroneEstimator:
     def back(self, front: Front, position: PositionEstimate | None) -> list[Sample]:
         """A message from its localization on: follow, the Estimate, Setpoint and Stop."""
         msg = front.msg
-        # This message's flag, as its front pass left it (in a batch, later messages'
-        # front passes have moved it since).
+        # This message's flag, as its front pass left it.
         self.calibration_extrapolated = front.calibration_extrapolated
         fs = self.follow_state
         if not (fs.enabled or fs.active) and math.isfinite(msg.stamp_s):

@@ -7,9 +7,8 @@ angles only while fresh (``[localization] reel_stale_after_s``: the reel reports
 rate; the elevation only with ``[localization] elevation``), and the motion-capture
 position of the message (the ``mocap`` azimuth source).
 
-Localization holds no state, so the inputs of many messages can be localized together
-(:func:`localize_many`, one vectorised call once there are :data:`BATCH_LOCALIZE_MIN`),
-with the same floats as one by one (:func:`localize_one`).
+Localization holds no state: :func:`localize_one` is a function of the message's
+:class:`LocalizeIn` alone.
 """
 
 from __future__ import annotations
@@ -24,22 +23,14 @@ from groundstation.localization import (
     AngleObservation,
     PositionEstimate,
     localize,
-    localize_batch,
 )
 
 __all__ = [
-    "BATCH_LOCALIZE_MIN",
     "LocalizeIn",
     "exit_azimuth_default_std_rad",
     "fresh_angle",
-    "localize_many",
     "localize_one",
 ]
-
-BATCH_LOCALIZE_MIN = 12
-"""Localizations from which :func:`localize_many` computes them in one vectorised call
-(:func:`localization.localize_batch`: numpy's per-call overhead is paid once, then a few µs
-per case; docs/pipeline_benchmark.md)."""
 
 Vec3 = tuple[float, float, float]
 
@@ -119,29 +110,5 @@ def localize_one(section: LocalizationSection, x: LocalizeIn) -> PositionEstimat
         exit_azimuth=x.exit_azimuth,
         exit_elevation=x.exit_elevation,
         mocap_world_m=x.mocap_world_m,
-        mocap_std_m=section.mocap_std_m,
-    )
-
-
-def localize_many(
-    section: LocalizationSection, inputs: list[LocalizeIn]
-) -> list[PositionEstimate | None]:
-    """:func:`localize_one` of each, computed together once there are enough to pay for it
-    (:func:`localization.localize_batch`, which gives the same floats)."""
-    if len(inputs) < BATCH_LOCALIZE_MIN:
-        return [localize_one(section, x) for x in inputs]
-    exit_az = [x.exit_azimuth for x in inputs]
-    exit_el = [x.exit_elevation for x in inputs]
-    return localize_batch(
-        np.array([x.tension_world_n for x in inputs]),
-        np.array([x.cov_n2 for x in inputs]),
-        np.array([x.weight_n_per_m for x in inputs], dtype=float),
-        np.array([x.length_m for x in inputs], dtype=float),
-        np.array([x.base_world_m for x in inputs]),
-        np.array([x.floor_z_m for x in inputs], dtype=float),
-        azimuth=section.azimuth,
-        exit_azimuth=exit_az if any(v is not None for v in exit_az) else None,
-        exit_elevation=exit_el if any(v is not None for v in exit_el) else None,
-        mocap_world_m=[x.mocap_world_m for x in inputs] if section.azimuth == "mocap" else None,
         mocap_std_m=section.mocap_std_m,
     )
