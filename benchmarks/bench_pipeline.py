@@ -474,13 +474,19 @@ def render(result: dict[str, Any], before: dict[str, Any] | None, argv: list[str
         ("total_p90_us", "Pipeline.handle, p90"),
         ("total_best_mean_us", "Pipeline.handle, mean (best repeat)"),
         ("drones_process_us", f"{DRONES} drones: Pipeline.process, one by one"),
-        ("drones_batch_us", f"**{DRONES} drones: Pipeline.process_batch, batches of {BATCH}**"),
+        (
+            "drones_batch_us",
+            f"**{DRONES} drones: Pipeline.process_batch (the service's drain), batches of "
+            f"{BATCH}**",
+        ),
     ):
         rows.append((label, result.get(key), (before or {}).get(key)))
     extra_labels = {
         "kalman_bare": "(the Kalman step alone: DiagonalKalman predict + update)",
         "filterpy_bare": "(the same step on filterpy's KalmanFilter, as before)",
-        "localize_batch": f"(localize_batch, {BATCH} cases per call, per case)",
+        "localize_batch": (
+            f"(localize_batch, the smoother's vectorised call, {BATCH} cases per call, per case)"
+        ),
         "follow_step_itself": "(follow_step itself, follow off: the pipeline skips it)",
     }
     for key, label in extra_labels.items():
@@ -515,6 +521,19 @@ def render(result: dict[str, Any], before: dict[str, Any] | None, argv: list[str
             f"Before: {before['commit']}, best of {before.get('runs', 1)} run(s), load average "
             f"{', '.join(f'{x:.2f}' for x in before['loadavg'])} (first run).",
         ]
+    median = result["total_median_us"]
+    st = result["stages_us"]
+    io = st["validate"] + st["estimate"]
+    lines += [
+        "",
+        f"Issue 22's target, ≤ 50 µs per message with validation and encoding: "
+        f"**{'met' if median <= 50.0 else 'not met'}** (median {median:.0f} µs). Of it, "
+        f"the contract's JSON in and out (validate + estimate) is {io:.0f} µs, the "
+        f"localization's catenary solves (the drone and six sigma points) {st['localize']:.0f} "
+        f"µs, the tension filter with its noise, change and drift tests "
+        f"{st['filter']:.0f} µs. docs/service_profile.md, section 5, says why this is "
+        "about what CPython does with this work and what it would take to go further.",
+    ]
     lines += [
         "",
         "Budget: 8 drones x 250 Hz = 2000 msg/s on 2 cores, so every 100 µs of pipeline is "

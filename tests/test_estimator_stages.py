@@ -1,5 +1,5 @@
 """Each stage of groundstation.estimator alone: the gate, the observation, the checks, the
-filter's control, the localization's inputs, follow's control, the Estimate's fields.
+contact, the filter's control, the localization's inputs, follow's control, the Estimate's fields.
 
 The Pipeline's own tests (test_pipeline*.py, test_perf_equivalence.py) run them together;
 here each stage's rules are pinned where a reader of that stage looks for them.
@@ -14,9 +14,11 @@ from typing import Any
 import numpy as np
 import pytest
 
+from groundstation import contact as contact_mod
 from groundstation import follow as follow_mod
 from groundstation.config import LocalizationSection
 from groundstation.estimator import checks, output
+from groundstation.estimator.contact_control import contact_decide
 from groundstation.estimator.filter_control import LIFTOFF_PRIOR_STD_N, FilterControl
 from groundstation.estimator.follow_control import (
     UNTRUSTED_POSITION_REASON,
@@ -195,6 +197,57 @@ def test_rest_missing_is_set_at_arming_without_offset_and_cleared_at_disarm() ->
     assert not f(was_armed=False, armed=True, offset_in_force=True, missing_before=False)
     assert f(was_armed=True, armed=True, offset_in_force=True, missing_before=True)  # holds
     assert not f(was_armed=True, armed=False, offset_in_force=False, missing_before=True)
+
+
+# ---------------------------------------------------------------- contact
+
+
+def test_contact_stage_hands_contact_step_this_messages_evidence() -> None:
+    """The calibrated thrust, the IMU's world vertical acceleration and motion capture's
+    height go to contact_step as they are; the state it returns is the stage's."""
+    params = contact_mod.ContactParams()
+    state = contact_mod.ContactState()
+    msg = _telemetry(
+        accel_mps2=(0.1, 0.0, G + 0.4), quat_wxyz=(0.99, 0.1, 0.0, 0.0), position_m=(0.2, 0.0, 0.7)
+    )
+    got = contact_decide(state, params, msg, thrust_n=0.31, mass_kg=MASS_KG, dt_s=0.004,
+                         floor_z_m=0.0)  # fmt: skip
+    want = contact_mod.contact_step(
+        state,
+        params,
+        dt_s=0.004,
+        armed=True,
+        thrust_n=0.31,
+        mass_kg=MASS_KG,
+        vertical_accel_mps2=contact_mod.vertical_accel_mps2(msg.accel_mps2, msg.quat_wxyz),
+        height_m=0.7,
+        floor_z_m=0.0,
+    )
+    assert got.state == want and got.on_ground == want.on_ground
+
+
+def test_contact_stage_a_disarmed_drone_is_on_the_ground_and_a_dip_is_not() -> None:
+    params = contact_mod.ContactParams()
+    state = contact_mod.ContactState()
+    # Hovering at 1 m (motion capture): airborne within a few samples.
+    for k in range(50):
+        msg = _telemetry(seq=k, stamp_s=0.004 * k, position_m=(0.0, 0.0, 1.0))
+        state, on_ground = contact_decide(
+            state, params, msg, thrust_n=MASS_KG * G, mass_kg=MASS_KG, dt_s=0.004, floor_z_m=0.0
+        )
+    assert not on_ground
+    # A thrust dip in the air (the specific force is thrust / m, far below g): still air.
+    for k in range(50, 150):
+        msg = _telemetry(seq=k, stamp_s=0.004 * k, accel_mps2=(0.0, 0.0, 0.7), thrust_n=0.02)
+        state, on_ground = contact_decide(
+            state, params, msg, thrust_n=0.02, mass_kg=MASS_KG, dt_s=0.004, floor_z_m=0.0
+        )
+        assert not on_ground, k
+    # Disarmed: the rest of the step takes it as ground, whatever the state says.
+    msg = _telemetry(seq=150, stamp_s=0.6, armed=False, position_m=(0.0, 0.0, 1.0))
+    out = contact_decide(state, params, msg, thrust_n=0.0, mass_kg=MASS_KG, dt_s=0.004,
+                         floor_z_m=0.0)  # fmt: skip
+    assert out.on_ground
 
 
 # ---------------------------------------------------------------- filter control

@@ -16,7 +16,7 @@ stage                         control                             physics
 observation                   :mod:`.observation`                 ``tension.observe_tension``
 stream gate (order, gaps)     :mod:`.gate`                        —
 rest calibration              :meth:`DroneEstimator._feed_rest`   ``calibration.RestCalibrator``
-contact (ground / air)        :meth:`DroneEstimator.front`        ``contact.contact_step``
+contact (ground / air)        :mod:`.contact_control`             ``contact.contact_step``
 battery, position σ checks    :mod:`.checks`                      —
 slow accelerometer error      :func:`.observation.learn_slow`     ``slow_accel``
 tension filter                :mod:`.filter_control`              ``tension.TensionFilter``
@@ -48,6 +48,7 @@ from groundstation.bus import Sample
 from groundstation.calibration import RestCalibrator
 from groundstation.config import CalibrationSection, DroneParams, Settings
 from groundstation.estimator import checks, output
+from groundstation.estimator.contact_control import contact_decide
 from groundstation.estimator.filter_control import FilterControl
 from groundstation.estimator.follow_control import follow_decide, follow_stamped
 from groundstation.estimator.gate import GateState, gate_step, mark_stale
@@ -377,19 +378,16 @@ class DroneEstimator:
         # Ground or air, with hysteresis: between ground_thrust_ratio and the weight the
         # floor may still carry the drone (its push is no tension) until lift-off is seen.
         obs = observed.observation
-        self.contact = contact = contact_mod.contact_step(
+        contact, on_ground = contact_decide(
             self.contact,
             self.contact_params,
-            dt_s=dt_s,
-            armed=msg.armed,
+            msg,
             thrust_n=obs.thrust_n,  # calibrated
             mass_kg=self.params.drone.mass_kg,
-            vertical_accel_mps2=contact_mod.vertical_accel_mps2(msg.accel_mps2, msg.quat_wxyz),
-            height_m=msg.position_m[2] if msg.position_m is not None else None,
+            dt_s=dt_s,
             floor_z_m=self.params.base.floor_z_m,
         )
-        # Issue 23: a low thrust alone (no observation) is no ground; the contact decides.
-        on_ground = contact.on_ground or not msg.armed
+        self.contact = contact
         self._check_battery(msg.vbat_v, on_ground, now_s)
         if self.slow_params is not None:
             self.slow = learn_slow(
