@@ -22,8 +22,11 @@ capture. The accelerometer noise level is set per experiment; the pipeline is *n
   test and the drift adaptation off) told the true noise (the long-run variance of the
   observation error against the true tension, measured in the same run) and given its best
   hover time constant (the best of a grid, chosen per noise level on the pooled median),
-  fed the same observations (true calibration) and localized with the same
-  :func:`groundstation.localization.localize`.
+  fed the full model's observations with every drawn error known (the accelerometer's
+  mean trusted as read) and localized with the same
+  :func:`groundstation.localization.localize`. Ours has the airframe's constants only and
+  its slow stage rests the slow part of the observation on thrust and attitude at hover,
+  which the oracle does not: a ratio below 1 is that stage's gain.
 * **False tugs**: hover at the first spot for 10 min (``--quick``: 1 min) per noise level,
   change detections counted by the pipeline.
 * **Tug**: a 30 mN step pull toward the base at 10 s for 5 s, 4 seeds (``--quick``: 2).
