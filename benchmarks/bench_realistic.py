@@ -807,8 +807,73 @@ def _render_envelope(res: dict[str, Any]) -> list[str]:
     return L
 
 
+_BEFORE_SLOW_STAGE = {
+    "commit": "b6d0e7c",
+    "hover_median_cm": {0.5: 4.6, 1.0: 8.7, 2.0: 17.4},
+    "hover_p95_cm": {0.5: 10.5, 1.0: 20.0, 2.0: 39.2},
+    "tug_t90_s": {0.5: 0.31, 1.0: 1.98},
+    "envelope_median_cm": {"misalignment": 23.2, "accel_scale": 24.2, "accel_bias": 10.5},
+}
+"""The page's figures before the slow accelerometer stage of issue 20 (the run at b6d0e7c,
+``--tug-seeds 8``): what the first bullet of the reading compares with."""
+
+
+def _render_slow_stage(res: dict[str, Any]) -> list[str]:
+    """The first bullet of the reading: this run against the estimator before issue 20."""
+    b = _BEFORE_SLOW_STAGE
+    parts = []
+    hover = {h["noise"]: h for h in res.get("hover", [])}
+    if hover:
+        meds = ", ".join(
+            f"{_cm(h['ours_median_m'])} / {_cm(h['ours_p95_m'])} at {n:g} m/s^2 (was "
+            f"{b['hover_median_cm'][n]:.1f} / {b['hover_p95_cm'][n]:.1f} cm)"
+            for n, h in hover.items()
+            if n in b["hover_median_cm"]
+        )
+        parts.append(
+            f"hover median / p95 {meds}: the medians improve at every level and the p95 is "
+            "worse at 1-2 m/s^2, where the hover crossover switches on and off and the "
+            "near-plumb spot (0.5, -0.6, 1.0) holds the tail (the open problem of issue 20, "
+            "docs/estimator_design.md)"
+        )
+    tug = {t["noise"]: t for t in res.get("tug", [])}
+    t90s = [
+        f"{tug[n]['t90_s']:.2f} s at {n:g} m/s^2 (was {was:.2f} s)"
+        for n, was in b["tug_t90_s"].items()
+        if n in tug and tug[n].get("t90_s") is not None
+    ]
+    if t90s:
+        parts.append(
+            f"the tug's t90 {', '.join(t90s)}: the slow stage holds the hover's slow content "
+            "for about its 1 s window before the tug reaches the estimate; `[filter] "
+            "accel_hover_exit_window_s` trades hover accuracy for a faster exit "
+            "(docs/hover_exit.md)"
+        )
+    env = {e["class"]: e for e in res.get("envelope", [])}
+    gone = [
+        f"{c} {_cm(env[c]['median_m'])} (was {was:.1f} cm)"
+        for c, was in b["envelope_median_cm"].items()
+        if c in env
+    ]
+    if gone:
+        parts.append(
+            f"uncalibrated, the accelerometer's own errors cost no more than none: "
+            f"{', '.join(gone)}, learnt in flight at each power-on; the thrust axis and the "
+            "thrust map still cost most of the error: they are the airframe's constants that "
+            "`calibrate` fits"
+        )
+    if not parts:
+        return []
+    return [
+        f"- **The estimator of issue 20** (the slow accelerometer stage and the airframe "
+        f"calibration, docs/estimator_design.md) against this page's previous run at "
+        f"{b['commit']}, before it: " + "; ".join(parts) + "."
+    ]
+
+
 def _render_reading(res: dict[str, Any]) -> list[str]:
     L = ["## Reading", ""]
+    L += _render_slow_stage(res)
     if "tug" in res:
         L += [
             "- The step oracle's t90 is 0 by construction (the mean of the samples since a "
@@ -851,8 +916,9 @@ def _render_reading(res: dict[str, Any]) -> list[str]:
             "determined at 2 m/s^2 for ours and the oracle alike; the pooled p95 follows that "
             "spot. There the localization blends the position toward the base as the "
             "filter's P grows, so the position error depends on the filter's memory more "
-            "than elsewhere: with a fixed 6 s hover time constant ours reached 2.0x the "
-            "oracle's p95 on seed 200 (the oracle's best was 20-40 s); the time constant "
+            "than elsewhere: with a fixed 6 s hover time constant ours reached (before the "
+            "slow stage of issue 20) 2.0x the oracle's p95 on seed 200 (the oracle's best "
+            "was 20-40 s); the time constant "
             "now follows the noise (groundstation/tension.py, *Process noise in seconds*).",
             "- With calibration = truth a flight's vertical tension error is its noise's "
             "window mean: at 2 m/s^2 the raw observation's T_z error, averaged over the "
@@ -867,7 +933,8 @@ def _render_reading(res: dict[str, Any]) -> list[str]:
         ]
     if "tug" in res:
         L.append(
-            "- The hover time constant against the tug (measured with `--only tug --levels L "
+            "- (Measured before the slow stage of issue 20.) The hover time constant against "
+            "the tug (measured with `--only tug --levels L "
             "--tug-seeds 8 --fixed-tau` at b70b80a: the same flights with the earlier fixed 6"
             " s): detections are the step test's and do not depend on it (the same first dete"
             "ctions per seed at 2 m/s^2). t90 at 1 m/s^2 was 2.34 s with 6 s against 1.98 s n"
