@@ -92,7 +92,12 @@ def open_page(
 
 
 def scene_canvas_box(page: Any) -> dict[str, float]:
-    """Bounding box of the largest canvas (the 3D view; uPlot charts are canvases too)."""
+    """Bounding box of the largest canvas (the 3D view; uPlot charts are canvases too).
+
+    Waits for the first canvas: a test may be the first on its page (its worker's first, or
+    the only one asked for), before the dashboard has drawn anything.
+    """
+    page.locator("canvas").first.wait_for(state="visible", timeout=FIRST_FRAME_TIMEOUT_MS)
     box = page.evaluate(
         """() => {
             let best = null;
