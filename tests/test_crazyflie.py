@@ -1157,6 +1157,9 @@ def test_a_lost_ground_station_holds_then_lands_the_drone_rather_than_dropping_i
     t_kill = time.monotonic()
     wait_for(lambda: _landed(link), "landed with the motors off", 10.0)
     wait_for(lambda: h.status[-1]["phase"] == "idle", "idle reported")
+    # The bridge reports the phase as it changes, then the motors off in a second status:
+    # under load a test can read between the two.
+    wait_for(lambda: h.status[-1]["motors_off"], "motors off reported")
     fw = link.firmware
     assert fw.impacts_mps == [], "landed, not dropped"
     assert not fw.locked and not h.bridge.gate.latched, "a landing locks nothing"
