@@ -37,6 +37,56 @@ def settings_for(**sim: Any) -> Settings:
     return load_settings(None, {"sim": sim}, use_env=False)
 
 
+class ClosedLoop:
+    """``scenario`` flown in lock-step, resumable: :meth:`run_to` flies on from where it is.
+
+    ``inject[step]`` adds samples to that simulator step's.
+    """
+
+    def __init__(
+        self,
+        settings: Settings,
+        scenario: str,
+        *,
+        inject: dict[int, list[Sample]] | None = None,
+        pipeline: Pipeline | None = None,
+    ) -> None:
+        self.sim = Simulator(settings, _NullBus(), scenario=scenario)  # type: ignore[arg-type]
+        self.pipe = pipeline or Pipeline(settings)
+        self.run = Run()
+        self.steps = 0
+        self._inject = inject or {}
+
+    def run_to(self, seconds: float) -> None:
+        """Fly on until ``seconds`` of simulated time (the step count ``closed_loop`` takes)."""
+        sim, pipe, run = self.sim, self.pipe, self.run
+        steps = round(seconds / sim.dt_s)
+        for step in range(self.steps, steps):
+            now_s = sim.t_s
+            samples = sim.step()
+            samples.extend(self._inject.get(step, []))
+            for sample in samples:
+                kind = sample.key.split("/", 2)[2]
+                if kind == "truth":
+                    t = json.loads(sample.payload)
+                    run.truth[round(t["stamp_s"], 6)] = t
+                    continue
+                if kind == "telemetry":
+                    run.telemetry += 1
+                for out in pipe.handle(sample, now_s):
+                    payload = json.loads(out.payload)
+                    if out.key.endswith("/estimate"):
+                        run.estimates.append(payload)
+                    elif out.key.endswith("/cmd/setpoint"):
+                        run.setpoints.append(payload)
+                        sim._on_command(out)
+                    elif out.key.endswith("/cmd/stop"):
+                        run.stops.append(payload)
+                        sim._on_command(out)
+            pipe.tick(now_s)
+        self.steps = max(self.steps, steps)
+
+
 def closed_loop(
     settings: Settings,
     scenario: str,
@@ -46,31 +96,6 @@ def closed_loop(
     pipeline: Pipeline | None = None,
 ) -> tuple[Run, Pipeline, Simulator]:
     """Run ``scenario`` for ``seconds`` of simulated time; ``inject[step]`` adds samples."""
-    sim = Simulator(settings, _NullBus(), scenario=scenario)  # type: ignore[arg-type]
-    pipe = pipeline or Pipeline(settings)
-    run = Run()
-    steps = round(seconds / sim.dt_s)
-    for step in range(steps):
-        now_s = sim.t_s
-        samples = sim.step()
-        samples.extend((inject or {}).get(step, []))
-        for sample in samples:
-            kind = sample.key.split("/", 2)[2]
-            if kind == "truth":
-                t = json.loads(sample.payload)
-                run.truth[round(t["stamp_s"], 6)] = t
-                continue
-            if kind == "telemetry":
-                run.telemetry += 1
-            for out in pipe.handle(sample, now_s):
-                payload = json.loads(out.payload)
-                if out.key.endswith("/estimate"):
-                    run.estimates.append(payload)
-                elif out.key.endswith("/cmd/setpoint"):
-                    run.setpoints.append(payload)
-                    sim._on_command(out)
-                elif out.key.endswith("/cmd/stop"):
-                    run.stops.append(payload)
-                    sim._on_command(out)
-        pipe.tick(now_s)
-    return run, pipe, sim
+    loop = ClosedLoop(settings, scenario, inject=inject, pipeline=pipeline)
+    loop.run_to(seconds)
+    return loop.run, loop.pipe, loop.sim
