@@ -154,8 +154,9 @@ def pytest_xdist_make_scheduler(config: pytest.Config, log: Any) -> Any:
                 return
             wants = self._wants(node)
             if not any(chain_of(next(iter(unit))) in wants for unit in self.workqueue.values()):
-                if not self._pending_of(self.assigned_work.get(node, {})):
-                    node.shutdown()
+                # Nothing more for this worker: it runs what it has and stops. (A worker holds
+                # its last test until it knows the next one or that there is none.)
+                node.shutdown()
                 return
             if self._pending_of(self.assigned_work.get(node, {})) > 1:
                 return
