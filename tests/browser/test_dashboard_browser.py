@@ -254,10 +254,13 @@ def test_position_chart_survives_switching_motion_capture_on_and_off(feed: Feed)
     page = feed.page
     # The first chart with 5 s of history: as slow as the first frame when this test is the
     # first on its page (software GL on a shared 2-core machine), not a command's reply.
+    # The page may still show the chart of the drone an earlier test selected last (the
+    # panel's selection is back on cf1 before the page redraws): wait for cf1's.
     first_s = FIRST_FRAME_TIMEOUT_MS / 1000.0
-    assert wait_until(lambda: position_chart_ok(page) is not None, first_s)
-    chart = position_chart_ok(page)
-    assert chart is not None and chart["series"] == 7  # cf1 has motion capture
+    assert wait_until(
+        lambda: (c := position_chart_ok(page)) is not None and c["series"] == 7,  # cf1: mocap
+        first_s,
+    ), page.evaluate(VISIBLE_CHARTS_JS)
     for drone_id, series in (("cf2", 4), ("cf1", 7), ("cf2", 4)):
         select_drone(page, drone_id)
         assert wait_until(lambda d=drone_id: only_panel(feed).selected == d, COMMAND_TIMEOUT_S)
