@@ -1,11 +1,11 @@
 """How ``./dev test`` shares the tests among its worker processes (pytest-xdist).
 
-``./dev test`` runs ``pytest -n 4 --dist loadgroup`` on a 2-core machine. Two kinds of test:
+``./dev test`` runs ``pytest -n 3 --dist loadgroup`` on a 2-core machine. Two kinds of test:
 
 - **Real-time** tests wait on the wall clock: real Zenoh sessions, subprocesses that fly a
   simulator at real time, a Chromium drawing with software GL, threads polled against a
-  deadline. Each of ``CHAINS`` runs serially on a worker of its own, at normal priority: the
-  browser tests on one, every other real-time test on another. They never run a CPU test.
+  deadline. Each of ``CHAINS`` (one: the browser tests, then every other real-time test)
+  runs serially on a worker of its own, at normal priority, and never runs a CPU test.
 - **CPU** tests (simulations run faster than real time, fits, the results command) run on
   the remaining workers, which lower their own priority (``nice`` +10, inherited by the
   subprocesses they start): whatever the real-time tests leave of the two cores goes to
@@ -33,8 +33,10 @@ import pytest
 DURATIONS = Path(__file__).with_name("durations.json")
 
 CHAINS: dict[str, tuple[str, ...]] = {
-    "browser": ("tests/browser/",),
+    # One chain: the browser tests never run beside the integration tests' processes (a
+    # parallel run that did so lost a browser test's wait once), at little cost in wall time.
     "realtime": (
+        "tests/browser/",  # a Chromium drawing with software GL
         "tests/integration/",  # processes on a real Zenoh router, simulators at real time
         "tests/test_crazyflie.py::",  # the bridge's threads against deadlines
         "tests/test_service.py::",  # the service's threads polled against deadlines
