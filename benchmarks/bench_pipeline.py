@@ -52,7 +52,6 @@ from filterpy.kalman import KalmanFilter
 
 from benchmarks import git
 from benchmarks.bench_service import _telemetry_payloads
-from benchmarks.floor_service import _inv3
 from groundstation import follow as follow_mod
 from groundstation.bus import Sample
 from groundstation.evaluation import settings_for
@@ -87,6 +86,39 @@ cases per call)."""
 BATCH = 32
 """Batch size of the batched rows (the service's ``_MAX_BATCH``)."""
 DRONES = 8
+
+
+def _inv3(S: np.ndarray) -> np.ndarray:
+    """Inverse of a 3x3 matrix by its adjugate: S^-1 = adj(S) / det(S).
+
+    Installed as ``KalmanFilter.inv`` for the filterpy row (it was the tension filter's until
+    that became three scalar filters in closed form), filterpy's hook for the inverse it needs in
+    ``update`` (K = P- C' (C P- C' + R)^-1). There S is symmetric positive definite with
+    eigenvalues at least (m sigma_a)^2 = (9 mN)^2, so the adjugate form is as accurate as
+    np.linalg.inv's LU (agreement to rounding). A singular or non-finite S takes
+    np.linalg.inv, which decides what happens, as before.
+
+    Args:
+        S: Shape (3, 3).
+
+    Returns:
+        The inverse, shape (3, 3).
+    """
+    (a, b, c), (d, e, f), (g, h, i) = S.tolist()
+    c00, c01, c02 = e * i - f * h, c * h - b * i, b * f - c * e
+    det = a * c00 + d * c01 + g * c02
+    if not (det != 0.0 and math.isfinite(det)):
+        return np.asarray(np.linalg.inv(S), dtype=np.float64)
+    return (
+        np.array(
+            [
+                [c00, c01, c02],
+                [f * g - d * i, a * i - c * g, c * d - a * f],
+                [d * h - e * g, b * g - a * h, a * e - b * d],
+            ]
+        )
+        / det
+    )
 
 
 def _best_mean_us(run: Callable[[], int], repeats: int) -> float:

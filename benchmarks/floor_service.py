@@ -12,15 +12,16 @@ steps no implementation can skip:
   clear error");
 * the tension observed from the IMU and the thrust (``tension.observe_tension``,
   ``eq:NE_tether``);
-* one predict + update of a filterpy ``KalmanFilter`` per drone (the house rule: filterpy
-  for the Kalman filter), its Q and R set once, with the same ``inv`` hook as
-  ``TensionFilter``;
+* one predict + update of the Kalman filter per drone, its Q and R set once: three scalar
+  filters in closed form, as the service's (issue 22's house rule; until then a filterpy
+  ``KalmanFilter``, ~20 µs a step, which the floor of the earlier pages of
+  docs/service_profile.md used);
 * the Estimate encoded (``messages.encode_estimate``) and published.
 
 Everything else the service does is left out: no noise learning, no change or step test,
 no drift adaptation, no contact state, no localization (``position_m`` null), no follow, no
 reel, no status. So this is a lower bound on the cost per message of *any* estimator that
-keeps the contract and steps filterpy once per message: the load benchmarks
+keeps the contract and steps a Kalman filter once per message: the load benchmarks
 (:mod:`benchmarks.bench_bursts`) measure it beside the bare echo and the service, through
 the same router with the same client, in the same run.
 """
@@ -28,78 +29,53 @@ the same router with the same client, in the same run.
 from __future__ import annotations
 
 import gc
-import math
 import sys
 import time
-
-import numpy as np
-from filterpy.kalman import KalmanFilter
 
 from benchmarks.echo_service import serve_telemetry
 from benchmarks.service_rig import MASS_KG, telemetry_payloads
 from groundstation.messages import FollowInfo, InvalidMessage, Telemetry, encode_estimate
 from groundstation.tension import observe_tension
+from groundstation.tension_kalman import DiagonalKalman
 
 _FOLLOW = FollowInfo(enabled=False, active=False, threshold_n=0.1, reason="floor rig").model_dump()
 
 
-def _inv3(S: np.ndarray) -> np.ndarray:
-    """Inverse of a 3x3 matrix by its adjugate: S^-1 = adj(S) / det(S).
+class FloorFilter:
+    """One drone's Kalman step: three scalar filters in closed form (the service's
+    ``tension_kalman.DiagonalKalman``, issue 22's house rule for the per-message filter,
+    tested equal to filterpy's ``KalmanFilter`` in tests/test_tension_equivalence.py), with
+    Q and R fixed."""
 
-    Installed as ``KalmanFilter.inv`` (it was the tension filter's until that became three
-    scalar filters in closed form), filterpy's hook for the inverse it needs in
-    ``update`` (K = P- C' (C P- C' + R)^-1). There S is symmetric positive definite with
-    eigenvalues at least (m sigma_a)^2 = (9 mN)^2, so the adjugate form is as accurate as
-    np.linalg.inv's LU (agreement to rounding). A singular or non-finite S takes
-    np.linalg.inv, which decides what happens, as before.
+    def __init__(self, r_n2: float, q_n2: float) -> None:
+        self.kf = DiagonalKalman()
+        self.kf.set((0.0, 0.0, 0.0), (r_n2, r_n2, r_n2))
+        self.q = (q_n2, q_n2, q_n2)
+        self.r = (r_n2, r_n2, r_n2)
 
-    Args:
-        S: Shape (3, 3).
-
-    Returns:
-        The inverse, shape (3, 3).
-    """
-    (a, b, c), (d, e, f), (g, h, i) = S.tolist()
-    c00, c01, c02 = e * i - f * h, c * h - b * i, b * f - c * e
-    det = a * c00 + d * c01 + g * c02
-    if not (det != 0.0 and math.isfinite(det)):
-        return np.asarray(np.linalg.inv(S), dtype=np.float64)
-    return (
-        np.array(
-            [
-                [c00, c01, c02],
-                [f * g - d * i, a * i - c * g, c * d - a * f],
-                [d * h - e * g, b * g - a * h, a * e - b * d],
-            ]
-        )
-        / det
-    )
+    @property
+    def x(self) -> list[float]:
+        return list(self.kf.x)
 
 
-def _new_filter(r_n2: float = 4e-4, q_n2: float = 1e-8) -> KalmanFilter:
-    kf = KalmanFilter(dim_x=3, dim_z=3)
-    kf.F = np.eye(3)
-    kf.H = np.eye(3)
-    kf.Q = np.eye(3) * q_n2
-    kf.R = np.eye(3) * r_n2
-    kf.P = np.eye(3) * r_n2
-    kf.inv = _inv3
-    return kf
+def _new_filter(r_n2: float = 4e-4, q_n2: float = 1e-8) -> FloorFilter:
+    return FloorFilter(r_n2, q_n2)
 
 
-def estimate_bytes(kf: KalmanFilter, payload: bytes) -> bytes | None:
+def estimate_bytes(kf: FloorFilter, payload: bytes) -> bytes | None:
     """One Telemetry payload → the Estimate's JSON (None for a rejected payload)."""
     try:
         msg = Telemetry.parse(payload)
     except InvalidMessage:
         return None
     obs = observe_tension(msg.accel_mps2, msg.quat_wxyz, msg.thrust_n, MASS_KG, msg.armed)
-    kf.predict()
+    kalman = kf.kf
+    kalman.predict(kf.q)
     if obs.tension_world_n is not None:
-        kf.update(np.asarray(obs.tension_world_n, dtype=float))
-    x = kf.x.ravel().tolist()
-    p = kf.P
-    std = [float(p[0, 0]) ** 0.5, float(p[1, 1]) ** 0.5, float(p[2, 2]) ** 0.5]
+        kalman.update(obs.tension_world_n.tolist(), kf.r)
+    x = list(kalman.x)
+    p = kalman.P
+    std = [p[0] ** 0.5, p[1] ** 0.5, p[2] ** 0.5]
     return encode_estimate(
         seq=msg.seq,
         stamp_s=msg.stamp_s,
@@ -140,7 +116,7 @@ def main(argv: list[str] | None = None) -> int:
     if args == ["--offline"]:
         print(f"contract floor offline: {offline_us_per_msg():.1f} µs CPU per message")
         return 0
-    filters: dict[str, KalmanFilter] = {}
+    filters: dict[str, FloorFilter] = {}
 
     def answer(prefix: str, payload: bytes) -> bytes | None:
         kf = filters.get(prefix)

@@ -1,5 +1,5 @@
 """The contract floor of the load benchmarks (benchmarks/floor_service.py) does what it claims:
-one valid Estimate per accepted Telemetry, from a real filterpy step, and nothing for bad input.
+one valid Estimate per accepted Telemetry, from a real Kalman step, and nothing for bad input.
 
 It is the lower bound that docs/service_bursts.md compares the service with, so a floor that
 skipped a step (or answered from nothing) would flatter the service."""
