@@ -7,8 +7,8 @@ The rig is :mod:`benchmarks.service_rig` (router, system under test, load client
 client's garbage collector out of the window, late ticks reported). Each case runs twice in
 the same run against ``groundstation serve --headless``, the bare echo
 (:mod:`benchmarks.echo_service`) and the contract floor (:mod:`benchmarks.floor_service`:
-validation, observation, one filterpy step and the Estimate per message, nothing else: what
-any service that keeps the contract and the filterpy rule pays at least), through the same
+validation, observation, one Kalman step and the Estimate per message, nothing else: what
+any service that keeps the contract pays at least), through the same
 router with the same client code:
 
 * ``steady``: 8 drones × 250 Hz.
@@ -168,13 +168,13 @@ def to_markdown(res: dict[str, Any], command: str) -> str:
         f = res["capacity/floor"]
         lines += [
             "",
-            f"Contract floor (validation, observation, one filterpy step, the Estimate; "
+            f"Contract floor (validation, observation, one Kalman step, the Estimate; "
             f"`benchmarks/floor_service.py`): **{f['msgs_per_s']:.0f} msg/s** at "
             f"{f['cpu_us_per_msg']:.0f} µs of process CPU per message (target "
             f"≤ {1e6 / CAPACITY_TARGET_HZ:.0f} µs: "
             + ("within" if f["cpu_us_per_msg"] <= 1e6 / CAPACITY_TARGET_HZ else "above")
             + "). It is a lower bound for any service that keeps the contract (one Estimate "
-            "per accepted Telemetry) and steps filterpy once per message.",
+            "per accepted Telemetry) and steps a Kalman filter once per message.",
         ]
     off0, off1 = res["offline_before"], res["offline_after"]
     offline = min(off0["cpu_us_per_msg"], off1["cpu_us_per_msg"])

@@ -563,7 +563,7 @@ def render(result: dict[str, Any], before: dict[str, Any] | None, argv: list[str
         f"the contract's JSON in and out (validate + estimate) is {io:.0f} µs, the "
         f"localization's catenary solves (the drone and six sigma points) {st['localize']:.0f} "
         f"µs, the tension filter with its noise, change and drift tests "
-        f"{st['filter']:.0f} µs. docs/service_profile.md, section 5, says why this is "
+        f"{st['filter']:.0f} µs. docs/service_profile.md, section 6, says why this is "
         "about what CPython does with this work and what it would take to go further.",
     ]
     lines += [

@@ -600,7 +600,7 @@ def _contract_floor_bursts(b: dict[str, dict[str, Any]]) -> str:
     f, e = b["floor"], b["echo"]
     return (
         f" The contract floor (`benchmarks/floor_service.py`: validation, observation, one "
-        f"filterpy step and the Estimate per message, nothing else) under the same bursts: "
+        f"Kalman step and the Estimate per message, nothing else) under the same bursts: "
         f"p99 {f['p99_ms']:.1f} ms, **{f['p99_ms'] / e['p99_ms']:.1f}×** the echo's; the "
         f"service is at {b['service']['p99_ms'] / f['p99_ms']:.1f}× the contract floor."
     )
@@ -1268,11 +1268,11 @@ def _service_section(o: Outcome) -> list[str]:
             f"run) costs {svc.offline_us_per_msg:.0f} µs of CPU per message here, i.e. at most "
             f"{1e6 / svc.offline_us_per_msg:,.0f} msg/s per worker. The target of "
             f"{rpeers.SERVICE_TARGET_CAPACITY_HZ:,.0f} msg/s (≤ 50 µs/msg) is at or beyond "
-            "what the contract floor itself does (validation, observation, one filterpy step "
+            "what the contract floor itself does (validation, observation, one Kalman step "
             "and the Estimate per message, nothing else): no service that keeps the contract "
-            "(one Estimate per accepted Telemetry) and steps filterpy per message reaches it "
-            "on this machine, so one instance scales out per core with `serve --drones` "
-            "(docs/service_profile.md section 5).",
+            "(one Estimate per accepted Telemetry) and steps a Kalman filter per message "
+            "reaches it on this machine, so one instance scales out per core with `serve --drones` "
+            "(docs/service_profile.md sections 5 and 6).",
             "",
         ]
     r8 = _service_row(o, 8)

@@ -57,7 +57,7 @@ RATE_HZ = 250.0
 PERIOD_S = 1.0 / RATE_HZ
 SUTS = ("service", "echo", "floor", "baseline")
 """Systems under test: ``groundstation serve --headless``, the bare echo floor, the contract
-floor (:mod:`benchmarks.floor_service`: validation, observation, one filterpy step and the
+floor (:mod:`benchmarks.floor_service`: validation, observation, one Kalman step and the
 Estimate per message, nothing else), and ``serve``
 from another source tree (``BENCH_BASELINE_TREE``: e.g. ``git archive <commit>`` unpacked),
 for a before/after comparison in one run."""
