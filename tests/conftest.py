@@ -1,6 +1,7 @@
 """How ``./dev test`` shares the tests among its worker processes (pytest-xdist).
 
-``./dev test`` runs ``pytest -n 3 --dist loadgroup`` on a 2-core machine. Two kinds of test:
+``./dev test -n 3 --dist loadgroup`` runs the suite in parallel on a 2-core machine (not
+yet ``./dev test``'s default: docs/service_profile.md section 6). Two kinds of test:
 
 - **Real-time** tests wait on the wall clock: real Zenoh sessions, subprocesses that fly a
   simulator at real time, a Chromium drawing with software GL, threads polled against a
