@@ -140,7 +140,6 @@ class Front(NamedTuple):
         finite: the filter's output is finite (else no Estimate).
         on_ground: the contact stage's decision (or disarmed).
         localize_in: what to localize it from (None: nothing to localize).
-        calibration_extrapolated: the battery check's flag for this message.
         mocap_world_m: the motion-capture position held for this message (None: none).
     """
 
@@ -152,7 +151,6 @@ class Front(NamedTuple):
     finite: bool
     on_ground: bool
     localize_in: LocalizeIn | None
-    calibration_extrapolated: bool | None
     mocap_world_m: Vec3 | None
 
 
@@ -429,15 +427,12 @@ class DroneEstimator:
             filtered.finite,
             on_ground,
             localize_in,
-            self.calibration_extrapolated,
             self.fresh_mocap(msg.stamp_s),
         )
 
     def back(self, front: Front, position: PositionEstimate | None) -> list[Sample]:
         """A message from its localization on: follow, the Estimate, Setpoint and Stop."""
         msg = front.msg
-        # This message's flag, as its front pass left it.
-        self.calibration_extrapolated = front.calibration_extrapolated
         fs = self.follow_state
         if not (fs.enabled or fs.active) and math.isfinite(msg.stamp_s):
             # Follow off and idle (follow_decide's first rule, without its call's cost).
