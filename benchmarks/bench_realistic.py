@@ -830,12 +830,24 @@ def _render_slow_stage(res: dict[str, Any]) -> list[str]:
             for n, h in hover.items()
             if n in b["hover_median_cm"]
         )
-        parts.append(
-            f"hover median / p95 {meds}: the medians improve at every level and the p95 is "
-            "worse at 1-2 m/s^2, where the hover crossover switches on and off and the "
-            "near-plumb spot (0.5, -0.6, 1.0) holds the tail (the open problem of issue 20, "
-            "docs/estimator_design.md)"
+        levels = [n for n in hover if n in b["hover_median_cm"]]
+
+        def where(up: bool, key: str, before: dict[float, float]) -> str:
+            at = [n for n in levels if (100.0 * hover[n][key] > before[n]) == up]
+            return ", ".join(f"{n:g}" for n in at) + " m/s^2" if at else "no level"
+
+        text = (
+            f"hover median / p95 {meds}: the median is lower at "
+            f"{where(False, 'ours_median_m', b['hover_median_cm'])}, the p95 higher at "
+            f"{where(True, 'ours_p95_m', b['hover_p95_cm'])}"
         )
+        if any(100.0 * hover[n]["ours_p95_m"] > b["hover_p95_cm"][n] for n in levels):
+            text += (
+                " (where the hover crossover switches on and off and the near-plumb spot "
+                "(0.5, -0.6, 1.0) holds the tail: the open problem of issue 20, "
+                "docs/estimator_design.md)"
+            )
+        parts.append(text)
     tug = {t["noise"]: t for t in res.get("tug", [])}
     t90s = [
         f"{tug[n]['t90_s']:.2f} s at {n:g} m/s^2 (was {was:.2f} s)"
@@ -856,10 +868,21 @@ def _render_slow_stage(res: dict[str, Any]) -> list[str]:
         if c in env
     ]
     if gone:
+        none = env.get("none")
+        as_none = none is not None and all(
+            env[c]["median_m"] <= 1.05 * none["median_m"]
+            for c in b["envelope_median_cm"]
+            if c in env
+        )
         parts.append(
-            f"uncalibrated, the accelerometer's own errors cost no more than none: "
-            f"{', '.join(gone)}, learnt in flight at each power-on; the thrust axis and the "
-            "thrust map still cost most of the error: they are the airframe's constants that "
+            f"uncalibrated, the accelerometer's own errors cost {', '.join(gone)}"
+            + (
+                f", within 5 % of vibration alone ({_cm(none['median_m'])}): learnt in flight "
+                "at each power-on"
+                if as_none and none is not None
+                else ""
+            )
+            + "; the thrust axis and the thrust map are the airframe's constants that "
             "`calibrate` fits"
         )
     if not parts:
