@@ -107,10 +107,12 @@ def load(name: str, data_dir: Path = DATA) -> Flight:
 
 
 def _run(argv: list[str]) -> tuple[int, str]:
-    out = io.StringIO()
-    with contextlib.redirect_stdout(out):
+    """The CLI's exit code and what it printed: standard output, then standard error (where
+    a refusal's reason goes)."""
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
         rc = gs_main(argv)
-    return rc, out.getvalue()
+    return rc, out.getvalue() + err.getvalue()
 
 
 @dataclass(frozen=True)
@@ -237,7 +239,8 @@ def main(argv: list[str] | None = None) -> int:
                     try:
                         cal, report = calibrate([flights[n] for n in train], work, tag, extra)
                     except RuntimeError as exc:
-                        refused[label] = str(exc).splitlines()[-1]
+                        lines = [x for x in str(exc).splitlines() if x.strip()]
+                        refused[label] = lines[-1] if lines else str(exc)
                         continue
                     if label.endswith("(default)"):
                         reports[fold] = report
