@@ -20,6 +20,7 @@ Run:  python -m benchmarks.bench_powerons [--train 3] [--judge 3] [--out docs/po
 from __future__ import annotations
 
 import argparse
+import functools
 import io
 import json
 import sys
@@ -206,12 +207,19 @@ def main(argv: list[str] | None = None) -> int:
             out = work / f"{model}.toml"
             buf = io.StringIO()
             try:
-                run_calibrate(default, None, files, str(out), model=model, echo=buf.write)
+                run_calibrate(
+                    default,
+                    None,
+                    files,
+                    str(out),
+                    model=model,
+                    echo=functools.partial(print, file=buf),
+                )
                 configs[f"calibrate --model {model}"] = load_settings(out, use_env=False)
             except Exception as exc:  # a refusal is a result here
                 buf.write(f"refused: {exc}")
                 configs[f"calibrate --model {model}"] = None
-            printed[model] = buf.getvalue()
+            printed[model] = buf.getvalue().replace(f"{work}/", "")  # the file names alone
         judged = [record(seed, args.noise, mocap=False, levelled=levelled) for seed in judge_seeds]
         rows: dict[str, Score | None] = {}
         for label, cfg in configs.items():

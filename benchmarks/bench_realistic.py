@@ -823,7 +823,7 @@ def _render_slow_stage(res: dict[str, Any]) -> list[str]:
     b = _BEFORE_SLOW_STAGE
     parts = []
     hover = {h["noise"]: h for h in res.get("hover", [])}
-    if hover:
+    if any(n in b["hover_median_cm"] for n in hover):  # a level the run before was made at
         meds = ", ".join(
             f"{_cm(h['ours_median_m'])} / {_cm(h['ours_p95_m'])} at {n:g} m/s^2 (was "
             f"{b['hover_median_cm'][n]:.1f} / {b['hover_p95_cm'][n]:.1f} cm)"
