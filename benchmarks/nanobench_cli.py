@@ -132,6 +132,11 @@ def judge(flight: Flight, config: Path, work: Path) -> Judged:
     rc, text = _run(["replay", "--offline", str(rec), "--config", str(config), "--out", str(out)])
     if rc != 0:
         raise RuntimeError(f"replay --offline failed ({rc}): {text}")
+    return score(flight, out)
+
+
+def score(flight: Flight, out: Path) -> Judged:
+    """The measure of one held-out flight from a recording of its Estimates."""
     by_stamp: dict[float, dict] = {}
     for m in iter_messages(out):
         if m.key == "tether/cf1/estimate":
