@@ -244,8 +244,8 @@ def main(argv: list[str] | None = None) -> int:
                     try:
                         cal, report = calibrate([flights[n] for n in train], work, tag, extra)
                     except RuntimeError as exc:
-                        lines = [x for x in str(exc).splitlines() if x.strip()]
-                        refused[label] = lines[-1] if lines else str(exc)
+                        said = [x for x in str(exc).splitlines() if x.strip()]
+                        refused[label] = said[-1] if said else str(exc)
                         continue
                     if label.endswith("(default)"):
                         reports[fold] = report
@@ -269,6 +269,11 @@ def main(argv: list[str] | None = None) -> int:
             say("")
             if label in refused:
                 say(f"calibrate refused: `{refused[label]}`")
+                say("")
+                say(
+                    "(The full model fits the accelerometer's bias from steady hovers under "
+                    "motion capture; these flights are trajectories with none.)"
+                )
                 say("")
                 continue
             say("| fold | flight | median abs T mN | answered | airborne |")
@@ -303,7 +308,7 @@ def main(argv: list[str] | None = None) -> int:
                 say("```")
                 say(text.strip())
                 say("```")
-    page = "\n".join(lines) + "\n"
+    page = "\n".join(lines).replace(f"{work}/", "") + "\n"  # the file names alone
     if args.out:
         Path(args.out).write_text(page, encoding="utf-8")
     sys.stdout.write(page)
