@@ -1001,6 +1001,13 @@ def main(argv: list[str] | None = None) -> int:
         "= 0, before it followed the noise), for comparison; with --only",
     )
     ap.add_argument(
+        "--hover-noise-sigmas",
+        type=float,
+        help="the service with [filter] accel_hover_noise_sigmas = this and "
+        "accel_hover_exit_ratio = 1.5 (the hover test that follows the vibration; default "
+        "off); with --only",
+    )
+    ap.add_argument(
         "--levels",
         help="comma-separated accelerometer noise levels, m/s^2 (0.5,1.0,2.0); with --only",
     )
@@ -1023,6 +1030,19 @@ def main(argv: list[str] | None = None) -> int:
         drone_mod.TensionFilterParams = functools.partial(  # type: ignore[misc,assignment]
             TensionFilterParams, hover_wander_n2_per_s=0.0
         )
+    if args.hover_noise_sigmas is not None:
+        if args.only is None:
+            ap.error("--hover-noise-sigmas needs --only (the page is the default filter's)")
+        import groundstation.slow_accel as slow_mod
+
+        default_slow = slow_mod.SlowAccelParams
+        sigmas = args.hover_noise_sigmas
+
+        def aware(**kwargs: Any) -> Any:
+            kwargs.update(quasi_static_sigmas=sigmas, quasi_static_exit_ratio=1.5)
+            return default_slow(**kwargs)
+
+        slow_mod.SlowAccelParams = aware  # type: ignore[misc,assignment]
     t0 = time.time()
     spots = [0, 3] if quick else list(range(6))
     hover_s = 14.0 if quick else 20.0

@@ -90,6 +90,18 @@ class SlowAccelParams:
         fast_sigmas: "small" for the short mean: below this many of its own standard
             deviations (from the vibration measured around the 1 s mean), and never below
             ``quasi_static_accel_mps2``: the vibration alone does not end a hover.
+        quasi_static_sigmas: the hover test's thresholds follow the vibration too: the 1 s
+            mean's is ``max(quasi_static_accel_mps2, quasi_static_sigmas·σ₁)``, σ₁ its
+            standard deviation from the vibration measured around it; the speed's (the
+            accelerometer's leaky integral, not motion capture's) likewise with that
+            integral's σ (0, the default: the fixed thresholds alone; config ``[filter]
+            accel_hover_noise_sigmas``). At 2 m/s² of vibration (100 Hz) σ₁
+            ≈ 0.15 m/s² and the speed's σ ≈ 0.2 m/s per axis: fixed 0.2 and 0.3 are met a
+            fraction of the time and the crossover switches on and off.
+        quasi_static_exit_ratio: hysteresis: in the hover, it ends only when the 1 s mean
+            or the speed exceeds this many times its threshold for starting one (1, the
+            default: none; ``[filter] accel_hover_exit_ratio``). Without it a noise-aware
+            test flickers on its own noise near the threshold (5–6 switches/s at 1–2 m/s²).
     """
 
     time_constant_s: float = 60.0
@@ -104,16 +116,25 @@ class SlowAccelParams:
     release_time_constant_s: float = 0.5
     fast_window_s: float = 0.0
     fast_sigmas: float = 4.0
+    quasi_static_sigmas: float = 0.0
+    quasi_static_exit_ratio: float = 1.0
 
     def __post_init__(self) -> None:
         if not (self.hover_crossover_s >= 0.0):
             raise ValueError(
                 f"SlowAccelParams.hover_crossover_s must be >= 0, got {self.hover_crossover_s!r}"
             )
-        for name in ("fast_window_s", "fast_sigmas"):
+        for name in ("fast_window_s", "fast_sigmas", "quasi_static_sigmas"):
             value = getattr(self, name)
             if not (value >= 0.0 and math.isfinite(value)):
                 raise ValueError(f"SlowAccelParams.{name} must be finite and >= 0, got {value!r}")
+        if not (
+            self.quasi_static_exit_ratio >= 1.0 and math.isfinite(self.quasi_static_exit_ratio)
+        ):
+            raise ValueError(
+                "SlowAccelParams.quasi_static_exit_ratio must be finite and >= 1, got "
+                f"{self.quasi_static_exit_ratio!r}"
+            )
         for name in (
             "quasi_static_accel_mps2",
             "quasi_static_speed_mps",
@@ -387,10 +408,26 @@ def slow_accel_step(
     var = st.vibration_var_mps4
     var += kv * ((dx * dx + dy * dy + dz * dz) / 3.0 - var)
     qs2 = params.quasi_static_accel_mps2**2
+    # The 1 s mean's threshold: never below the fixed one, and at least quasi_static_sigmas
+    # of its own standard deviation (σ₁² = var·k1/(2 − k1) per axis); in the hover, times
+    # the exit ratio (hysteresis: the noise around the threshold does not switch it).
+    limit1 = max(qs2, params.quasi_static_sigmas**2 * var * k1 / (2.0 - k1))
+    if st.quasi_static:
+        limit1 *= params.quasi_static_exit_ratio**2
+    # The speed's likewise when it is the accelerometer's leaky integral (v ← leak·v + e·dt:
+    # σ_v² = var·dt²/(1 − leak²) per axis), not motion capture's.
+    limit_v = params.quasi_static_speed_mps**2
+    if source == "accel":
+        leak2 = math.exp(-dt_s / 2.0)
+        if leak2 < 1.0:
+            sv2 = var * dt_s * dt_s / (1.0 - leak2 * leak2)
+            limit_v = max(limit_v, params.quasi_static_sigmas**2 * sv2)
+    if st.quasi_static:
+        limit_v *= params.quasi_static_exit_ratio**2
     quasi = (
         params.hover_crossover_s > 0.0
-        and a1[0] * a1[0] + a1[1] * a1[1] + a1[2] * a1[2] < qs2
-        and vx * vx + vy * vy + vz * vz < params.quasi_static_speed_mps**2
+        and a1[0] * a1[0] + a1[1] * a1[1] + a1[2] * a1[2] < limit1
+        and vx * vx + vy * vy + vz * vz < limit_v
     )
     af = _ZERO3
     if params.fast_window_s > 0.0:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -276,3 +277,63 @@ def test_without_the_short_window_the_hover_test_is_the_1s_mean_alone() -> None:
     # short window whose limit can never be reached.
     never = SlowAccelParams(fast_window_s=0.3, fast_sigmas=1e6)
     assert _hover_then_push(SlowAccelParams(), 0.5) == _hover_then_push(never, 0.5)
+
+
+def _hover_flags(
+    params: SlowAccelParams, vibration_mps2: float, push_mps2: float = 0.0, seed: int = 1
+) -> list[bool]:
+    """10 s of hover with white vibration at 100 Hz (no motion capture), then 5 s of a
+    sustained push along x: the quasi-static flag at each sample."""
+    rng = np.random.default_rng(seed)
+    state = SlowAccelState()
+    flags = []
+    for i in range(1500):
+        push = push_mps2 if i >= 1000 else 0.0
+        ax, ay, az = rng.normal(0.0, vibration_mps2, 3)
+        state = slow_accel_step(
+            state,
+            params,
+            dt_s=0.01,
+            stamp_s=i * 0.01,
+            accel_body_mps2=(ax + push, ay, G + az),
+            R_world_body=LEVEL,
+            phase="air",
+            mocap_world_m=None,
+        )
+        flags.append(state.quasi_static)
+    return flags
+
+
+def test_the_noise_aware_hover_test_holds_through_strong_vibration() -> None:
+    """At 2 m/s² of vibration the fixed thresholds (0.2 m/s², 0.3 m/s) are met a fraction of
+    the time; thresholds at 4 σ of what they test hold the hover, and a push still ends it."""
+    fixed = SlowAccelParams()  # the default: the fixed thresholds, no hysteresis
+    aware = SlowAccelParams(quasi_static_sigmas=4.0, quasi_static_exit_ratio=1.5)
+    assert np.mean(_hover_flags(fixed, 2.0)[300:1000]) < 0.5
+    assert np.mean(_hover_flags(aware, 2.0)[300:1000]) > 0.9
+    pushed = _hover_flags(aware, 2.0, push_mps2=2.0)[1000:]
+    assert not any(pushed[100:])  # out within 1 s, and stays out
+    # At low vibration the fixed thresholds are the larger: the same flags.
+    fixed_hysteresis = SlowAccelParams(quasi_static_exit_ratio=1.5)
+    assert _hover_flags(fixed_hysteresis, 0.3, 0.5) == _hover_flags(aware, 0.3, 0.5)
+    with pytest.raises(ValueError):
+        SlowAccelParams(quasi_static_exit_ratio=0.5)
+
+
+def test_the_hover_test_settings_reach_the_estimator(tmp_path: Path) -> None:
+    """``[filter] accel_hover_noise_sigmas`` and ``accel_hover_exit_ratio`` are the slow
+    stage's; off (0, 1) by default; an exit ratio below 1 is refused."""
+    from groundstation.config import ConfigError, load_settings
+    from groundstation.estimator.drone import DroneEstimator
+
+    default = DroneEstimator("cf1", load_settings(None, {}, use_env=False)).slow_params
+    assert default is not None
+    assert (default.quasi_static_sigmas, default.quasi_static_exit_ratio) == (0.0, 1.0)
+    cfg = tmp_path / "gs.toml"
+    cfg.write_text("[filter]\naccel_hover_noise_sigmas = 4.0\naccel_hover_exit_ratio = 1.5\n")
+    slow = DroneEstimator("cf1", load_settings(cfg, {}, use_env=False)).slow_params
+    assert slow is not None
+    assert (slow.quasi_static_sigmas, slow.quasi_static_exit_ratio) == (4.0, 1.5)
+    cfg.write_text("[filter]\naccel_hover_exit_ratio = 0.5\n")
+    with pytest.raises(ConfigError, match="accel_hover_exit_ratio"):
+        load_settings(cfg, {}, use_env=False)

@@ -219,6 +219,8 @@ class DroneEstimator:
                 velocity_time_constant_s=params.filter.drag_velocity_time_constant_s,
                 hover_crossover_s=params.filter.accel_hover_crossover_s,
                 fast_window_s=params.filter.accel_hover_exit_window_s,
+                quasi_static_sigmas=params.filter.accel_hover_noise_sigmas,
+                quasi_static_exit_ratio=params.filter.accel_hover_exit_ratio,
             )
             if params.calibration.accel_slow
             else None
