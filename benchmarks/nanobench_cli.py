@@ -231,6 +231,12 @@ def main(argv: list[str] | None = None) -> int:
                 "rotor_drag_n_s_per_m = 0.0\n",
             ),
             ("airframe + slow accelerometer (default)", [], ""),
+            (
+                "airframe + slow accelerometer, hover test following the vibration "
+                "(`[filter] accel_hover_noise_sigmas = 4`, `accel_hover_exit_ratio = 1.5`)",
+                [],
+                "[filter]\naccel_hover_noise_sigmas = 4.0\naccel_hover_exit_ratio = 1.5\n",
+            ),
         ]
         results: dict[str, dict[str, list[Judged]]] = {v[0]: {} for v in variants}
         reports: dict[str, str] = {}
