@@ -228,21 +228,28 @@ def test_while_hovering_the_hover_model_takes_the_low_band() -> None:
 
 
 def _hover_then_push(
-    params: SlowAccelParams, push_mps2: float, vibration_mps2: float = 0.3, seed: int = 0
+    params: SlowAccelParams,
+    push_mps2: float,
+    vibration_mps2: float = 0.3,
+    seed: int = 0,
+    *,
+    dt_s: float = 0.004,
+    samples: int = 2000,
+    push_from: int = 1250,
 ) -> list[bool]:
-    """Hover with white vibration for 5 s, then a sustained push along x: the quasi-static
-    flag at each sample (dt 4 ms)."""
+    """Hover with white vibration (no motion capture) for ``push_from`` samples (5 s by
+    default), then a sustained push along x: the quasi-static flag at each sample."""
     rng = np.random.default_rng(seed)
     state = SlowAccelState()
     flags = []
-    for i in range(2000):
-        push = push_mps2 if i >= 1250 else 0.0
+    for i in range(samples):
+        push = push_mps2 if i >= push_from else 0.0
         ax, ay, az = rng.normal(0.0, vibration_mps2, 3)
         state = slow_accel_step(
             state,
             params,
-            dt_s=0.004,
-            stamp_s=i * 0.004,
+            dt_s=dt_s,
+            stamp_s=i * dt_s,
             accel_body_mps2=(ax + push, ay, G + az),
             R_world_body=LEVEL,
             phase="air",
@@ -282,26 +289,10 @@ def test_without_the_short_window_the_hover_test_is_the_1s_mean_alone() -> None:
 def _hover_flags(
     params: SlowAccelParams, vibration_mps2: float, push_mps2: float = 0.0, seed: int = 1
 ) -> list[bool]:
-    """10 s of hover with white vibration at 100 Hz (no motion capture), then 5 s of a
-    sustained push along x: the quasi-static flag at each sample."""
-    rng = np.random.default_rng(seed)
-    state = SlowAccelState()
-    flags = []
-    for i in range(1500):
-        push = push_mps2 if i >= 1000 else 0.0
-        ax, ay, az = rng.normal(0.0, vibration_mps2, 3)
-        state = slow_accel_step(
-            state,
-            params,
-            dt_s=0.01,
-            stamp_s=i * 0.01,
-            accel_body_mps2=(ax + push, ay, G + az),
-            R_world_body=LEVEL,
-            phase="air",
-            mocap_world_m=None,
-        )
-        flags.append(state.quasi_static)
-    return flags
+    """10 s of hover at 100 Hz, then 5 s of a sustained push along x (``_hover_then_push``)."""
+    return _hover_then_push(
+        params, push_mps2, vibration_mps2, seed, dt_s=0.01, samples=1500, push_from=1000
+    )
 
 
 def test_the_noise_aware_hover_test_holds_through_strong_vibration() -> None:
