@@ -392,6 +392,7 @@ def slow_accel_step(
     k1 = min(dt_s / 1.0, 1.0)
     a1x, a1y, a1z = st.accel_1s_body_mps2
     a1 = (a1x + k1 * (ex - a1x), a1y + k1 * (ey - a1y), a1z + k1 * (ez - a1z))
+    leak2 = 1.0
     if source == "mocap":
         rv = velocity
     else:
@@ -408,22 +409,23 @@ def slow_accel_step(
     var = st.vibration_var_mps4
     var += kv * ((dx * dx + dy * dy + dz * dz) / 3.0 - var)
     qs2 = params.quasi_static_accel_mps2**2
-    # The 1 s mean's threshold: never below the fixed one, and at least quasi_static_sigmas
-    # of its own standard deviation (σ₁² = var·k1/(2 − k1) per axis); in the hover, times
-    # the exit ratio (hysteresis: the noise around the threshold does not switch it).
-    limit1 = max(qs2, params.quasi_static_sigmas**2 * var * k1 / (2.0 - k1))
-    if st.quasi_static:
-        limit1 *= params.quasi_static_exit_ratio**2
-    # The speed's likewise when it is the accelerometer's leaky integral (v ← leak·v + e·dt:
-    # σ_v² = var·dt²/(1 − leak²) per axis), not motion capture's.
+    limit1 = qs2
     limit_v = params.quasi_static_speed_mps**2
-    if source == "accel":
-        leak2 = math.exp(-dt_s / 2.0)
-        if leak2 < 1.0:
-            sv2 = var * dt_s * dt_s / (1.0 - leak2 * leak2)
-            limit_v = max(limit_v, params.quasi_static_sigmas**2 * sv2)
+    sigmas2 = params.quasi_static_sigmas**2
+    if sigmas2 > 0.0:
+        # The 1 s mean's threshold: never below the fixed one, and at least
+        # quasi_static_sigmas of its own standard deviation (σ₁² = var·k1/(2 − k1) per axis).
+        limit1 = max(limit1, sigmas2 * var * k1 / (2.0 - k1))
+        # The speed's likewise when it is the accelerometer's leaky integral (v ← leak·v +
+        # e·dt: σ_v² = var·dt²/(1 − leak²) per axis), not motion capture's.
+        if source == "accel" and leak2 < 1.0:
+            limit_v = max(limit_v, sigmas2 * var * dt_s * dt_s / (1.0 - leak2 * leak2))
     if st.quasi_static:
-        limit_v *= params.quasi_static_exit_ratio**2
+        # In the hover, times the exit ratio (hysteresis: the noise around the threshold
+        # does not switch it).
+        ratio2 = params.quasi_static_exit_ratio**2
+        limit1 *= ratio2
+        limit_v *= ratio2
     quasi = (
         params.hover_crossover_s > 0.0
         and a1[0] * a1[0] + a1[1] * a1[1] + a1[2] * a1[2] < limit1
