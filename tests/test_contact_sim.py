@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import bisect
 import json
+from collections.abc import Callable
 from typing import Any
 
 import pytest
@@ -27,10 +28,14 @@ def _demo(**sim: Any) -> Settings:
     return load_settings(None, data, use_env=False)
 
 
-def _truth(run: Run, stamp_s: float) -> dict[str, Any]:
-    """The latest truth at or before ``stamp_s`` (the realistic IMU's stamps jitter)."""
+def _truths(run: Run) -> Callable[[float], dict[str, Any]]:
+    """The latest truth at or before a stamp (the realistic IMU's stamps jitter)."""
     stamps = sorted(run.truth)
-    return run.truth[stamps[max(0, bisect.bisect_right(stamps, stamp_s) - 1)]]
+
+    def at(stamp_s: float) -> dict[str, Any]:
+        return run.truth[stamps[max(0, bisect.bisect_right(stamps, stamp_s) - 1)]]
+
+    return at
 
 
 START_S = 0.15
@@ -42,7 +47,8 @@ carry nothing for ``push_hold_s`` (0.1 s): the initial guess, not a latch."""
 def _check_airborne(run: Run, status: dict[str, Any] | None, seconds: float) -> None:
     assert run.estimates, "no estimates"
     assert run.estimates[-1]["stamp_s"] > seconds - 1.0
-    assert not any(_truth(run, e["stamp_s"])["on_ground"] for e in run.estimates[::50]), (
+    truth = _truths(run)
+    assert not any(truth(e["stamp_s"])["on_ground"] for e in run.estimates[::50]), (
         "the premise: the simulated drone never touches the floor"
     )
     grounded = [e["stamp_s"] for e in run.estimates if e["on_ground"] and e["stamp_s"] > START_S]
@@ -122,8 +128,9 @@ def test_take_off_from_the_floor_is_on_the_ground_until_it_lifts(profile: str, m
     settings = load_settings(None, {"sim": {"profile": profile, "mocap": mocap}}, use_env=False)
     run, _, _ = closed_loop(settings, "takeoff_ramp", 8.0)
     seen_air = False
+    truth_at = _truths(run)
     for e in run.estimates:
-        truth = _truth(run, e["stamp_s"])
+        truth = truth_at(e["stamp_s"])
         z = truth["position_m"][2]
         if e["stamp_s"] < 3.5:
             assert e["on_ground"], (e["stamp_s"], truth)  # spooling up, far from hover
@@ -146,6 +153,6 @@ def test_tug_to_land_ends_on_the_ground(profile: str) -> None:
             assert not e["on_ground"], e["stamp_s"]
         elif e["stamp_s"] > stop_s + 0.05:
             assert e["on_ground"], e["stamp_s"]
-    assert _truth(run, run.estimates[-1]["stamp_s"])["on_ground"]
+    assert _truths(run)(run.estimates[-1]["stamp_s"])["on_ground"]
     status = pipe.status("cf1", sim.t_s)
     assert status is not None and status["contact"] == {"on_ground": True, "reason": "disarmed"}

@@ -7,7 +7,9 @@ of hanging at the end of its tether.
 
 from __future__ import annotations
 
+import collections
 import json
+import math
 import tomllib
 from pathlib import Path
 from typing import Any
@@ -60,24 +62,24 @@ def _fly_and_check(
     """
     sim = Simulator(settings, _Bus(), scenario=scenario)  # type: ignore[arg-type]
     assert len(sim.drones) >= 1
+    weight_n = {d: settings.for_drone(d).drone.mass_kg * 9.81 for d in sim.drones}
     worst: dict[str, float] = {}
-    recent: dict[str, list[tuple[float, float]]] = {}
+    recent: dict[str, collections.deque[tuple[float, float]]] = {}
     for _ in range(round(seconds / sim.dt_s)):
         for s in sim.step():
             if not s.key.endswith("/truth"):
                 continue
             drone_id = s.key.split("/")[1]
             t = json.loads(s.payload)
-            params = settings.for_drone(drone_id)
-            weight_n = params.drone.mass_kg * 9.81
-            reach = np.linalg.norm(np.subtract(t["position_m"], t["base_m"]))
+            reach = math.dist(t["position_m"], t["base_m"])
             assert not t["taut"] and reach < t["length_m"], (drone_id, t["stamp_s"], reach)
-            history = recent.setdefault(drone_id, [])
-            history.append((t["stamp_s"], float(np.linalg.norm(t["tension_n"]))))
+            history = recent.setdefault(drone_id, collections.deque())
+            history.append((t["stamp_s"], math.hypot(*t["tension_n"])))
             while history[0][0] < t["stamp_s"] - window_s:
-                history.pop(0)
-            tension = float(np.mean([v for _, v in history]))
-            assert tension < weight_n, (drone_id, t["stamp_s"], tension)
+                history.popleft()
+            # The mean over the window, summed afresh (a running sum would drift).
+            tension = math.fsum(v for _, v in history) / len(history)
+            assert tension < weight_n[drone_id], (drone_id, t["stamp_s"], tension)
             worst[drone_id] = max(worst.get(drone_id, 0.0), tension)
     assert set(worst) == set(sim.drones)
 

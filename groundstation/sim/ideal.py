@@ -22,6 +22,7 @@ __all__ = ["GRAVITY_MPS2", "DroneSim"]
 GRAVITY_MPS2 = 9.81
 _G_WORLD = np.array([0.0, 0.0, -GRAVITY_MPS2])
 _E3 = np.array([0.0, 0.0, 1.0])
+Vec3 = tuple[float, float, float]
 
 
 @dataclass
@@ -71,108 +72,149 @@ class DroneSim:
     taut: bool = False
     on_ground: bool = False
 
-    def _tether(self, position_world_m: np.ndarray) -> tuple[np.ndarray, bool, bool]:
+    def _tether(self, px: float, py: float, pz: float) -> tuple[Vec3, bool, bool]:
+        """The tether's force on the drone at (px, py, pz), floor contact, taut."""
         if self.coin_mass_kg is not None and self.coin_arm_m is not None:
             # The coin bench: a weightless thread over an arm, T = m_coin·g toward the arm.
-            d = self.coin_arm_m - position_world_m
-            return d / np.linalg.norm(d) * (self.coin_mass_kg * GRAVITY_MPS2), False, False
-        chord = position_world_m - self.base_world_m
-        if float(np.linalg.norm(chord)) >= self.length_m * (1.0 - 1e-6):
-            return self._taut_force(chord), False, True
+            ax, ay, az = self.coin_arm_m.tolist()
+            dx, dy, dz = ax - px, ay - py, az - pz
+            n = math.sqrt(dx * dx + dy * dy + dz * dz)
+            w = self.coin_mass_kg * GRAVITY_MPS2
+            return (dx / n * w, dy / n * w, dz / n * w), False, False
+        bx, by, bz = self.base_world_m.tolist()
+        cx, cy, cz = px - bx, py - by, pz - bz
+        if math.sqrt(cx * cx + cy * cy + cz * cz) >= self.length_m * (1.0 - 1e-6):
+            return self._taut_force(cx, cy, cz), False, True
         try:
             tf = tether_force(
                 self.base_world_m,
-                position_world_m,
+                np.array([px, py, pz]),
                 self.length_m,
                 self.weight_n_per_m,
                 self.floor_z_m,
             )
         except TetherTooShortError:
-            return self._taut_force(chord), False, True
-        force = np.asarray(tf.force_world_n, dtype=float)
-        norm = float(np.linalg.norm(force))
+            return self._taut_force(cx, cy, cz), False, True
+        fx, fy, fz = (float(v) for v in tf.force_world_n)
+        norm = math.sqrt(fx * fx + fy * fy + fz * fz)
         if norm > self.tension_cap_n:
-            return force * (self.tension_cap_n / norm), bool(tf.floor_contact), True
-        return force, bool(tf.floor_contact), False
+            k = self.tension_cap_n / norm
+            return (fx * k, fy * k, fz * k), bool(tf.floor_contact), True
+        return (fx, fy, fz), bool(tf.floor_contact), False
 
-    def _taut_force(self, chord: np.ndarray) -> np.ndarray:
-        n = float(np.linalg.norm(chord))
-        return -chord / n * self.tension_cap_n if n > 0 else np.zeros(3)
+    def tether_at(self, position_world_m: np.ndarray) -> np.ndarray:
+        """The tether's force on the drone at a position, world, N (the starting pull)."""
+        px, py, pz = (float(c) for c in position_world_m)
+        return np.array(self._tether(px, py, pz)[0])
 
-    def _control(self, dt_s: float) -> tuple[float, np.ndarray]:
-        """Thrust (N) and body z axis (world) from the position controller."""
+    def _taut_force(self, cx: float, cy: float, cz: float) -> Vec3:
+        n = math.sqrt(cx * cx + cy * cy + cz * cz)
+        cap = self.tension_cap_n
+        return (-cx / n * cap, -cy / n * cap, -cz / n * cap) if n > 0 else (0.0, 0.0, 0.0)
+
+    def _control(self, dt_s: float, p: Vec3, v: Vec3) -> tuple[float, Vec3]:
+        """Thrust (N) and body z axis (world) from the position controller, the drone at
+        ``p`` with velocity ``v``."""
         if not self.armed:
             self.integral_m_s[:] = 0.0
-            return 0.0, self.quat_axis()
+            zx, zy, zz = self.quat_axis().tolist()
+            return 0.0, (zx, zy, zz)
         if self.armed_for_s < self.thrust_ramp_s:
             # Spool-up: thrust grows with time, level, whatever the position error.
             self.integral_m_s[:] = 0.0
             ramp = self.armed_for_s / self.thrust_ramp_s
-            return ramp * self.mass_kg * GRAVITY_MPS2, _E3.copy()
-        err = self.target_world_m - self.position_world_m
+            return ramp * self.mass_kg * GRAVITY_MPS2, (0.0, 0.0, 1.0)
+        tx, ty, tz = self.target_world_m.tolist()
+        ex, ey, ez = tx - p[0], ty - p[1], tz - p[2]
+        ix, iy, iz = self.integral_m_s.tolist()
         if not self.on_ground:
-            self.integral_m_s += err * dt_s
-            np.clip(self.integral_m_s, -2.0, 2.0, out=self.integral_m_s)
-        acc = self.kp_per_s2 * err - self.kd_per_s * self.velocity_world_mps
-        acc += self.ki_per_s3 * self.integral_m_s
-        force = self.mass_kg * (acc - _G_WORLD)
+            ix, iy, iz = ix + ex * dt_s, iy + ey * dt_s, iz + ez * dt_s
+            ix = -2.0 if ix < -2.0 else (2.0 if ix > 2.0 else ix)  # clip to [-2, 2]
+            iy = -2.0 if iy < -2.0 else (2.0 if iy > 2.0 else iy)
+            iz = -2.0 if iz < -2.0 else (2.0 if iz > 2.0 else iz)
+            self.integral_m_s[:] = (ix, iy, iz)
+        kp, kd, ki, m = self.kp_per_s2, self.kd_per_s, self.ki_per_s3, self.mass_kg
+        ax = kp * ex - kd * v[0] + ki * ix
+        ay = kp * ey - kd * v[1] + ki * iy
+        az = kp * ez - kd * v[2] + ki * iz
+        fx, fy, fz = m * (ax - 0.0), m * (ay - 0.0), m * (az - -GRAVITY_MPS2)
         # Limit the tilt: keep the vertical part, shrink the horizontal part.
-        horiz = math.hypot(force[0], force[1])
-        max_horiz = max(force[2], 0.0) * math.tan(self.max_tilt_rad)
+        horiz = math.hypot(fx, fy)
+        max_horiz = max(fz, 0.0) * math.tan(self.max_tilt_rad)
         if horiz > max_horiz and horiz > 0:
-            force[:2] *= max_horiz / horiz
-        thrust = float(np.linalg.norm(force))
+            k = max_horiz / horiz
+            fx, fy = fx * k, fy * k
+        thrust = math.sqrt(fx * fx + fy * fy + fz * fz)
         max_thrust = self.max_thrust_ratio * self.mass_kg * GRAVITY_MPS2
         if thrust < 1e-9:
-            return 0.0, _E3.copy()
-        return min(thrust, max_thrust), force / thrust
+            return 0.0, (0.0, 0.0, 1.0)
+        return min(thrust, max_thrust), (fx / thrust, fy / thrust, fz / thrust)
 
     def quat_axis(self) -> np.ndarray:
         return rotation_world_body_wxyz(self.quat_wxyz)[:, 2]
 
     def step(self, dt_s: float, external_force_world_n: np.ndarray) -> None:
-        """Advance by ``dt_s``: control, forces, contact, integration, sensor truth."""
+        """Advance by ``dt_s``: control, forces, contact, integration, sensor truth.
+
+        On Python floats (numpy's per-call cost on 3-vectors was most of the step), in
+        numpy's order of operations, so the same numbers to the bit.
+        """
         h = dt_s / self.substeps
+        bx, by, bz = self.base_world_m.tolist()
+        ex, ey, ez = (float(f) for f in external_force_world_n)
+        p = self.position_world_m.tolist()
+        v = self.velocity_world_mps.tolist()
+        m = self.mass_kg
+        floor_z = self.floor_z_m
+        reach = self.length_m * (1.0 - 1e-6)
+        tension: Vec3 = (0.0, 0.0, 0.0)
+        acc: Vec3 = (0.0, 0.0, 0.0)
+        thrust = 0.0
+        floor_contact = taut = on_ground = False
         for _ in range(self.substeps):
             self.armed_for_s = self.armed_for_s + h if self.armed else 0.0
-            thrust, z_axis = self._control(h)
+            thrust, (zx, zy, zz) = self._control(h, (p[0], p[1], p[2]), (v[0], v[1], v[2]))
             if self.armed:
-                self.quat_wxyz = quat_wxyz_from_z_axis(z_axis)
-            tension, floor_contact, taut = self._tether(self.position_world_m)
-            force = thrust * z_axis + tension + external_force_world_n
-            force = force + self.mass_kg * _G_WORLD
+                self.quat_wxyz = quat_wxyz_from_z_axis(np.array([zx, zy, zz]))
+            tension, floor_contact, taut = self._tether(p[0], p[1], p[2])
+            fx = thrust * zx + tension[0] + ex + m * 0.0
+            fy = thrust * zy + tension[1] + ey + m * 0.0
+            fz = thrust * zz + tension[2] + ez + m * -GRAVITY_MPS2
             # The floor: it pushes back while the drone rests on it.
-            on_floor = self.position_world_m[2] <= self.floor_z_m + 1e-9
-            normal = np.zeros(3)
-            if on_floor and force[2] <= 0.0:
-                normal[2] = -force[2]
-                force = force + normal
-                self.velocity_world_mps[:] = 0.0
+            on_floor = p[2] <= floor_z + 1e-9
+            normal_z = 0.0
+            if on_floor and fz <= 0.0:
+                normal_z = -fz
+                fz = fz + normal_z
+                v = [0.0, 0.0, 0.0]
                 # friction holds it in place horizontally
-                normal[:2] = -force[:2]
-                force[:2] = 0.0
-            accel = force / self.mass_kg
-            self.velocity_world_mps += accel * h
-            self.position_world_m += self.velocity_world_mps * h
-            if self.position_world_m[2] < self.floor_z_m:
-                self.position_world_m[2] = self.floor_z_m
-                self.velocity_world_mps[2] = max(0.0, self.velocity_world_mps[2])
-            chord = self.position_world_m - self.base_world_m
-            dist = float(np.linalg.norm(chord))
-            reach = self.length_m * (1.0 - 1e-6)
+                fx = fy = 0.0
+            acc = (fx / m, fy / m, fz / m)
+            v = [v[0] + acc[0] * h, v[1] + acc[1] * h, v[2] + acc[2] * h]
+            p = [p[0] + v[0] * h, p[1] + v[1] * h, p[2] + v[2] * h]
+            if p[2] < floor_z:
+                p[2] = floor_z
+                v[2] = max(0.0, v[2])
+            cx, cy, cz = p[0] - bx, p[1] - by, p[2] - bz
+            dist = math.sqrt(cx * cx + cy * cy + cz * cz)
             if dist > reach and self.coin_mass_kg is None:
                 # Taut stop: the tether does not stretch; drop the outward velocity.
-                u = chord / dist
-                self.position_world_m = self.base_world_m + u * reach
-                radial = float(self.velocity_world_mps @ u)
+                ux, uy, uz = cx / dist, cy / dist, cz / dist
+                p = [bx + ux * reach, by + uy * reach, bz + uz * reach]
+                radial = v[0] * ux + v[1] * uy + v[2] * uz
                 if radial > 0:
-                    self.velocity_world_mps -= radial * u
+                    v = [v[0] - radial * ux, v[1] - radial * uy, v[2] - radial * uz]
                 taut = True
-            self.on_ground = bool(on_floor and normal[2] > 0.0)
-            self.thrust_n = thrust
-            self.tension_world_n = tension
-            self.floor_contact = floor_contact
-            self.taut = taut
-            # Specific force f = R'(p'' - g) = R'(F_total_non_gravity)/m (NOTES.md).
-            R = rotation_world_body_wxyz(self.quat_wxyz)
-            self.specific_force_body_mps2 = R.T @ (accel - _G_WORLD)
+            on_ground = bool(on_floor and normal_z > 0.0)
+            self.on_ground = on_ground
+            self.position_world_m[:] = p
+            self.velocity_world_mps[:] = v
+        self.thrust_n = thrust
+        self.tension_world_n = np.array(tension)
+        self.floor_contact = floor_contact
+        self.taut = taut
+        # Specific force f = R'(p'' - g) = R'(F_total_non_gravity)/m (NOTES.md).
+        R = rotation_world_body_wxyz(self.quat_wxyz)
+        self.specific_force_body_mps2 = R.T @ np.array(
+            [acc[0] - 0.0, acc[1] - 0.0, acc[2] - -GRAVITY_MPS2]
+        )

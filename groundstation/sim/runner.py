@@ -205,7 +205,7 @@ class Simulator:
         drone.offset_m = offset
         if not sc.start_on_ground:
             # Start in equilibrium: pre-load the integral with the tether's pull.
-            tension, _, _ = drone._tether(start)
+            tension = drone.tether_at(start)
             drone.integral_m_s = -tension / (drone.mass_kg * drone.ki_per_s3)
         drone.on_ground = sc.start_on_ground
         return drone
