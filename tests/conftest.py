@@ -1,7 +1,7 @@
 """How ``./dev test`` shares the tests among its worker processes (pytest-xdist).
 
-``./dev test -n 3 --dist loadgroup`` runs the suite in parallel on a 2-core machine (not
-yet ``./dev test``'s default: docs/service_profile.md section 6). Two kinds of test:
+``./dev test`` runs the suite in parallel (``-n`` cores + 1 ``--dist loadgroup``: three
+workers on a 2-core machine; ``./dev test -n 0`` runs it in one process). Two kinds of test:
 
 - **Real-time** tests wait on the wall clock: real Zenoh sessions, subprocesses that fly a
   simulator at real time, a Chromium drawing with software GL, threads polled against a

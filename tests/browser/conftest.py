@@ -25,6 +25,25 @@ CHROMIUM_ARGS = [
     "--no-first-run",
     "--disable-quic",
 ]
+FRAME_PERIOD_MS = 250
+"""The page's animation frames come at most every 250 ms (``FRAME_CAP_JS``).
+
+Software GL draws one frame of the dashboard in ~0.1-0.4 s of CPU, and viser draws frames
+for 250 ms after every scene update (20 Hz): left alone, Chromium's GPU process (at a
+raised priority) takes every core it can get, for frames no test looks at, and starves the
+page's own scripts and every other test of a parallel run. Capped, the browser tests take
+~60 s of wall time and ~100 s of CPU alone instead of ~100 s and ~180 s (measured with
+/proc/stat on this 2-core machine). What the tests check (the page's controls, readouts,
+charts and a drawn scene) does not depend on the frame rate; Playwright's own waits run in
+its isolated world, whose requestAnimationFrame is untouched."""
+FRAME_CAP_JS = (
+    "(() => {"
+    f" const period = {FRAME_PERIOD_MS};"
+    " window.requestAnimationFrame ="
+    " (cb) => window.setTimeout(() => cb(performance.now()), period);"
+    " window.cancelAnimationFrame = (id) => window.clearTimeout(id);"
+    " })();"
+)
 LOCAL_HOSTS = {"127.0.0.1", "localhost", "[::1]", "::1"}
 FIRST_FRAME_TIMEOUT_MS = 120_000
 """Software WebGL on a shared 2-core machine: the first frame can take many seconds."""
@@ -83,6 +102,7 @@ def open_page(
         viewport: (width, height) in CSS pixels.
     """
     context = browser.new_context(viewport={"width": viewport[0], "height": viewport[1]})
+    context.add_init_script(FRAME_CAP_JS)
     context.on("request", lambda request: log.urls.append(request.url))
     page = context.new_page()
     page.on("websocket", lambda ws: log.urls.append(ws.url))

@@ -128,8 +128,11 @@ def test_two_drones_are_framed_left_of_the_panel(browser: Any, viewport: tuple[i
         )
         client = camera_applied()
         canvas = scene_canvas_box(page)
+        # The camera may come before the panel has mounted: wait for it too.
+        assert wait_until(lambda: page.evaluate(PANEL_BOX_JS) is not None, TIMEOUT_S), (
+            "no control panel on the page"
+        )
         panel = page.evaluate(PANEL_BOX_JS)
-        assert panel is not None, "no control panel on the page"
         # The panel floats over the right of the canvas (else the test checks nothing).
         assert canvas["x"] < panel["x"] < canvas["x"] + canvas["width"]
 
