@@ -20,8 +20,6 @@ from groundstation.sim.rotation import quat_wxyz_from_z_axis, rotation_world_bod
 __all__ = ["GRAVITY_MPS2", "DroneSim"]
 
 GRAVITY_MPS2 = 9.81
-_G_WORLD = np.array([0.0, 0.0, -GRAVITY_MPS2])
-_E3 = np.array([0.0, 0.0, 1.0])
 Vec3 = tuple[float, float, float]
 
 
@@ -177,6 +175,8 @@ class DroneSim:
             if self.armed:
                 self.quat_wxyz = quat_wxyz_from_z_axis(np.array([zx, zy, zz]))
             tension, floor_contact, taut = self._tether(p[0], p[1], p[2])
+            # + m·g with g = (0, 0, -9.81) as numpy added it (the 0.0 terms included, which
+            # turn a -0.0 into 0.0): tests/test_sim_ideal_floats.py compares bit for bit.
             fx = thrust * zx + tension[0] + ex + m * 0.0
             fy = thrust * zy + tension[1] + ey + m * 0.0
             fz = thrust * zz + tension[2] + ez + m * -GRAVITY_MPS2
