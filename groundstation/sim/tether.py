@@ -90,11 +90,10 @@ class LumpedTether:
             self.base_world_m, np.array(drone_world_m, dtype=float), self.length_m, n, floor_z_m
         )
         self.v_world_mps = np.zeros((n + 1, 3))
-        self.force_on_drone_world_n = np.zeros(3)
-        self._tension_n = np.zeros(n)
         self._const_for_m = math.nan
         self._const = (0.0, 0.0, 0.0, 0.0)
-        self._update_forces()
+        (X, Y, Z), (VX, VY, VZ) = self.x_world_m.T.tolist(), self.v_world_mps.T.tolist()
+        self.force_on_drone_world_n = np.array(self._forces(X, Y, Z, VX, VY, VZ)[3])
 
     # ------------------------------------------------------------------ properties
 
@@ -163,30 +162,47 @@ class LumpedTether:
         sub-steps, and the rest length to ``length_m`` (reeling; None: unchanged), so a reel
         does not jerk the stiff segments once per step.
 
+        The sub-steps run on Python floats, node by node (numpy's per-call cost on 11 × 3
+        arrays was most of a step); ``tests/test_sim_tether_floats.py`` keeps the numpy step
+        they replaced and checks both give the same floats.
+
         Returns:
             (3,) force of the tether on the drone at the end of the step, world frame, N.
         """
         n_sub = self.substeps(dt_s)
         h = dt_s / n_sub
-        start = self.x_world_m[-1].copy()
-        end = np.asarray(drone_world_m, dtype=float)
+        end_x, end_y, end_z = np.asarray(drone_world_m, dtype=float).tolist()
         self.v_world_mps[-1] = drone_velocity_world_mps
         self.v_world_mps[0] = 0.0
+        # Columns of the nodes' state, as floats.
+        (X, Y, Z), (VX, VY, VZ) = self.x_world_m.T.tolist(), self.v_world_mps.T.tolist()
+        last = len(X) - 1
+        # (end - start) / n_sub, per axis.
+        sx, sy, sz = (end_x - X[last]) / n_sub, (end_y - Y[last]) / n_sub, (end_z - Z[last]) / n_sub
         h_per_m = h / self.node_mass_kg
-        inner_x, inner_v = self.x_world_m[1:-1], self.v_world_mps[1:-1]
-        step_m = (end - start) / n_sub
         length0 = self.length_m
         reel_m = 0.0 if length_m is None else (float(length_m) - length0) / n_sub
+        on_drone = (0.0, 0.0, 0.0)
         for i in range(n_sub):
             if reel_m != 0.0:
                 self.set_length(length0 + reel_m * (i + 1))
                 h_per_m = h / self.node_mass_kg
-            self.x_world_m[-1] += step_m
-            force = self._update_forces()
+            X[last] += sx
+            Y[last] += sy
+            Z[last] += sz
+            FX, FY, FZ, on_drone = self._forces(X, Y, Z, VX, VY, VZ)
             # semi-implicit Euler: v += F/m·h, then x += v·h (interior nodes only)
-            inner_v += force[1:-1] * h_per_m
-            inner_x += inner_v * h
-        self.x_world_m[-1] = end
+            for j in range(1, last):
+                vx = VX[j] = VX[j] + FX[j] * h_per_m
+                vy = VY[j] = VY[j] + FY[j] * h_per_m
+                vz = VZ[j] = VZ[j] + FZ[j] * h_per_m
+                X[j] += vx * h
+                Y[j] += vy * h
+                Z[j] += vz * h
+        X[last], Y[last], Z[last] = end_x, end_y, end_z
+        self.x_world_m[:] = np.array((X, Y, Z)).T
+        self.v_world_mps[:] = np.array((VX, VY, VZ)).T
+        self.force_on_drone_world_n = np.array(on_drone)
         return self.force_on_drone_world_n.copy()
 
     def _constants(self) -> tuple[float, float, float, float]:
@@ -200,40 +216,66 @@ class LumpedTether:
             self._const_for_m = self.length_m
         return self._const
 
-    def _update_forces(self) -> np.ndarray:
-        """Node forces (N+1, 3) of the current state; sets the force on the drone."""
+    def _forces(
+        self,
+        X: list[float],
+        Y: list[float],
+        Z: list[float],
+        VX: list[float],
+        VY: list[float],
+        VZ: list[float],
+    ) -> tuple[list[float], list[float], list[float], tuple[float, float, float]]:
+        """Node forces (three columns of N + 1) of a state, and the force on the drone, N.
+
+        The operations of the numpy form they replaced, in its order (a dot product of
+        3-vectors as numpy's ``einsum`` sums it on x86-64: (x·x' + z·z') + y·y').
+        """
         p = self.params
-        x, v = self.x_world_m, self.v_world_mps
         l0, m, k, c_axial = self._constants()
-        d = x[1:] - x[:-1]
-        length = np.sqrt(np.einsum("ij,ij->i", d, d))
-        u = d / np.maximum(length, 1e-12)[:, None]
-        rate = np.einsum("ij,ij->i", u, v[1:] - v[:-1])
-        # t = EA·strain + c·dl/dt while stretched; a slack segment carries nothing. The damper
-        # acts in full while stretched (clipping it at zero feeds a slack-taut chatter).
-        tension = (k * (length - l0) + c_axial * rate) * (length > l0)
-        self._tension_n = tension
-        pull = tension[:, None] * u
-        # gravity and the effective drag, then the segments' pulls
-        force = v * -(p.air_damping_n_s_per_m2 * l0)
-        force[:, 2] -= m * GRAVITY_MPS2
-        force[:-1] += pull
-        force[1:] -= pull
-        if float(x[:, 2].min()) < self.floor_z_m:
-            pen = np.maximum(self.floor_z_m - x[:, 2], 0.0)
-            c_floor = 2.0 * math.sqrt(p.floor_stiffness_n_per_m * m)
-            normal = np.maximum(p.floor_stiffness_n_per_m * pen - c_floor * v[:, 2], 0.0)
-            normal *= pen > 0.0
-            force[:, 2] += normal
-            vt = v[:, :2]
-            speed = np.sqrt(np.einsum("ij,ij->i", vt, vt) + p.friction_speed_mps**2)
-            force[:, :2] -= (p.floor_friction * normal / speed)[:, None] * vt
+        weight = m * GRAVITY_MPS2
+        drag = -(p.air_damping_n_s_per_m2 * l0)
+        # gravity and the effective drag
+        FX = [vx * drag for vx in VX]
+        FY = [vy * drag for vy in VY]
+        FZ = [vz * drag - weight for vz in VZ]
+        n = len(X) - 1
+        PX, PY, PZ = [0.0] * n, [0.0] * n, [0.0] * n
+        for i in range(n):
+            dx, dy, dz = X[i + 1] - X[i], Y[i + 1] - Y[i], Z[i + 1] - Z[i]
+            length = math.sqrt((dx * dx + dz * dz) + dy * dy)
+            den = max(length, 1e-12)
+            ux, uy, uz = dx / den, dy / den, dz / den
+            rate = (ux * (VX[i + 1] - VX[i]) + uz * (VZ[i + 1] - VZ[i])) + uy * (VY[i + 1] - VY[i])
+            # t = EA·strain + c·dl/dt while stretched; a slack segment carries nothing. The
+            # damper acts in full while stretched (clipping it at zero feeds a slack-taut
+            # chatter).
+            tension = (k * (length - l0) + c_axial * rate) * (1.0 if length > l0 else 0.0)
+            PX[i], PY[i], PZ[i] = tension * ux, tension * uy, tension * uz
+        # Each segment pulls its two ends together: first every start node, then every end.
+        for i in range(n):
+            FX[i] += PX[i]
+            FY[i] += PY[i]
+            FZ[i] += PZ[i]
+        for i in range(n):
+            FX[i + 1] -= PX[i]
+            FY[i + 1] -= PY[i]
+            FZ[i + 1] -= PZ[i]
+        floor = self.floor_z_m
+        if min(Z) < floor:
+            stiff = p.floor_stiffness_n_per_m
+            c_floor = 2.0 * math.sqrt(stiff * m)
+            friction, slip2 = p.floor_friction, p.friction_speed_mps**2
+            for j, z in enumerate(Z):
+                pen = max(floor - z, 0.0)
+                normal = max(stiff * pen - c_floor * VZ[j], 0.0) * (1.0 if pen > 0.0 else 0.0)
+                FZ[j] += normal
+                vx, vy = VX[j], VY[j]
+                g = friction * normal / math.sqrt((vx * vx + vy * vy) + slip2)
+                FX[j] -= g * vx
+                FY[j] -= g * vy
         # On the drone: the last segment's pull toward the previous node, and the weight of
         # the half segment that hangs at the drone's end.
-        on_drone = -pull[-1]
-        on_drone[2] -= 0.5 * m * GRAVITY_MPS2
-        self.force_on_drone_world_n = on_drone
-        return force
+        return FX, FY, FZ, (-PX[-1], -PY[-1], -PZ[-1] - 0.5 * m * GRAVITY_MPS2)
 
     def settle(
         self, duration_s: float, dt_s: float = 1e-3, extra_damping_per_s: float = 0.0
