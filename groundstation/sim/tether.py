@@ -174,7 +174,7 @@ class LumpedTether:
         end_x, end_y, end_z = np.asarray(drone_world_m, dtype=float).tolist()
         self.v_world_mps[-1] = drone_velocity_world_mps
         self.v_world_mps[0] = 0.0
-        # Columns of the nodes' state, as floats.
+        # The columns of the nodes' positions (m) and velocities (m/s), as floats.
         (X, Y, Z), (VX, VY, VZ) = self.x_world_m.T.tolist(), self.v_world_mps.T.tolist()
         last = len(X) - 1
         # (end - start) / n_sub, per axis.
@@ -229,6 +229,14 @@ class LumpedTether:
 
         The operations of the numpy form they replaced, in its order (a dot product of
         3-vectors as numpy's ``einsum`` sums it on x86-64: (x·x' + z·z') + y·y').
+
+        Args:
+            X, Y, Z: the nodes' world coordinates, base first, m (short names: the columns
+                of ``x_world_m``, read in every line of the loops below).
+            VX, VY, VZ: their velocities, world, m/s (the columns of ``v_world_mps``).
+
+        Returns:
+            ``(FX, FY, FZ, force on the drone)``: per node, world, N.
         """
         p = self.params
         l0, m, k, c_axial = self._constants()
