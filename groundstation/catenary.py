@@ -68,6 +68,7 @@ __all__ = [
     "locate_with_floor_floats",
     "solve",
     "tether_force",
+    "tether_force_xyz",
     "tether_points",
 ]
 
@@ -1194,6 +1195,44 @@ def tether_force(
     """
     bx, by, bz = _xyz(base_world_m, "base_world_m")
     px, py, pz = _xyz(drone_world_m, "drone_world_m")
+    fx, fy, fz, h_n, tv_n, geom = _force(
+        bx, by, bz, px, py, pz, length_m, weight_n_per_m, floor_z_m
+    )
+    force = np.array([fx, fy, fz])
+    force.flags.writeable = False
+    return TetherForce(force, h_n, tv_n, geom.floor_contact, geom.floor_run_m)
+
+
+def tether_force_xyz(
+    base_world_m: tuple[float, float, float],
+    drone_world_m: tuple[float, float, float],
+    length_m: float,
+    weight_n_per_m: float,
+    floor_z_m: float = -math.inf,
+) -> tuple[float, float, float]:
+    """:func:`tether_force`'s ``force_world_n`` for points given as three Python floats
+    each: the same floats and the same errors, without the arrays (a per-message caller's
+    form, :mod:`groundstation.follow`)."""
+    bx, by, bz = base_world_m
+    px, py, pz = drone_world_m
+    if not all(map(math.isfinite, (bx, by, bz, px, py, pz))):
+        raise CatenaryError(f"positions must be finite, got {base_world_m!r}, {drone_world_m!r}")
+    fx, fy, fz, _, _, _ = _force(bx, by, bz, px, py, pz, length_m, weight_n_per_m, floor_z_m)
+    return fx, fy, fz
+
+
+def _force(
+    bx: float,
+    by: float,
+    bz: float,
+    px: float,
+    py: float,
+    pz: float,
+    length_m: float,
+    weight_n_per_m: float,
+    floor_z_m: float,
+) -> tuple[float, float, float, float, float, _Hang]:
+    """:func:`tether_force` on finite floats: ``(fx, fy, fz, H, T_v, shape)``."""
     big_l, omega, floor = float(length_m), float(weight_n_per_m), float(floor_z_m)
     if not (0.0 < big_l < math.inf):
         raise CatenaryError(f"length_m must be finite and > 0, got {length_m!r}")
@@ -1212,9 +1251,7 @@ def tether_force(
         ux = uy = 0.0
     h_n = omega * geom.a
     tv_n = omega * geom.sigma_drone
-    force = np.array([_times(-h_n, ux), _times(-h_n, uy), -tv_n])
-    force.flags.writeable = False
-    return TetherForce(force, h_n, tv_n, geom.floor_contact, geom.floor_run_m)
+    return _times(-h_n, ux), _times(-h_n, uy), -tv_n, h_n, tv_n, geom
 
 
 def _times(magnitude: float, component: float) -> float:

@@ -79,6 +79,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from groundstation import catenary
+from groundstation.frozen import evolve
 
 __all__ = [
     "OWN_TAUT_MARGIN_M",
@@ -300,44 +301,74 @@ def clamp_to_reach(
     """
     p = np.asarray(point_world_m, dtype=np.float64)
     b = np.asarray(base_world_m, dtype=np.float64)
-    if not (np.all(np.isfinite(p)) and np.all(np.isfinite(b)) and math.isfinite(radius_m)):
+    if p.shape != (3,) or b.shape != (3,):
+        raise ValueError(f"points must have shape (3,), got {p.shape} and {b.shape}")
+    q = _clamp(_as_vec3(p), _as_vec3(b), radius_m, min_z_m)
+    return None if q is None else np.array(q)
+
+
+def _clamp(p: Vec3, b: Vec3, radius_m: float, min_z_m: float) -> Vec3 | None:
+    """:func:`clamp_to_reach` on three floats each (the per-message form)."""
+    px, py, pz = p
+    bx, by, bz = b
+    if not (_finite(p) and _finite(b) and math.isfinite(radius_m)):
         return None
-    if radius_m < 0.0 or math.isnan(min_z_m) or min_z_m > b[2] + radius_m:
+    if radius_m < 0.0 or math.isnan(min_z_m) or min_z_m > bz + radius_m:
         return None
-    q = p.copy()
-    q[2] = max(q[2], min_z_m)
-    d = q - b
-    if float(d @ d) <= radius_m * radius_m:
-        return q
-    d = p - b
-    dist = math.sqrt(float(d @ d))
-    on_ball = b + d * (radius_m / dist)  # dist > radius > = 0 here
+    qz = max(pz, min_z_m)
+    dx, dy, dz = px - bx, py - by, qz - bz
+    if dx * dx + dy * dy + dz * dz <= radius_m * radius_m:
+        return (px, py, qz)
+    dz = pz - bz
+    dist = math.sqrt(dx * dx + dy * dy + dz * dz)
+    k = radius_m / dist  # dist > radius >= 0 here
+    on_ball = (bx + dx * k, by + dy * k, bz + dz * k)
     if on_ball[2] >= min_z_m:
         return on_ball
-    disc_r = math.sqrt(max(radius_m * radius_m - (min_z_m - b[2]) ** 2, 0.0))
-    h = p[:2] - b[:2]
-    h_norm = math.hypot(float(h[0]), float(h[1]))
+    disc_r = math.sqrt(max(radius_m * radius_m - (min_z_m - bz) ** 2, 0.0))
+    h_norm = math.hypot(dx, dy)
     if h_norm > disc_r:
-        h = h * (disc_r / h_norm)
-    return np.array([b[0] + h[0], b[1] + h[1], min_z_m])
+        k = disc_r / h_norm
+        dx, dy = dx * k, dy * k
+    return (bx + dx, by + dy, min_z_m)
 
 
-def _finite_vec3(value: ArrayLike | None) -> FloatArray | None:
+def _finite(v: Vec3) -> bool:
+    return math.isfinite(v[0]) and math.isfinite(v[1]) and math.isfinite(v[2])
+
+
+def _as_vec3(value: ArrayLike) -> Vec3:
+    """Three Python floats (of a 3-array, or a list or tuple of numbers)."""
+    if type(value) is tuple and len(value) == 3:
+        x, y, z = value
+        if type(x) is float and type(y) is float and type(z) is float:
+            return value
+    x, y, z = np.asarray(value, dtype=np.float64).tolist()
+    return (x, y, z)
+
+
+def _finite_vec3(value: ArrayLike | None) -> Vec3 | None:
+    """``value`` as three finite floats, or None (None, another shape, a non-finite entry)."""
     if value is None:
         return None
+    if type(value) is tuple and len(value) == 3:
+        x, y, z = value
+        if type(x) is float and type(y) is float and type(z) is float:
+            return value if _finite(value) else None
     arr = np.asarray(value, dtype=np.float64)
-    if arr.shape != (3,) or not np.all(np.isfinite(arr)):
+    if arr.shape != (3,):
         return None
-    return arr
+    x, y, z = arr.tolist()
+    return (x, y, z) if _finite((x, y, z)) else None
 
 
 def _tether_own_force(
-    reference_world_m: FloatArray,
-    base_world_m: ArrayLike,
+    reference_world_m: Vec3,
+    base_world_m: Vec3,
     length_m: float,
     weight_n_per_m: float | None,
     floor_z_m: float,
-) -> FloatArray | None:
+) -> Vec3 | None:
     """The catenary's force on a drone at rest at ``reference_world_m`` (step 4a), or None.
 
     Within ``OWN_TAUT_MARGIN_M`` of taut the reference is first pulled back along the chord
@@ -346,19 +377,24 @@ def _tether_own_force(
     """
     if weight_n_per_m is None:
         return None
-    base = np.asarray(base_world_m, dtype=np.float64)
-    chord = reference_world_m - base
-    chord_m = math.sqrt(float(chord @ chord))
+    bx, by, bz = base_world_m
+    cx, cy, cz = (
+        reference_world_m[0] - bx,
+        reference_world_m[1] - by,
+        reference_world_m[2] - bz,
+    )
+    chord_m = math.sqrt(cx * cx + cy * cy + cz * cz)
     max_chord_m = length_m - OWN_TAUT_MARGIN_M
     if max_chord_m > 0.0 and chord_m > max_chord_m:
-        reference_world_m = base + chord * (max_chord_m / chord_m)
+        k = max_chord_m / chord_m
+        reference_world_m = (bx + cx * k, by + cy * k, bz + cz * k)
     try:
-        force = catenary.tether_force(
+        force = catenary.tether_force_xyz(
             base_world_m, reference_world_m, length_m, weight_n_per_m, floor_z_m
-        ).force_world_n
+        )
     except (catenary.CatenaryError, ValueError):
         return None
-    return force if bool(np.all(np.isfinite(force))) else None
+    return force if _finite(force) else None
 
 
 def follow_step(
@@ -378,6 +414,10 @@ def follow_step(
     on_ground: bool = False,
 ) -> FollowDecision:
     """One step of tension following and tug-to-land (see the module docstring).
+
+    The vectors are Python floats throughout (three per vector; a handful of operations
+    per message, for which numpy's per-call overhead cost more than the arithmetic):
+    ``tests/test_follow_floats.py`` holds this step equal to the numpy one it replaced.
 
     Args:
         state: State after the previous step.
@@ -416,7 +456,7 @@ def follow_step(
     if not math.isfinite(stamp_s):
         raise ValueError(f"stamp_s must be finite, got {stamp_s!r}")
     prev = state.last_stamp_s
-    state = replace(state, last_stamp_s=stamp_s)
+    state = evolve(state, last_stamp_s=stamp_s)
 
     # 1. Stale input disengages; the operator re-enables.
     if state.enabled or state.active:
@@ -428,17 +468,18 @@ def follow_step(
         elif prev is not None and stamp_s < prev:
             why = f"stamp went backwards ({prev} -> {stamp_s}): disengaged"
         if why is not None:
-            state = replace(state, enabled=False, active=False, landing_armed=False, reason=why)
+            state = evolve(state, enabled=False, active=False, landing_armed=False, reason=why)
             return FollowDecision(state)
 
     # 2. Off, or stopped after tug-to-land.
     if not state.enabled or state.stopped:
-        return FollowDecision(replace(state, active=False))
+        return FollowDecision(evolve(state, active=False))
 
     # 3. Never act on a missing position.
     position = _finite_vec3(position_world_m)
     if position is None:
-        return FollowDecision(replace(state, active=False, reason="no position: goal frozen"))
+        return FollowDecision(evolve(state, active=False, reason="no position: goal frozen"))
+    base = _as_vec3(base_world_m)
 
     # 4. The pull beyond the tether's own tension, with hysteresis.
     dt_prev_s = max(stamp_s - prev, 0.0) if prev is not None else 0.0
@@ -446,38 +487,41 @@ def follow_step(
     norm_n = tension_norm_n
     if norm_n is not None and not math.isfinite(norm_n):
         norm_n = None
-    pull: FloatArray | None = None
+    pull: Vec3 | None = None
     pull_n: float | None
     if tension is not None and norm_n is not None:
         # 4a. T_own = F_cat(p_ref) + b at the reference position.
         if position_is_external:
             reference = position
         elif state.active and state.setpoint_world_m is not None:
-            reference = np.array(state.setpoint_world_m)  # the goal the drone tracks
+            reference = state.setpoint_world_m  # the goal the drone tracks
         else:
             quiet_p = _finite_vec3(state.quiet_position_world_m)
             reference = quiet_p if quiet_p is not None else position
-        f_cat = _tether_own_force(reference, base_world_m, length_m, weight_n_per_m, floor_z_m)
+        f_cat = _tether_own_force(reference, base, length_m, weight_n_per_m, floor_z_m)
         modelled = f_cat is not None
         if f_cat is None:  # keep the last answer where the catenary has none
             last_cat = _finite_vec3(state.catenary_world_n)
-            f_cat = last_cat if last_cat is not None else np.zeros(3)
+            f_cat = last_cat if last_cat is not None else _ZERO3
+        tx, ty, tz = tension
+        fx, fy, fz = f_cat
         offset = _finite_vec3(state.own_offset_world_n)
         if offset is None:
             # With motion capture the catenary at the measured position is the tether's own
             # tension, independently of the estimate: b starts at 0 (a hand already pulling
             # as following is switched on is a pull). Without it the reference position
             # comes from the tension itself: nobody is taken to pull at the switch-on.
-            offset = np.zeros(3) if (position_is_external and modelled) else tension - f_cat
-        pull = tension - (f_cat + offset)
-        pull_n = math.sqrt(float(pull @ pull))
-        state = replace(state, catenary_world_n=_vec3(f_cat), own_offset_world_n=_vec3(offset))
+            offset = _ZERO3 if (position_is_external and modelled) else (tx - fx, ty - fy, tz - fz)
+        ox, oy, oz = offset
+        pull = (tx - (fx + ox), ty - (fy + oy), tz - (fz + oz))  # T - (F_cat + b)
+        pull_n = math.sqrt(pull[0] * pull[0] + pull[1] * pull[1] + pull[2] * pull[2])
+        state = evolve(state, catenary_world_n=f_cat, own_offset_world_n=offset)
     else:
         pull_n = norm_n if tension_world_n is None and norm_n is not None else None
     if on_ground:
         active = False
         reason = "on the ground: goal frozen"
-        state = replace(
+        state = evolve(
             state, own_offset_world_n=None, catenary_world_n=None, quiet_position_world_m=None
         )
     elif pull_n is None:
@@ -492,12 +536,8 @@ def follow_step(
         state.landing_armed or (active and params.land_below_m is not None)
     )
     was_active = state.active
-    state = replace(
-        state,
-        active=active,
-        landing_armed=landing_armed,
-        reason=reason,
-        pull_world_n=_vec3(pull) if pull is not None else None,
+    state = evolve(
+        state, active=active, landing_armed=landing_armed, reason=reason, pull_world_n=pull
     )
     admittance = not position_is_external and tension is not None and pull is not None
     if not active and not on_ground and tension is not None and pull is not None:
@@ -505,28 +545,38 @@ def follow_step(
         # (without motion capture, where the tether-based position is valid while nobody
         # pulls) the quiet position is averaged over QUIET_TIME_CONSTANT_S, so the first
         # samples of a tug (the filter needs a few to see it) barely move it.
-        f_cat_now = np.array(state.catenary_world_n)
-        offset_now = np.array(state.own_offset_world_n)
+        assert state.catenary_world_n is not None and state.own_offset_world_n is not None
+        fx, fy, fz = state.catenary_world_n
+        ox, oy, oz = state.own_offset_world_n
+        tx, ty, tz = tension
         # Only inside the quiet band: a tug's rise passes the band in a fraction of the
         # filter's ~0.3 s and is held out of b from there on.
         quiet = pull_n is not None and pull_n < QUIET_BAND_RATIO * params.release_n
         w_b = min(1.0, dt_prev_s / REFERENCE_TIME_CONSTANT_S) if quiet else 0.0
-        offset_now = offset_now + w_b * (tension - f_cat_now - offset_now)  # b += w (T - F - b)
-        state = replace(state, own_offset_world_n=_vec3(offset_now))
+        offset_now = (  # b += w (T - F - b)
+            ox + w_b * (tx - fx - ox),
+            oy + w_b * (ty - fy - oy),
+            oz + w_b * (tz - fz - oz),
+        )
+        state = evolve(state, own_offset_world_n=offset_now)
         if not position_is_external:
             prev_p = _finite_vec3(state.quiet_position_world_m)
-            w = 1.0 if prev_p is None else min(1.0, dt_prev_s / QUIET_TIME_CONSTANT_S)
-            state = replace(
-                state,
-                quiet_position_world_m=_vec3(
-                    position if prev_p is None else prev_p + w * (position - prev_p)
-                ),
-            )
+            if prev_p is None:
+                quiet_now = position
+            else:
+                w = min(1.0, dt_prev_s / QUIET_TIME_CONSTANT_S)
+                qx, qy, qz = prev_p
+                quiet_now = (
+                    qx + w * (position[0] - qx),
+                    qy + w * (position[1] - qy),
+                    qz + w * (position[2] - qz),
+                )
+            state = evolve(state, quiet_position_world_m=quiet_now)
 
     # 6. While active, the goal: within reach and at a bounded speed.
     radius_m = length_m - params.reach_margin_m if math.isfinite(length_m) else math.nan
     min_z_m = floor_z_m + params.floor_margin_m if not math.isnan(floor_z_m) else math.nan
-    target: FloatArray | None = None
+    target: Vec3 | None = None
     if active:
         last = _finite_vec3(state.setpoint_world_m)
         dt_s = (
@@ -545,46 +595,46 @@ def follow_step(
                 dt_s = 0.0
             if start is None:
                 start = position
-            velocity = params.admittance_mps_per_n * pull
-            speed = math.sqrt(float(velocity @ velocity))
+            k = params.admittance_mps_per_n
+            vx, vy, vz = k * pull[0], k * pull[1], k * pull[2]
+            speed = math.sqrt(vx * vx + vy * vy + vz * vz)
             if speed > params.max_speed_mps:
-                velocity = velocity * (params.max_speed_mps / speed)
-            target = clamp_to_reach(
-                start + velocity * (dt_s or 0.0), base_world_m, radius_m, min_z_m
-            )
+                k = params.max_speed_mps / speed
+                vx, vy, vz = vx * k, vy * k, vz * k
+            t = dt_s or 0.0
+            goal = (start[0] + vx * t, start[1] + vy * t, start[2] + vz * t)
+            target = _clamp(goal, base, radius_m, min_z_m)
         else:
             # 6a. The paper: the goal is the current position (motion capture).
-            target = clamp_to_reach(position, base_world_m, radius_m, min_z_m)
+            target = _clamp(position, base, radius_m, min_z_m)
             if target is not None and last is not None and dt_s is not None:
                 max_step_m = params.max_speed_mps * dt_s
-                step = target - last
-                dist = math.sqrt(float(step @ step))
+                sx, sy, sz = target[0] - last[0], target[1] - last[1], target[2] - last[2]
+                dist = math.sqrt(sx * sx + sy * sy + sz * sz)
                 if dist > max_step_m:
                     # Reach wins over the rate limit if the reachable set moved.
-                    target = clamp_to_reach(
-                        last + step * (max_step_m / dist), base_world_m, radius_m, min_z_m
-                    )
+                    k = max_step_m / dist
+                    goal = (last[0] + sx * k, last[1] + sy * k, last[2] + sz * k)
+                    target = _clamp(goal, base, radius_m, min_z_m)
         if target is None:
-            state = replace(state, reason="position out of reach and no reachable goal")
+            state = evolve(state, reason="position out of reach and no reachable goal")
             return FollowDecision(state)
 
     # 5. Tug-to-land: exactly one Stop, then terminal until enabled again. Without motion
     # capture the height during a pull is the goal's (the drone tracks it). On the
     # ground landing is disarmed (step 4), so nothing stops a spool-up.
-    z_m = float(target[2]) if (admittance and target is not None) else float(position[2])
+    z_m = target[2] if (admittance and target is not None) else position[2]
     if state.landing_armed and params.land_below_m is not None and z_m < params.land_below_m:
         stop_reason = f"tug-to-land: z {z_m:.3f} m below land_below_m {params.land_below_m} m"
-        state = replace(state, enabled=False, active=False, stopped=True, reason=stop_reason)
+        state = evolve(state, enabled=False, active=False, stopped=True, reason=stop_reason)
         return FollowDecision(state, stop_reason=stop_reason)
 
     if target is None:
         return FollowDecision(state)
-    setpoint = _vec3(target)
-    state = replace(state, setpoint_world_m=setpoint, setpoint_stamp_s=stamp_s)
-    out = np.array(setpoint)
+    state = evolve(state, setpoint_world_m=target, setpoint_stamp_s=stamp_s)
+    out = np.array(target)
     out.setflags(write=False)
     return FollowDecision(state, setpoint_world_m=out)
 
 
-def _vec3(a: FloatArray) -> Vec3:
-    return (float(a[0]), float(a[1]), float(a[2]))
+_ZERO3: Vec3 = (0.0, 0.0, 0.0)

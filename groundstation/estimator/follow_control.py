@@ -87,7 +87,7 @@ def follow_decide(
     if not (state.enabled or state.active) and math.isfinite(stamp_s):
         return follow_stamped(state, stamp_s), None
     follow_position = (
-        np.array(mocap_world_m, dtype=float)
+        mocap_world_m
         if mocap_world_m is not None
         else (position.position_world_m if position is not None else None)
     )
