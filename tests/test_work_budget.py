@@ -1,0 +1,151 @@
+"""The per-message path's work, counted: a budget that a slowdown cannot slip past unseen.
+
+Issue 22 found the service at 6.3× the echo floor one week after 2.3–2.9×: nothing had
+watched the per-message cost between benchmark runs, and a timed test would flake on this
+shared machine (its speed moves by 2× from one minute to the next). This test counts
+instead of timing. ``sys.setprofile`` sees every call one converged message makes through
+:meth:`Pipeline.handle` (validation and the Estimate's JSON included): calls of Python
+functions, calls of C functions, and among those numpy's (each ~0.3–1 µs of overhead for a
+handful of floats, what issue 13 and issue 22 took out of the path). For a given input the
+counts are the same on every run and machine with the locked dependencies
+(requirements.lock), so the budget is exact where the benchmark is not.
+
+Each regime's budget is its count when it was set plus 5 %: a `dataclasses.replace` more
+per message (~5 µs of ~120) exceeds it, as does a second numpy call on a 3-vector. (Follow
+on, before its float rewrite, made 25 Python calls, 35 C calls and 12 numpy calls more per
+message than now: 164, 245 and 26 at 221e68a.) A change that needs more raises the
+budget in the same commit, with ``python -m benchmarks.bench_pipeline`` before and after
+in its message; the failure prints the call sites that grew, to start from.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from collections import Counter
+from collections.abc import Callable
+from types import FrameType
+from typing import Any
+
+import numpy as np
+import pytest
+
+from groundstation.bus import Sample
+from groundstation.pipeline import Pipeline
+from tests.test_perf_equivalence import DRONE, HOVER_N, _follow, _telemetry, pinned_settings
+
+WARMUP = 500
+"""Messages before counting: the filter has converged and its noise estimate warmed up."""
+COUNTED = 200
+
+MOCAP_M = [0.8, 0.0, 1.0]
+
+
+def _reel(k: int) -> Sample:
+    body = {"stamp_s": k * 0.004, "length_m": 1.6, "exit_azimuth_rad": 2.9}
+    body["exit_elevation_rad"] = 0.3
+    return Sample(f"tether/{DRONE}/reel", json.dumps(body).encode())
+
+
+Make = Callable[[int, np.random.Generator], Sample]
+REGIMES: dict[str, dict[str, Any]] = {
+    "hover": {"make": lambda k, rng: _telemetry(k, HOVER_N, rng)},
+    "hover, motion capture, follow on": {
+        "make": lambda k, rng: _telemetry(k, HOVER_N, rng, position_m=MOCAP_M),
+        "follow": True,
+    },
+    "plumb": {"make": lambda k, rng: _telemetry(k, np.array([0.0, 0.0, -0.080]), rng)},
+    "tether on the floor": {
+        "make": lambda k, rng: _telemetry(k, np.array([-0.010, 0.0, -0.010]), rng)
+    },
+    "on the ground, disarmed": {
+        "make": lambda k, rng: _telemetry(k, np.zeros(3), rng, armed=False, thrust_scale=0.0)
+    },
+    "hover, reel with exit angles at 10 Hz": {
+        "make": lambda k, rng: _telemetry(k, HOVER_N, rng),
+        "reel": True,
+    },
+}
+
+BUDGET: dict[str, tuple[int, int, int]] = {
+    # regime: (Python calls, C calls, numpy calls) per message: the count at f1a2614 (in
+    # parentheses) plus 5 %, rounded up.
+    "hover": (104, 165, 11),  # (98.2, 156.6, 10.1)
+    "hover, motion capture, follow on": (147, 221, 15),  # (139.3, 209.7, 14.2)
+    "plumb": (131, 243, 15),  # (124.2, 231.1, 14.1)
+    "tether on the floor": (152, 430, 15),  # (144.2, 408.6, 14.1)
+    "on the ground, disarmed": (92, 66, 23),  # (86.8, 62.0, 21.2)
+    "hover, reel with exit angles at 10 Hz": (174, 402, 12),  # (164.8, 382.6, 11.1)
+}
+
+
+def _count(regime: dict[str, Any]) -> tuple[dict[str, float], Counter[str]]:
+    """Calls per counted message, by kind, and the call sites (``file:function``)."""
+    rng = np.random.default_rng(3)
+    pipe = Pipeline(pinned_settings())
+    make: Make = regime["make"]
+    messages = [make(k, rng) for k in range(WARMUP + COUNTED)]
+    kinds: Counter[str] = Counter()
+    sites: Counter[str] = Counter()
+
+    def profile(frame: FrameType, event: str, arg: Any) -> None:
+        if event == "call":
+            kinds["python"] += 1
+            code = frame.f_code
+            sites[f"{code.co_filename.rsplit('/', 1)[-1]}:{code.co_name}"] += 1
+        elif event == "c_call":
+            module = (
+                getattr(arg, "__module__", None) or type(getattr(arg, "__self__", None)).__module__
+            )
+            kind = "numpy" if module and module.startswith("numpy") else "c"
+            kinds[kind] += 1
+            sites[f"{kind} {module}.{getattr(arg, '__name__', '?')}"] += 1
+
+    for k, msg in enumerate(messages):
+        stamp_s = k * 0.004
+        if regime.get("follow") and k == 20:
+            pipe.handle(_follow(enabled=True, threshold_n=0.02), stamp_s)
+        if regime.get("reel") and k % 25 == 0:
+            pipe.handle(_reel(k), stamp_s)
+        counting = k >= WARMUP
+        if counting:
+            sys.setprofile(profile)
+        try:
+            out = pipe.handle(msg, stamp_s)
+        finally:
+            sys.setprofile(None)
+        assert out, f"message {k} published nothing"
+    per_message = {kind: kinds[kind] / COUNTED for kind in ("python", "c", "numpy")}
+    return per_message, sites
+
+
+@pytest.mark.parametrize("name", list(REGIMES))
+def test_per_message_work_stays_within_budget(name: str) -> None:
+    counts, sites = _count(REGIMES[name])
+    budget = dict(zip(("python", "c", "numpy"), BUDGET[name], strict=True))
+    over = {k: (round(counts[k], 1), budget[k]) for k in budget if counts[k] > budget[k]}
+    top = "\n".join(f"  {n / COUNTED:6.1f}  {site}" for site, n in sites.most_common(25))
+    assert not over, (
+        f"{name}: calls per message over budget (count, budget): {over}\n"
+        f"the most frequent call sites per message:\n{top}"
+    )
+
+
+def test_the_count_sees_a_slowdown() -> None:
+    """The budget can fail: the same path with one ``dataclasses.replace`` per message
+    (what follow off cost before issue 22) counts over the hover budget."""
+    from dataclasses import replace
+
+    from groundstation.estimator import drone as drone_mod
+
+    original = drone_mod.follow_stamped
+
+    def slower(state: Any, stamp_s: float) -> Any:
+        return replace(state, last_stamp_s=stamp_s)
+
+    drone_mod.follow_stamped = slower
+    try:
+        counts, _ = _count(REGIMES["hover"])
+    finally:
+        drone_mod.follow_stamped = original
+    assert counts["python"] > BUDGET["hover"][0] or counts["c"] > BUDGET["hover"][1], counts
