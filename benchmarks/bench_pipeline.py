@@ -261,6 +261,7 @@ def measure(warmup: int, messages: int, repeats: int, seed: int = 0) -> dict[str
             "localize_batch": _best_mean_us(run_localize_batch, repeats),
         }
         drones = _drones_us(warmup, messages, repeats, seed)
+        follow_on = _follow_on_us(warmed, timed, repeats)
     finally:
         if gc_was:
             gc.enable()
@@ -275,6 +276,7 @@ def measure(warmup: int, messages: int, repeats: int, seed: int = 0) -> dict[str
         "total_median_us": float(np.median(per_msg_us)),
         "total_p90_us": float(np.percentile(per_msg_us, 90)),
         "total_best_mean_us": min(means),
+        "follow_on_median_us": follow_on,
         "commit": _commit(),
         "python": sys.version.split()[0],
         "numpy": np.__version__,
@@ -432,6 +434,38 @@ def _filterpy_us(
     return best
 
 
+def _follow_on_us(warmed: Callable[[], Pipeline], timed: list[bytes], repeats: int) -> float:
+    """``Pipeline.handle``'s median with follow on: the same hover, each message carrying a
+    motion-capture position (where the warmed pipeline had localized the drone) and follow
+    enabled after the first of them (no pull: following is armed, the goal frozen,
+    the whole follow step runs, with the catenary's force at that position)."""
+    clock = time.perf_counter_ns
+    times: list[int] = []
+    for _ in range(repeats):
+        pipe = warmed()
+        drone = pipe.drones["d0"]
+        (estimate,) = pipe.handle(Sample(KEY, timed[0]), 0.0)
+        mocap = json.loads(estimate.payload)["position_m"]
+        assert mocap is not None, "the warmed pipeline has no position"
+        samples = []
+        for p in timed[1:]:
+            body = json.loads(p)
+            body["position_m"] = mocap
+            samples.append(Sample(KEY, json.dumps(body).encode()))
+        # Follow is refused for a drone whose last message had neither motion capture nor
+        # a calibration behind it: one message with motion capture first.
+        pipe.handle(samples[0], 0.0)
+        pipe.handle(Sample("tether/d0/follow", b'{"enabled": true}'), 0.0)
+        assert drone.follow_state.enabled, drone.follow_state.reason
+        handle = pipe.handle
+        for s in samples[1:]:
+            t0 = clock()
+            handle(s, 0.0)
+            times.append(clock() - t0)
+        assert drone.follow_state.enabled, drone.follow_state.reason
+    return float(np.median(times)) / 1e3
+
+
 def _drones_us(warmup: int, messages: int, repeats: int, seed: int) -> dict[str, float]:
     """DRONES drones interleaved (after ``warmup`` messages each, so that every filter has
     converged), per message: ``Pipeline.process`` one by one against
@@ -505,6 +539,10 @@ def render(result: dict[str, Any], before: dict[str, Any] | None, argv: list[str
         ("total_median_us", "**Pipeline.handle, median**"),
         ("total_p90_us", "Pipeline.handle, p90"),
         ("total_best_mean_us", "Pipeline.handle, mean (best repeat)"),
+        (
+            "follow_on_median_us",
+            "Pipeline.handle, median, follow on (motion capture in each message, no pull)",
+        ),
         ("drones_process_us", f"{DRONES} drones: Pipeline.process, one by one"),
         (
             "drones_batch_us",
