@@ -505,9 +505,9 @@ def _best(results: list[dict[str, Any]]) -> dict[str, Any]:
         k: min(r.get("extra_us", {}).get(k, math.inf) for r in results) for k in EXTRA
     }
     keys = ("stages_sum_us", "total_median_us", "total_p90_us", "total_best_mean_us")
-    for key in (*keys, "drones_process_us", "drones_batch_us"):
+    for key in (*keys, "follow_on_median_us", "drones_process_us", "drones_batch_us"):
         out[key] = min(r.get(key, math.inf) for r in results)
-    out["runs"] = len(results)
+    out["runs"] = sum(r.get("runs", 1) for r in results)
     return out
 
 
