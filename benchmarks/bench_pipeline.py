@@ -24,6 +24,9 @@ message runs the whole path: observation, filter, localization, follow, Estimate
   (``tension.DiagonalKalman``, the floor under ``filter_update``) and as filterpy's
   ``KalmanFilter`` predict + update (what that step cost before it was written out),
   ``localize`` over batches (``localization.localize_batch``).
+* ``follow on``: :meth:`Pipeline.handle`'s median for the same hover with a motion-capture
+  position in every message and follow enabled (no pull: armed, the goal frozen; the whole
+  follow step runs, the catenary's own force at that position included).
 * The drone rows: 8 drones interleaved, ``Pipeline.process`` one message at a time against
   ``Pipeline.process_batch`` in batches of 32 grouped by drone (the service's drain while a
   backlog exists), CPU time per message, validation not included.
@@ -601,8 +604,10 @@ def render(result: dict[str, Any], before: dict[str, Any] | None, argv: list[str
         f"the contract's JSON in and out (validate + estimate) is {io:.0f} µs, the "
         f"localization's catenary solves (the drone and six sigma points) {st['localize']:.0f} "
         f"µs, the tension filter with its noise, change and drift tests "
-        f"{st['filter']:.0f} µs. docs/service_profile.md, section 6, says why this is "
-        "about what CPython does with this work and what it would take to go further.",
+        f"{st['filter']:.0f} µs. With follow on (and motion capture) a message costs "
+        f"{result['follow_on_median_us']:.0f} µs. docs/service_profile.md, sections 6 and 7, "
+        "say why this is about what CPython does with this work and what it would take to "
+        "go further.",
     ]
     lines += [
         "",
