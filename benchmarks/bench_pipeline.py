@@ -27,6 +27,9 @@ message runs the whole path: observation, filter, localization, follow, Estimate
 * ``follow on``: :meth:`Pipeline.handle`'s median for the same hover with a motion-capture
   position in every message and follow enabled (no pull: armed, the goal frozen; the whole
   follow step runs, the catenary's own force at that position included).
+* What CPython executes: the bytecodes of one message (``sys.settrace`` opcode events, over
+  200 messages) and, for scale, the time per bytecode of a loop of float arithmetic and one
+  ``math`` call on local variables (CPython's best case with floats).
 * The drone rows: 8 drones interleaved, ``Pipeline.process`` one message at a time against
   ``Pipeline.process_batch`` in batches of 32 grouped by drone (the service's drain while a
   backlog exists), CPU time per message, validation not included.
@@ -265,6 +268,8 @@ def measure(warmup: int, messages: int, repeats: int, seed: int = 0) -> dict[str
         }
         drones = _drones_us(warmup, messages, repeats, seed)
         follow_on = _follow_on_us(warmed, timed, repeats)
+        bytecodes = _bytecodes_per_message(warmed, samples)
+        loop_ns = _loop_ns_per_bytecode(repeats)
     finally:
         if gc_was:
             gc.enable()
@@ -280,6 +285,8 @@ def measure(warmup: int, messages: int, repeats: int, seed: int = 0) -> dict[str
         "total_p90_us": float(np.percentile(per_msg_us, 90)),
         "total_best_mean_us": min(means),
         "follow_on_median_us": follow_on,
+        "bytecodes_per_message": bytecodes,
+        "loop_ns_per_bytecode": loop_ns,
         "commit": _commit(),
         "python": sys.version.split()[0],
         "numpy": np.__version__,
@@ -434,6 +441,53 @@ def _filterpy_us(
             predict()
             update(z)
         best = min(best, (time.perf_counter_ns() - t0) / len(zs) / 1e3)
+    return best
+
+
+def _bytecodes_per_message(warmed: Callable[[], Pipeline], samples: list[Sample]) -> float:
+    """Bytecodes CPython executes per message in ``Pipeline.handle`` (``sys.settrace`` with
+    opcode events; deterministic, as tests/test_work_budget.py counts them), over up to 200
+    of the timed messages."""
+    count = [0]
+
+    def trace(frame: Any, event: str, arg: Any) -> Any:
+        frame.f_trace_opcodes = True
+        frame.f_trace_lines = False
+        return opcode
+
+    def opcode(frame: Any, event: str, arg: Any) -> Any:
+        if event == "opcode":
+            count[0] += 1
+        return opcode
+
+    pipe = warmed()
+    some = samples[:200]
+    for s in some:
+        sys.settrace(trace)
+        try:
+            pipe.handle(s, 0.0)
+        finally:
+            sys.settrace(None)
+    return count[0] / len(some)
+
+
+def _loop_ns_per_bytecode(repeats: int) -> float:
+    """What a bytecode costs CPython here at its best with floats: a loop of float
+    arithmetic and one ``math`` call on local variables (12 bytecodes an iteration, counted
+    as above), best of ``repeats``."""
+
+    def loop(n: int) -> float:
+        x = 0.5
+        for _ in range(n):
+            x = math.hypot(x, 0.1) * 0.5
+        return x
+
+    n = 200_000
+    best = math.inf
+    for _ in range(repeats):
+        t0 = time.perf_counter_ns()
+        loop(n)
+        best = min(best, (time.perf_counter_ns() - t0) / n / 12)
     return best
 
 
@@ -609,6 +663,16 @@ def render(result: dict[str, Any], before: dict[str, Any] | None, argv: list[str
         "say why this is about what CPython does with this work and what it would take to "
         "go further.",
     ]
+    if "bytecodes_per_message" in result:
+        n_bc = result["bytecodes_per_message"]
+        lines += [
+            "",
+            f"What CPython executes: {n_bc:,.0f} bytecodes per message (counted, as "
+            f"tests/test_work_budget.py counts them), {median * 1e3 / n_bc:.1f} ns each at the "
+            f"median; a loop of float arithmetic and one math call on local variables runs at "
+            f"{result['loop_ns_per_bytecode']:.1f} ns per bytecode here. 50 µs would take "
+            f"{50e3 / n_bc:.1f} ns per bytecode with this much work, or less work.",
+        ]
     lines += [
         "",
         "Budget: 8 drones x 250 Hz = 2000 msg/s on 2 cores, so every 100 µs of pipeline is "

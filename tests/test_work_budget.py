@@ -3,19 +3,21 @@
 Issue 22 found the service at 6.3× the echo floor one week after 2.3–2.9×: nothing had
 watched the per-message cost between benchmark runs, and a timed test would flake on this
 shared machine (its speed moves by 2× from one minute to the next). This test counts
-instead of timing. ``sys.setprofile`` sees every call one converged message makes through
-:meth:`Pipeline.handle` (validation and the Estimate's JSON included): calls of Python
-functions, calls of C functions, and among those numpy's (each ~0.3–1 µs of overhead for a
-handful of floats, what issue 13 and issue 22 took out of the path). For a given input the
-counts are the same on every run and machine with the locked dependencies
-(requirements.lock), so the budget is exact where the benchmark is not.
+instead of timing, for one converged message through :meth:`Pipeline.handle` (validation
+and the Estimate's JSON included): with ``sys.setprofile`` the calls of Python functions,
+of C functions, and among those numpy's (each ~0.3–1 µs of overhead for a handful of
+floats, what issues 13 and 22 took out of the path); with ``sys.settrace`` the bytecodes
+CPython executes (what the arithmetic costs: ~17 ns each on this path here). For a given
+input the counts are the same on every run and machine with the locked dependencies
+(requirements.lock) and Python, so the budget is exact where the benchmark is not.
 
-Each regime's budget is its count when it was set plus 5 %: a `dataclasses.replace` more
+Each regime's budget is its count when it was set plus 5 %: a ``dataclasses.replace`` more
 per message (~5 µs of ~120) exceeds it, as does a second numpy call on a 3-vector. (Follow
-on, before its float rewrite, made 25 Python calls, 35 C calls and 12 numpy calls more per
-message than now: 164, 245 and 26 at 221e68a.) A change that needs more raises the
-budget in the same commit, with ``python -m benchmarks.bench_pipeline`` before and after
-in its message; the failure prints the call sites that grew, to start from.
+on, before its float rewrite, made 25 Python calls, 35 C calls, 12 numpy calls and 2,018
+bytecodes more per message than now: 164, 245, 26 and 10,828 at 221e68a.) A change that
+needs more raises the budget in the same commit, with ``python -m
+benchmarks.bench_pipeline`` before and after in its message; the failure prints the call
+sites per message, to start from.
 """
 
 from __future__ import annotations
@@ -67,20 +69,27 @@ REGIMES: dict[str, dict[str, Any]] = {
     },
 }
 
-BUDGET: dict[str, tuple[int, int, int]] = {
-    # regime: (Python calls, C calls, numpy calls) per message: the count at f1a2614 (in
-    # parentheses) plus 5 %, rounded up.
-    "hover": (104, 165, 11),  # (98.2, 156.6, 10.1)
-    "hover, motion capture, follow on": (147, 221, 15),  # (139.3, 209.7, 14.2)
-    "plumb": (131, 243, 15),  # (124.2, 231.1, 14.1)
-    "tether on the floor": (152, 430, 15),  # (144.2, 408.6, 14.1)
-    "on the ground, disarmed": (92, 66, 23),  # (86.8, 62.0, 21.2)
-    "hover, reel with exit angles at 10 Hz": (174, 402, 12),  # (164.8, 382.6, 11.1)
+KINDS = ("python", "c", "numpy", "bytecodes")
+BUDGET: dict[str, tuple[int, int, int, int]] = {
+    # regime: (Python calls, C calls, numpy calls, bytecodes) per message: the count at
+    # f1a2614 (below each, in parentheses) plus 5 %, rounded up.
+    "hover": (104, 165, 11, 7275),
+    # (98.2, 156.6, 10.1, 6928)
+    "hover, motion capture, follow on": (147, 221, 15, 9251),
+    # (139.3, 209.6, 14.1, 8810)
+    "plumb": (131, 244, 15, 9132),
+    # (124.2, 231.5, 14.1, 8697)
+    "tether on the floor": (152, 430, 15, 11959),
+    # (144.2, 408.6, 14.1, 11389)
+    "on the ground, disarmed": (92, 66, 23, 3521),
+    # (86.8, 62.0, 21.2, 3353)
+    "hover, reel with exit angles at 10 Hz": (174, 405, 12, 13048),
+    # (165.4, 385.6, 11.1, 12426)
 }
 
 
 def _count(regime: dict[str, Any]) -> tuple[dict[str, float], Counter[str]]:
-    """Calls per counted message, by kind, and the call sites (``file:function``)."""
+    """Calls and bytecodes per counted message, by kind, and the call sites."""
     rng = np.random.default_rng(3)
     pipe = Pipeline(pinned_settings())
     make: Make = regime["make"]
@@ -101,6 +110,16 @@ def _count(regime: dict[str, Any]) -> tuple[dict[str, float], Counter[str]]:
             kinds[kind] += 1
             sites[f"{kind} {module}.{getattr(arg, '__name__', '?')}"] += 1
 
+    def trace(frame: FrameType, event: str, arg: Any) -> Any:
+        frame.f_trace_opcodes = True
+        frame.f_trace_lines = False
+        return count_opcodes
+
+    def count_opcodes(frame: FrameType, event: str, arg: Any) -> Any:
+        if event == "opcode":
+            kinds["bytecodes"] += 1
+        return count_opcodes
+
     for k, msg in enumerate(messages):
         stamp_s = k * 0.004
         if regime.get("follow") and k == 20:
@@ -109,24 +128,26 @@ def _count(regime: dict[str, Any]) -> tuple[dict[str, float], Counter[str]]:
             pipe.handle(_reel(k), stamp_s)
         counting = k >= WARMUP
         if counting:
+            sys.settrace(trace)
             sys.setprofile(profile)
         try:
             out = pipe.handle(msg, stamp_s)
         finally:
             sys.setprofile(None)
+            sys.settrace(None)
         assert out, f"message {k} published nothing"
-    per_message = {kind: kinds[kind] / COUNTED for kind in ("python", "c", "numpy")}
+    per_message = {kind: kinds[kind] / COUNTED for kind in KINDS}
     return per_message, sites
 
 
 @pytest.mark.parametrize("name", list(REGIMES))
 def test_per_message_work_stays_within_budget(name: str) -> None:
     counts, sites = _count(REGIMES[name])
-    budget = dict(zip(("python", "c", "numpy"), BUDGET[name], strict=True))
+    budget = dict(zip(KINDS, BUDGET[name], strict=True))
     over = {k: (round(counts[k], 1), budget[k]) for k in budget if counts[k] > budget[k]}
     top = "\n".join(f"  {n / COUNTED:6.1f}  {site}" for site, n in sites.most_common(25))
     assert not over, (
-        f"{name}: calls per message over budget (count, budget): {over}\n"
+        f"{name}: work per message over budget (count, budget): {over}\n"
         f"the most frequent call sites per message:\n{top}"
     )
 
