@@ -299,11 +299,10 @@ def clamp_to_reach(
         The projected point, m, shape (3,), or None when the set is empty (radius < 0,
         or the plane lies above the ball) or an input is not finite.
     """
-    p = np.asarray(point_world_m, dtype=np.float64)
-    b = np.asarray(base_world_m, dtype=np.float64)
-    if p.shape != (3,) or b.shape != (3,):
-        raise ValueError(f"points must have shape (3,), got {p.shape} and {b.shape}")
-    q = _clamp(_as_vec3(p), _as_vec3(b), radius_m, min_z_m)
+    p, b = _vec3(point_world_m), _vec3(base_world_m)
+    if p is None or b is None:
+        raise ValueError(f"points must have shape (3,), got {point_world_m!r}, {base_world_m!r}")
+    q = _clamp(p, b, radius_m, min_z_m)
     return None if q is None else np.array(q)
 
 
@@ -337,29 +336,23 @@ def _finite(v: Vec3) -> bool:
     return math.isfinite(v[0]) and math.isfinite(v[1]) and math.isfinite(v[2])
 
 
-def _as_vec3(value: ArrayLike) -> Vec3:
-    """Three Python floats (of a 3-array, or a list or tuple of numbers)."""
+def _vec3(value: ArrayLike) -> Vec3 | None:
+    """Three Python floats of a 3-array, list or tuple of numbers; None for another shape."""
     if type(value) is tuple and len(value) == 3:
         x, y, z = value
         if type(x) is float and type(y) is float and type(z) is float:
             return value
-    x, y, z = np.asarray(value, dtype=np.float64).tolist()
+    arr = np.asarray(value, dtype=np.float64)
+    if arr.shape != (3,):
+        return None
+    x, y, z = arr.tolist()
     return (x, y, z)
 
 
 def _finite_vec3(value: ArrayLike | None) -> Vec3 | None:
     """``value`` as three finite floats, or None (None, another shape, a non-finite entry)."""
-    if value is None:
-        return None
-    if type(value) is tuple and len(value) == 3:
-        x, y, z = value
-        if type(x) is float and type(y) is float and type(z) is float:
-            return value if _finite(value) else None
-    arr = np.asarray(value, dtype=np.float64)
-    if arr.shape != (3,):
-        return None
-    x, y, z = arr.tolist()
-    return (x, y, z) if _finite((x, y, z)) else None
+    v = None if value is None else _vec3(value)
+    return v if v is not None and _finite(v) else None
 
 
 def _tether_own_force(
@@ -479,7 +472,9 @@ def follow_step(
     position = _finite_vec3(position_world_m)
     if position is None:
         return FollowDecision(evolve(state, active=False, reason="no position: goal frozen"))
-    base = _as_vec3(base_world_m)
+    base = _vec3(base_world_m)
+    if base is None:
+        raise ValueError(f"base_world_m must have shape (3,), got {base_world_m!r}")
 
     # 4. The pull beyond the tether's own tension, with hysteresis.
     dt_prev_s = max(stamp_s - prev, 0.0) if prev is not None else 0.0
