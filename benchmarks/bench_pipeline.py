@@ -444,11 +444,10 @@ def _filterpy_us(
     return best
 
 
-def _bytecodes_per_message(warmed: Callable[[], Pipeline], samples: list[Sample]) -> float:
-    """Bytecodes CPython executes per message in ``Pipeline.handle`` (``sys.settrace`` with
-    opcode events; deterministic, as tests/test_work_budget.py counts them), over up to 200
-    of the timed messages."""
-    count = [0]
+def bytecode_tracer(on_opcode: Callable[[], None]) -> Callable[[Any, str, Any], Any]:
+    """A ``sys.settrace`` function that calls ``on_opcode`` once per bytecode CPython
+    executes (opcode events on, line events off), in every frame entered while it is set.
+    tests/test_work_budget.py budgets the counts it gives."""
 
     def trace(frame: Any, event: str, arg: Any) -> Any:
         frame.f_trace_opcodes = True
@@ -457,9 +456,21 @@ def _bytecodes_per_message(warmed: Callable[[], Pipeline], samples: list[Sample]
 
     def opcode(frame: Any, event: str, arg: Any) -> Any:
         if event == "opcode":
-            count[0] += 1
+            on_opcode()
         return opcode
 
+    return trace
+
+
+def _bytecodes_per_message(warmed: Callable[[], Pipeline], samples: list[Sample]) -> float:
+    """Bytecodes CPython executes per message in ``Pipeline.handle``
+    (:func:`bytecode_tracer`; deterministic), over up to 200 of the timed messages."""
+    count = [0]
+
+    def one() -> None:
+        count[0] += 1
+
+    trace = bytecode_tracer(one)
     pipe = warmed()
     some = samples[:200]
     for s in some:

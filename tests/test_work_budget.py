@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from benchmarks.bench_pipeline import bytecode_tracer
 from groundstation.bus import Sample
 from groundstation.pipeline import Pipeline
 from tests.test_perf_equivalence import DRONE, HOVER_N, _follow, _telemetry, pinned_settings
@@ -126,15 +127,10 @@ def _count(regime: dict[str, Any]) -> tuple[dict[str, float], Counter[str]]:
             kinds[kind] += 1
             sites[f"{kind} {module}.{getattr(arg, '__name__', '?')}"] += 1
 
-    def trace(frame: FrameType, event: str, arg: Any) -> Any:
-        frame.f_trace_opcodes = True
-        frame.f_trace_lines = False
-        return count_opcodes
+    def one_bytecode() -> None:
+        kinds["bytecodes"] += 1
 
-    def count_opcodes(frame: FrameType, event: str, arg: Any) -> Any:
-        if event == "opcode":
-            kinds["bytecodes"] += 1
-        return count_opcodes
+    trace = bytecode_tracer(one_bytecode)
 
     for k, msg in enumerate(messages):
         stamp_s = k * 0.004
