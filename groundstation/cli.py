@@ -28,6 +28,7 @@ from typing import Any
 
 from groundstation import __version__
 from groundstation.config import ConfigError, Settings, load_settings
+from groundstation.outputs import OutputError
 
 __all__ = ["main"]
 
@@ -321,13 +322,17 @@ def cmd_serve(args: argparse.Namespace) -> int:
     from groundstation.zenoh_bus import ZenohBus
 
     settings = _load(args)
+    if settings.service.record:
+        from groundstation.outputs import check_output
+
+        check_output(settings.service.record, force=args.force, flag="--record")
     endpoint = None
     if not args.headless:
         _check_web_port(settings)
         settings, endpoint = _dashboard_endpoint(settings)
     stop = _stop_on_signals()
     with ZenohBus(settings.zenoh) as bus:
-        service = Service(settings, bus)
+        service = Service(settings, bus, replace_recording=args.force)
         child = None
         try:
             try:
@@ -418,17 +423,42 @@ DEMO_DEFAULTS: dict[str, Any] = {
 """The embedded demo configuration: peer on loopback, one simulated drone, dashboard."""
 
 
+def _check_listen_free(endpoints: Sequence[str], hint: str) -> None:
+    """Fail before opening a session when a TCP endpoint to listen on is taken (zenoh would
+    otherwise fail later with a Rust error, or a demo would move without being asked)."""
+    for ep in endpoints:
+        m = re.fullmatch(r"tcp/([0-9.]+|localhost|\[[0-9a-fA-F:]+\]):(\d+)", ep)
+        if m and m.group(2) != "0":
+            host = m.group(1).strip("[]")
+            if not _port_free(host, int(m.group(2))):
+                raise PortInUse(
+                    f"{ep} is in use ({hint}); stop it, or pass --listen tcp/127.0.0.1:N"
+                )
+
+
 def _demo_bus(args: argparse.Namespace, settings: Settings) -> tuple[Settings, str]:
-    """The demo's own bus: a peer listening on ROUTER_ENDPOINT's port, whatever the file says.
+    """The demo's own bus, and the line the banner prints about it.
 
     Everything runs in this one process, so it needs no router; a configuration written for
     separate processes (config/sim.toml: a client of a router on 7447) would otherwise
-    connect to itself. ``--connect`` on the command line still joins a router. Returns the
-    settings and the line the banner prints about the bus.
+    connect to itself, so the file's [zenoh] mode, connect and listen are not used. The
+    command line is: ``--connect`` joins a router (listening only where ``--listen`` says);
+    ``--listen`` listens exactly there (an endpoint in use is an error that names it). Only
+    the default, ROUTER_ENDPOINT, moves to a free port when taken, and says so.
     """
     z = settings.zenoh
+    listen = tuple(args.listen)
     if args.connect:
-        return settings, f"zenoh: {z.mode} of {', '.join(z.connect)}"
+        _check_listen_free(listen, "a router, or another demo?")
+        zenoh = z.model_copy(update={"listen": listen})
+        line = f"zenoh: {zenoh.mode} of {', '.join(zenoh.connect)}"
+        if listen:
+            line += f", listening on {', '.join(listen)}"
+        return settings.model_copy(update={"zenoh": zenoh}), line
+    if listen:
+        _check_listen_free(listen, "a router, or another demo?")
+        zenoh = z.model_copy(update={"mode": "peer", "connect": (), "listen": listen})
+        return settings.model_copy(update={"zenoh": zenoh}), f"zenoh: peer on {', '.join(listen)}"
     if z.mode != "peer" or z.connect:
         origin = args.config or "the environment"
         print(
@@ -526,13 +556,7 @@ def cmd_router(args: argparse.Namespace) -> int:
     section = z.model_copy(
         update={"mode": "router", "listen": listen, "connect": tuple(args.connect)}
     )
-    for ep in listen:
-        m = re.fullmatch(r"tcp/([0-9.]+|localhost):(\d+)", ep)
-        if m and m.group(2) != "0" and not _port_free(m.group(1), int(m.group(2))):
-            raise PortInUse(
-                f"{ep} is in use (another router, zenohd, or a demo?); "
-                "stop it, or pass --listen tcp/127.0.0.1:N"
-            )
+    _check_listen_free(listen, "another router, zenohd, or a demo?")
     stop = _stop_on_signals()
     session = open_session(section)
     try:
@@ -548,11 +572,13 @@ def cmd_router(args: argparse.Namespace) -> int:
 
 
 def cmd_record(args: argparse.Namespace) -> int:
+    from groundstation.outputs import check_output
     from groundstation.recording import run_record
 
+    check_output(args.out, force=args.force)  # before the session opens
     settings = _load(args)
     stop = _stop_on_signals()
-    return int(run_record(settings, args.out, args.key or ["tether/**"], stop))
+    return int(run_record(settings, args.out, args.key or ["tether/**"], stop, force=args.force))
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
@@ -565,10 +591,19 @@ def cmd_replay(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 2
+    if not args.offline and (args.out or args.figures):
+        print(
+            "groundstation: replay --out and --figures need --offline (a replay on the bus "
+            "writes no file; `groundstation record` records it)",
+            file=sys.stderr,
+        )
+        return 2
     settings = _load(args)
     if args.offline:
         return int(
-            recording.run_replay_offline(settings, args.file, args.out, figures_dir=args.figures)
+            recording.run_replay_offline(
+                settings, args.file, args.out, figures_dir=args.figures, force=args.force
+            )
         )
     stop = _stop_on_signals()
     return int(recording.run_replay(settings, args.file, speed=args.speed, stop_event=stop))
@@ -665,6 +700,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         fit_tether=args.fit_tether,
         model=args.model,
         untethered=args.untethered,
+        tether_detached=args.tether_detached,
+        force=args.force,
     )
 
 
@@ -689,6 +726,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--drones", metavar="CHUNK", help="own only drones matching tether/CHUNK/* (e.g. lab-a-*)"
     )
     p.add_argument("--record", metavar="FILE", help="also record the bus to this MCAP file")
+    p.add_argument("--force", action="store_true", help="let --record replace an existing file")
     p.set_defaults(func=cmd_serve)
 
     p = sub.add_parser(
@@ -766,8 +804,12 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("record", help="record the bus into MCAP")
     _add_common(p)
     p.add_argument(
-        "--out", required=True, metavar="FILE.mcap", help="the MCAP file to write (required)"
+        "--out",
+        required=True,
+        metavar="FILE.mcap",
+        help="the MCAP file to write (required; an existing file only with --force)",
     )
+    p.add_argument("--force", action="store_true", help="replace an existing --out file")
     p.add_argument(
         "--key",
         action="append",
@@ -795,6 +837,11 @@ def build_parser() -> argparse.ArgumentParser:
         "--out", metavar="OUT.mcap", help="with --offline: write the re-estimated recording here"
     )
     p.add_argument("--figures", metavar="DIR", help="with --offline: draw figures here")
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="with --offline: replace an existing --out file and figures (never the input)",
+    )
     p.set_defaults(func=cmd_replay)
 
     p = sub.add_parser("crazyflie", help="bridge a Crazyflie (cflib) to the bus")
@@ -836,11 +883,24 @@ def build_parser() -> argparse.ArgumentParser:
         help="calibrate this drone only (default: every drone in the recordings, each of "
         "which needs a [drones.<id>] table when the configuration has any)",
     )
-    p.add_argument("--out", required=True, metavar="PATH.toml", help="configuration to write")
+    p.add_argument(
+        "--out",
+        required=True,
+        metavar="PATH.toml",
+        help="configuration to write (a new file, or an existing one with --force; never an input)",
+    )
+    p.add_argument("--force", action="store_true", help="replace an existing --out file")
     p.add_argument(
         "--untethered",
         action="store_true",
-        help="flights without the tether: the true tension is zero (the cleanest reference)",
+        help="flights without the tether: the true tension is zero (the cleanest reference); "
+        "refused on recordings with tether messages unless --tether-detached",
+    )
+    p.add_argument(
+        "--tether-detached",
+        action="store_true",
+        help="with --untethered: the recordings hold reel or tether messages, but the tether "
+        "was detached from the drone",
     )
     p.add_argument(
         "--model",
@@ -901,6 +961,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"groundstation: {exc}", file=sys.stderr)
         return 2
     except PortInUse as exc:
+        print(f"groundstation {args.command}: {exc}", file=sys.stderr)
+        return 2
+    except OutputError as exc:
         print(f"groundstation {args.command}: {exc}", file=sys.stderr)
         return 2
     except Exception as exc:

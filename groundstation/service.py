@@ -78,6 +78,8 @@ class Service:
         alone_ok: no peer is normal (``demo``: simulator, service and dashboard share one
             session): "no peer / no router" is only a debug line, and ``status`` says
             ``alone_ok: true`` so that ``peers: 0`` raises no alarm.
+        replace_recording: ``[service] record`` may replace an existing file (``serve
+            --record FILE --force``); otherwise an existing file is refused at start.
     """
 
     def __init__(
@@ -88,8 +90,10 @@ class Service:
         clock: Callable[[], float] = time.monotonic,
         instance: str | None = None,
         alone_ok: bool = False,
+        replace_recording: bool = False,
     ) -> None:
         self.settings = settings
+        self._replace_recording = replace_recording
         self.bus = bus
         self.clock = clock
         self.instance = instance or uuid.uuid4().hex[:12]
@@ -145,7 +149,9 @@ class Service:
         if self.settings.service.record:
             from groundstation.recording import Recorder
 
-            self._recorder = Recorder(self.bus, self.settings.service.record)
+            self._recorder = Recorder(
+                self.bus, self.settings.service.record, force=self._replace_recording
+            )
         self._worker = threading.Thread(target=self._run, name="groundstation-worker", daemon=True)
         self._worker.start()
         for kind in _INPUT_KINDS:

@@ -137,7 +137,7 @@ def test_bad_input_one_line_exit_2_nothing_written(
     assert len(err.splitlines()) == 1, err
     assert str(bad) in err and expect in err, err
     assert not out.exists()
-    assert not list(tmp_path.glob(".calibrate-*"))
+    assert not list(tmp_path.glob(".*.partial"))
 
 
 def test_the_calibrated_battery_range_is_written_and_flagged_at_run_time(
@@ -386,13 +386,13 @@ def test_a_corrupt_chunk_costs_its_messages_not_the_calibration(tmp_path: Path) 
     from groundstation.recording.format import ChannelTable, open_writer
 
     rec = tmp_path / "flight.mcap"
-    stream, writer = open_writer(rec, 16 * 1024)
+    out_file, writer = open_writer(rec, 16 * 1024)
     channels = ChannelTable(writer)
     msgs = recorded_messages(flight(list(PAPER_HOVER_SPOTS_M[:2]), TRUTH, seed=1))
     for m in msgs:
         writer.add_message(channels.channel_id(m.key), m.log_time_ns, m.payload, m.publish_time_ns)
     writer.finish()
-    stream.close()
+    out_file.commit()
     with rec.open("rb") as fh:
         summary = make_reader(fh).get_summary()
     assert summary is not None and len(summary.chunk_indexes) > 4

@@ -12,9 +12,7 @@ missing.
 from __future__ import annotations
 
 import math
-import os
 import re
-import tempfile
 import tomllib
 from collections import defaultdict
 from collections.abc import Callable, Mapping, Sequence
@@ -36,6 +34,7 @@ from groundstation.calibration import (
     hover_mask,
 )
 from groundstation.config import ConfigError, Settings, load_settings
+from groundstation.outputs import NewFile, OutputError, check_output
 from groundstation.recording.format import RecordingError
 from groundstation.recording.reader import iter_messages
 
@@ -76,6 +75,8 @@ class _Columns:
     weight: list[float] = field(default_factory=list)
     with_mocap: int = 0
     base_from_reel: bool = False
+    tether_messages: int = 0
+    """Reel and tether-parameter messages of this drone: a tether was attached."""
 
 
 @dataclass(frozen=True)
@@ -88,6 +89,8 @@ class DroneRecording:
     weight_n_per_m: float
     base_from_reel: bool
     invalid: int
+    tether_messages: tuple[int, ...] = ()
+    """Per file (as ``files``): reel and tether-parameter messages of this drone."""
 
 
 _NAN3 = (math.nan, math.nan, math.nan)
@@ -105,6 +108,8 @@ def _read_file(path: Path, settings: Settings) -> tuple[dict[str, _Columns], int
         except messages.InvalidMessage:
             continue
         try:
+            if kind in ("reel", "params"):
+                cols.setdefault(drone, _Columns()).tether_messages += 1
             if kind == "telemetry":
                 tel = messages.Telemetry.parse(rec.payload)
             elif kind == "reel":
@@ -225,6 +230,7 @@ def read_recordings(
             weight_n_per_m=float(np.median(cat["weight"])),
             base_from_reel=any(c.base_from_reel for _, _, c in parts),
             invalid=invalid[d],
+            tether_messages=tuple(c.tether_messages for _, _, c in parts),
         )
     return out
 
@@ -712,6 +718,8 @@ def run_calibrate(
     fit_tether: bool = False,
     model: str = "airframe",
     untethered: bool = False,
+    tether_detached: bool = False,
+    force: bool = False,
     now: Callable[[], datetime] = lambda: datetime.now(UTC),
     echo: Callable[[str], None] = print,
 ) -> int:
@@ -722,10 +730,26 @@ def run_calibrate(
     one is an error (its tether and base would be guessed from the shared tables): ``drone``
     names it explicitly.
 
+    ``out_path`` is checked before any recording is read: it may be none of the inputs (the
+    recordings, the configuration), and an existing file is replaced only with ``force``.
+    ``untethered`` on recordings that carry tether messages (a reel's length, tether
+    parameters) is refused unless ``tether_detached`` says the tether was off the drone
+    while the reel published.
+
     Raises:
         CalibrateInputError, RecordingError, ConfigError: unusable input (names the file).
     """
+    try:
+        check_output(
+            out_path,
+            inputs=[*files, *([config_path] if config_path is not None else [])],
+            force=force,
+        )
+    except OutputError as exc:
+        raise CalibrateInputError(str(exc)) from None
     recs = read_recordings(files, settings, drone)
+    if untethered and not tether_detached:
+        _check_untethered(recs)
     for line in _which_drones(recs, settings, drone):
         echo(line)
     stamp = now().strftime("%Y-%m-%dT%H:%M:%SZ")
@@ -757,7 +781,7 @@ def run_calibrate(
             for name, why in afit.fixed.items():
                 head.append(f"  {name} fixed at 0: {why}")
             comments[f"drones.{d}.calibration"] = head
-        return _write_config(settings, config_path, patch, comments, out_path, echo)
+        return _write_config(settings, config_path, patch, comments, out_path, echo, force)
     if untethered:
         recs = {d: replace(r, weight_n_per_m=math.nan) for d, r in recs.items()}
     cals = {d: calibrate_drone(r, settings, fit_tether=fit_tether) for d, r in recs.items()}
@@ -792,7 +816,28 @@ def run_calibrate(
                 base = np.array(params.base.position_m) + np.array(offset)
                 tables["base"] = {"position_m": [round(float(x), 5) for x in base]}
         patch["drones"][d] = tables
-    return _write_config(settings, config_path, patch, comments, out_path, echo)
+    return _write_config(settings, config_path, patch, comments, out_path, echo, force)
+
+
+def _check_untethered(recs: Mapping[str, DroneRecording]) -> None:
+    """Refuse ``--untethered`` on recordings in which a tether published (see run_calibrate).
+
+    The untethered fit takes the true tension as zero; a tether that pulled would be fitted
+    into the thrust scale and axis without a word.
+    """
+    found = [
+        f"{Path(f).name} ({n} for {d})"
+        for d, rec in sorted(recs.items())
+        for f, n in zip(rec.files, rec.tether_messages, strict=False)
+        if n
+    ]
+    if found:
+        raise CalibrateInputError(
+            "--untethered takes the tether's force as zero, but these recordings hold tether "
+            f"messages (reel length, tether parameters): {', '.join(found)}. Calibrate "
+            "without --untethered, or, if the tether was detached from the drone while the "
+            "reel published, say so with --tether-detached"
+        )
 
 
 def _write_config(
@@ -802,6 +847,7 @@ def _write_config(
     comments: dict[str, list[str]],
     out_path: str,
     echo: Callable[[str], None],
+    force: bool = False,
 ) -> int:
     """Merge the drones' tables into the input configuration, validate, write atomically."""
     input_text = ""
@@ -819,18 +865,15 @@ def _write_config(
     text = _compose(input_text, input_data, patch, comments)
 
     # Validate as serve would (load_settings resolves every [drones.<id>]), then move it in.
-    out = Path(out_path)
-    fd, tmp = tempfile.mkstemp(prefix=".calibrate-", suffix=".toml", dir=out.parent or ".")
     try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-        try:
-            load_settings(tmp, use_env=False)
-        except ConfigError as exc:
-            raise CalibrateInputError(f"the written configuration is invalid: {exc}") from None
-        os.replace(tmp, out)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-    echo(f"wrote {out}")
+        with NewFile(out_path, force=force, text=True) as out:
+            out.stream.write(text)
+            out.stream.flush()
+            try:
+                load_settings(out.writing_path, use_env=False)
+            except ConfigError as exc:
+                raise CalibrateInputError(f"the written configuration is invalid: {exc}") from None
+    except OutputError as exc:
+        raise CalibrateInputError(str(exc)) from None
+    echo(f"wrote {out.target}")
     return 0

@@ -22,12 +22,12 @@ import json
 import logging
 import re
 from pathlib import Path
-from typing import IO
 
 from mcap.writer import CompressionType, Writer
 from pydantic import BaseModel
 
 from groundstation import messages
+from groundstation.outputs import NewFile, OutputError
 
 _log = logging.getLogger(__name__)
 
@@ -115,11 +115,22 @@ class ChannelTable:
         return cid
 
 
-def open_writer(path: Path, chunk_size: int) -> tuple[IO[bytes], Writer]:
+def open_writer(
+    path: Path, chunk_size: int, *, force: bool = False, grow_in_place: bool = False
+) -> tuple[NewFile, Writer]:
+    """An MCAP writer on a new file (:class:`~groundstation.outputs.NewFile`).
+
+    The caller finishes the writer, then commits the file (or discards it on failure). An
+    existing ``path`` is refused unless ``force``; with ``grow_in_place`` the file is created
+    under its name at once (a recording: what a killed recorder wrote stays readable there).
+
+    Raises:
+        RecordingError: the file cannot be created, or exists and ``force`` is false.
+    """
     try:
-        stream = path.open("wb")
-    except OSError as exc:
-        raise RecordingError(f"cannot create recording {str(path)!r}: {exc.strerror}") from None
-    writer = Writer(stream, chunk_size=chunk_size, compression=CompressionType.ZSTD)
+        out = NewFile(path, force=force, grow_in_place=grow_in_place)
+    except OutputError as exc:
+        raise RecordingError(f"cannot create recording: {exc}") from None
+    writer = Writer(out.stream, chunk_size=chunk_size, compression=CompressionType.ZSTD)
     writer.start(profile="", library=_LIBRARY)
-    return stream, writer
+    return out, writer

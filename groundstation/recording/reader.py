@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import heapq
 import logging
 import struct
@@ -17,6 +18,7 @@ from mcap.reader import make_reader
 from mcap.records import Channel, Chunk, ChunkIndex, Message, MessageIndex
 from mcap.stream_reader import StreamReader, breakup_chunk
 
+from groundstation.outputs import NewFile, OutputError, check_output
 from groundstation.recording.format import (
     MAGIC,
     ChannelTable,
@@ -293,29 +295,60 @@ def _iter_truncated(path: Path, losses: _Losses) -> Iterator[RecordedMessage]:
                 topics[record.id] = record.topic
 
 
-def recover(src: str | Path, dst: str | Path) -> int:
+def recover(src: str | Path, dst: str | Path, *, force: bool = False) -> int:
     """Rewrite the readable part of a (possibly truncated) recording as a finished file.
+
+    Args:
+        src: the recording to read.
+        dst: the file to write (never ``src``; an existing one only with ``force``).
+        force: replace an existing ``dst``.
 
     Returns:
         The number of messages written to ``dst``.
 
     Raises:
-        RecordingError: ``src`` is unreadable or ``dst`` cannot be created.
+        RecordingError: ``src`` is unreadable, ``dst`` is ``src``, exists (without
+            ``force``) or cannot be created.
     """
-    return copy_messages(iter_messages(src), Path(dst))
+    try:
+        check_output(dst, inputs=(src,), force=force, flag="recover's output")
+    except OutputError as exc:
+        raise RecordingError(str(exc)) from None
+    return copy_messages(iter_messages(src), Path(dst), force=force)
 
 
-def copy_messages(msgs: Iterable[RecordedMessage], dst: Path) -> int:
-    stream, writer = open_writer(dst, 1024 * 1024)
+def copy_messages(msgs: Iterable[RecordedMessage], dst: Path, *, force: bool = False) -> int:
+    """Write ``msgs`` to a new MCAP file ``dst``, whole or not at all.
+
+    Returns:
+        The number of messages written.
+
+    Raises:
+        RecordingError: ``dst`` exists (without ``force``) or cannot be written; a reading
+            error of ``msgs`` leaves no file behind.
+    """
+    out, writer = open_writer(dst, 1024 * 1024, force=force)
     channels = ChannelTable(writer)
     count = 0
-    try:
+    with _committed(out):
         for m in msgs:
             writer.add_message(
                 channels.channel_id(m.key), m.log_time_ns, m.payload, m.publish_time_ns
             )
             count += 1
         writer.finish()
-    finally:
-        stream.close()
     return count
+
+
+@contextlib.contextmanager
+def _committed(out: NewFile) -> Iterator[None]:
+    """Commit ``out`` when the block succeeds, discard it when it raises."""
+    try:
+        yield
+    except BaseException:
+        out.discard()
+        raise
+    try:
+        out.commit()
+    except OutputError as exc:
+        raise RecordingError(str(exc)) from None

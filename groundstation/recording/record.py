@@ -39,18 +39,21 @@ def run_record(
     *,
     linger_quiet_s: float = 0.25,
     linger_max_s: float = 1.5,
+    force: bool = False,
 ) -> int:
     """Body of ``groundstation record``: record the Zenoh bus until ``stop_event`` is set.
 
     Opens a session from ``settings.zenoh`` and records. When the event is set it keeps
     recording until the bus has been quiet for ``linger_quiet_s`` (at most ``linger_max_s``),
     so samples still in flight when SIGINT arrives are not lost, then finishes the file.
+    An existing ``out_path`` is refused unless ``force`` (then the new recording replaces
+    it when finished; see :class:`~groundstation.recording.writer.Recorder`).
 
     Returns:
         0 once the file is finished.
 
     Raises:
-        RecordingError: the file cannot be created or written.
+        RecordingError: the file exists (without ``force``), cannot be created or written.
     """
     from groundstation.bus import PeerWatch, describe_endpoints
     from groundstation.zenoh_bus import ZenohBus
@@ -64,7 +67,7 @@ def run_record(
             "groundstation record",
             _log,
         )
-        recorder = Recorder(bus, out_path, keyexprs or DEFAULT_KEYEXPRS)
+        recorder = Recorder(bus, out_path, keyexprs or DEFAULT_KEYEXPRS, force=force)
         try:
             _log.info("recording %s to %s", ", ".join(recorder.keyexprs), out_path)
             # Short waits keep the main thread responsive to the CLI's signal handlers.

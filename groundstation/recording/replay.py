@@ -13,6 +13,7 @@ from typing import Any, Protocol
 
 from groundstation.bus import Bus, Sample, keyexpr_matches
 from groundstation.config import Settings
+from groundstation.outputs import OutputError, check_output
 from groundstation.recording.figures import write_figures
 from groundstation.recording.format import (
     INPUT_KEY_RE,
@@ -112,6 +113,7 @@ def replay_offline(
     *,
     tick_period_s: float = 0.05,
     smooth: bool = True,
+    force: bool = False,
 ) -> int:
     """Re-run estimation on a recording as fast as possible and write inputs plus outputs.
 
@@ -125,13 +127,22 @@ def replay_offline(
     tension filter stepped for also gets its forward-backward smoothed tension and position,
     ``tether/{drone}/estimate_smoothed`` at the same log time (docs/smoother.md).
 
+    The output is written beside ``out_path`` and moved into place when complete: a failure
+    leaves no output and an existing file as it was. ``out_path`` may not be ``path``, and an
+    existing ``out_path`` is replaced only with ``force``.
+
     Returns:
         The number of output samples the pipeline produced.
 
     Raises:
-        RecordingError: unreadable input or uncreatable output.
+        RecordingError: unreadable input, an output that is the input, exists (without
+            ``force``) or cannot be created.
     """
-    stream, writer = open_writer(Path(out_path), 1024 * 1024)
+    try:
+        check_output(out_path, inputs=(path,), force=force)
+    except OutputError as exc:
+        raise RecordingError(str(exc)) from None
+    out_file, writer = open_writer(Path(out_path), 1024 * 1024, force=force)
     channels = ChannelTable(writer)
     produced = 0
     next_tick_s: float | None = None
@@ -165,13 +176,14 @@ def replay_offline(
         for key, payload, t_ns in tap.samples() if tap is not None else ():
             write(key, payload, t_ns)  # after the pass: smoothing needs the whole of it
         writer.finish()
-    except RecordingError:
-        # Nothing usable in the input (or it cannot be read): no half-written output.
-        stream.close()
-        Path(out_path).unlink(missing_ok=True)
+    except BaseException:
+        # Nothing usable in the input, or it cannot be read: no half-written output.
+        out_file.discard()
         raise
-    finally:
-        stream.close()
+    try:
+        out_file.commit()
+    except OutputError as exc:
+        raise RecordingError(str(exc)) from None
     return produced
 
 
@@ -238,8 +250,13 @@ def run_replay_offline(
     *,
     figures_dir: str | Path | None = None,
     pipeline: PipelineLike | None = None,
+    force: bool = False,
 ) -> int:
     """Body of ``groundstation replay --offline``: re-run estimation, write OUT (and figures).
+
+    Both outputs are checked before the recording is read: ``out_path`` may not be ``path``
+    nor exist, and ``figures_dir`` may not be a file nor already hold figures (``*.png``),
+    unless ``force``.
 
     Args:
         settings: configuration for the pipeline (as the live service would have).
@@ -247,18 +264,33 @@ def run_replay_offline(
         out_path: the MCAP file to write (see :func:`replay_offline`).
         figures_dir: also draw PNGs there (see :func:`write_figures`).
         pipeline: the estimator to run; default ``groundstation.pipeline.Pipeline(settings)``.
+        force: replace an existing ``out_path`` and existing figures.
 
     Returns:
         0 on success.
 
     Raises:
-        RecordingError: unreadable input, uncreatable output, matplotlib missing for figures.
+        RecordingError: unreadable input, an output refused (see above) or uncreatable,
+            matplotlib missing for figures.
     """
+    try:
+        check_output(out_path, inputs=(path,), force=force)
+        if figures_dir is not None:
+            figs = check_output(figures_dir, inputs=(path,), flag="--figures", directory=True)
+            held = sorted(p.name for p in figs.glob("*.png")) if figs.is_dir() else []
+            if held and not force:
+                shown = ", ".join(held[:4]) + (", ..." if len(held) > 4 else "")
+                raise OutputError(
+                    f"--figures {str(figures_dir)!r} already holds figures ({shown}): "
+                    "refusing to replace them (pass --force, or choose another directory)"
+                )
+    except OutputError as exc:
+        raise RecordingError(str(exc)) from None
     if pipeline is None:
         from groundstation.pipeline import Pipeline
 
         pipeline = Pipeline(settings)
-    produced = replay_offline(path, out_path, pipeline)
+    produced = replay_offline(path, out_path, pipeline, force=force)
     _log.info("offline replay of %s: %d outputs written to %s", path, produced, out_path)
     if figures_dir is not None:
         for png in write_figures(out_path, figures_dir):

@@ -53,7 +53,8 @@ class Recorder:
 
     Args:
         bus: the bus to record (its callbacks only enqueue).
-        path: the output ``.mcap`` file (created or truncated).
+        path: the output ``.mcap`` file, created at once so that it grows as samples arrive
+            (an existing file is refused unless ``force``).
         keyexprs: key expressions to record; a sample matching several is written once.
         chunk_size: bytes after which a chunk is closed (before compression).
         flush_interval_s: a chunk holding messages is closed and flushed to the OS at least
@@ -61,9 +62,11 @@ class Recorder:
         max_queue: backlog, in samples, beyond which new samples are dropped and counted
             (a memory bound for a stalled disk; never reached at the rates measured in
             ``docs/recorder_benchmark.md``).
+        force: replace an existing ``path``: the recording goes to a temporary file beside
+            it, moved into place when the recorder closes (the old file stays until then).
 
     Raises:
-        RecordingError: the file cannot be created.
+        RecordingError: the file cannot be created, or exists and ``force`` is false.
     """
 
     def __init__(
@@ -75,6 +78,7 @@ class Recorder:
         chunk_size: int = 256 * 1024,
         flush_interval_s: float = 1.0,
         max_queue: int = 1_000_000,
+        force: bool = False,
     ) -> None:
         if not keyexprs:
             raise ValueError("Recorder needs at least one key expression, got none")
@@ -84,7 +88,9 @@ class Recorder:
         self.keyexprs = tuple(keyexprs)
         self._flush_interval_s = flush_interval_s
         self._max_queue = max_queue
-        self._stream, self._writer = open_writer(self.path, chunk_size)
+        self._file, self._writer = open_writer(
+            self.path, chunk_size, force=force, grow_in_place=True
+        )
         self._channels = ChannelTable(self._writer)
         self._writer.add_metadata(
             "groundstation.recording",
@@ -219,7 +225,12 @@ class Recorder:
             except Exception as exc:
                 self._error = exc
             finally:
-                self._stream.close()
+                # Even after a failure the file holds what was recorded up to it (readable,
+                # and recoverable with ``recover``): keep it.
+                try:
+                    self._file.commit()
+                except Exception as exc:
+                    self._error = self._error or exc
         if self._error is not None:
             raise RecordingError(f"recording {str(self.path)!r} failed: {self._error}")
         self._stats = RecorderStats(
