@@ -70,7 +70,7 @@ def test_check_output_refuses_an_existing_file_unless_forced(tmp_path: Path) -> 
     f = tmp_path / "out.mcap"
     assert check_output(f) == f  # new: fine
     f.write_bytes(b"x")
-    with pytest.raises(OutputError, match="exists: refusing to replace it .*--force"):
+    with pytest.raises(OutputError, match=r"exists: refusing to replace it .*--force"):
         check_output(f)
     assert check_output(f, force=True) == f
     with pytest.raises(OutputError, match="is a directory"):
@@ -224,10 +224,8 @@ def test_calibrate_untethered_refuses_tether_messages_unless_detached(
     err = capsys.readouterr().err
     assert rc == 2 and "hold tether messages" in err and "tethered.mcap (1 for cf1)" in err
     assert "--tether-detached" in err and not out.exists()
-    rc = main(
-        ["calibrate", "--untethered", "--tether-detached", str(flights["tethered"])]
-        + ["--out", str(out)]
-    )
+    detached = ["--untethered", "--tether-detached", str(flights["tethered"])]
+    rc = main(["calibrate", *detached, "--out", str(out)])
     assert rc == 0 and out.exists()
     # A recording with no tether messages needs no such word.
     out2 = tmp_path / "cal2.toml"
