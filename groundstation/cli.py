@@ -1,5 +1,5 @@
-"""Command line: ``groundstation serve | sim | demo | router | record | replay | crazyflie |
-calibrate | dashboard``.
+"""Command line: ``groundstation serve | sim | demo | router | record | replay | info |
+crazyflie | calibrate | dashboard``.
 
 Flags of the public contract are kept exactly (``docs/contract.md``); the ones added beside
 them are listed there too. Every long-running command stops on SIGINT or SIGTERM, closes its
@@ -609,6 +609,23 @@ def cmd_replay(args: argparse.Namespace) -> int:
     return int(recording.run_replay(settings, args.file, speed=args.speed, stop_event=stop))
 
 
+def cmd_info(args: argparse.Namespace) -> int:
+    from groundstation.recording.info import format_info, recording_info
+
+    _setup_logging("WARNING", False)
+    for index, path in enumerate(args.files):
+        if not os.path.isfile(path):
+            raise FileNotFoundError(f"{path!r}: no such file")
+        info = recording_info(path)
+        if args.json:
+            print(json.dumps(info.as_dict(), separators=(",", ":")), flush=True)
+        else:
+            if index:
+                print()
+            print(format_info(info), flush=True)
+    return 0
+
+
 def cmd_crazyflie(args: argparse.Namespace) -> int:
     from groundstation.bridges.crazyflie import (
         CrazyflieBridge,
@@ -843,6 +860,18 @@ def build_parser() -> argparse.ArgumentParser:
         help="with --offline: replace an existing --out file and figures (never the input)",
     )
     p.set_defaults(func=cmd_replay)
+
+    p = sub.add_parser(
+        "info",
+        help="what a recording holds: keys, counts, drones, time span, calibration, gaps",
+        description="Summarise MCAP recordings (finished or cut): keys with counts and rates, "
+        "the drones, the span on the receive clock and each drone's own clock, motion capture, "
+        "battery, the calibration its estimates applied, and gaps in its telemetry. Reads "
+        "only.",
+    )
+    p.add_argument("files", metavar="FILE.mcap", nargs="+", help="recordings")
+    p.add_argument("--json", action="store_true", help="one JSON object per file")
+    p.set_defaults(func=cmd_info)
 
     p = sub.add_parser("crazyflie", help="bridge a Crazyflie (cflib) to the bus")
     _add_common(p)

@@ -15,8 +15,10 @@ caller passes it on.
 
 from __future__ import annotations
 
+import contextvars
 import json
 import math
+import os
 import re
 import tomllib
 from collections.abc import Mapping
@@ -334,7 +336,13 @@ class CalibrationSection(_Section):
     @classmethod
     def _small_axis(cls, value: tuple[float, float]) -> tuple[float, float]:
         if any(not math.isfinite(v) or abs(v) > 0.35 for v in value):
-            raise ValueError(f"{value!r}: each angle must be finite and within ±0.35 rad (20°)")
+            hint = ""
+            if all(math.isfinite(v) and abs(math.radians(v)) <= 0.35 for v in value):
+                rad = ", ".join(f"{math.radians(v):.4g}" for v in value)
+                hint = f"; degrees? {list(value)!r} degrees is thrust_axis_rad = [{rad}]"
+            raise ValueError(
+                f"{value!r}: each angle must be finite and within ±0.35 rad (20°){hint}"
+            )
         return value
 
     @field_validator("thrust_vbat_range_v")
@@ -790,6 +798,13 @@ class DroneParams(_Section):
     calibration: CalibrationSection = CalibrationSection()
 
 
+_ENV_SOURCE_ON: contextvars.ContextVar[bool] = contextvars.ContextVar(
+    "groundstation_env_source_on", default=True
+)
+"""Whether constructing :class:`Settings` reads ``GROUNDSTATION_*`` (off while
+:func:`load_settings` validates its layers)."""
+
+
 class Settings(BaseSettings):
     """The root configuration object."""
 
@@ -832,7 +847,11 @@ class Settings(BaseSettings):
         file_secret_settings: PydanticBaseSettingsSource,
     ) -> tuple[PydanticBaseSettingsSource, ...]:
         # Only ``Settings()`` reads the environment; load_settings lays it between the
-        # file and the CLI. ``model_validate`` reads no source at all.
+        # file and the CLI, then validates the layers with the environment source off
+        # (pydantic-settings reads it in ``model_validate`` too: ``use_env=False`` would
+        # otherwise still see GROUNDSTATION_* variables).
+        if not _ENV_SOURCE_ON.get():
+            return (init_settings,)
         return (init_settings, env_settings)
 
     def for_drone(self, drone_id: str) -> DroneParams:
@@ -908,8 +927,27 @@ def _implausible(key: str, value: float) -> str | None:
     )
 
 
+STANDARD_GRAVITY_MPS2 = 9.80665
+"""Standard gravity (physical, CGPM 1901), for the plausibility checks only: the
+configuration imports no physics module (the simulator imports the configuration)."""
+
+BASE_COORDINATE_MAX_M = PLAUSIBLE["tether.length_m"].high
+"""Largest plausible |coordinate| of the base exit point, m: the longest plausible tether
+(a base further from the world origin than any tether reaches is a unit mistake, e.g. a
+height of 75.4 given in centimetres)."""
+
+FOLLOW_THRESHOLD_MAX_WEIGHTS = 1.0
+"""Largest plausible follow threshold as a multiple of the drone's weight m·g (physical: a
+micro quadrotor's thrust-to-weight ratio is about 2 (Crazyflie 2.1: ~60 g of thrust for
+~30 g), so its margin over hover is about one weight; a pull above that drags the drone
+whatever it does, and following would never engage before it)."""
+
+
 def _check_plausible(params: DroneParams | Settings, prefix: str) -> None:
-    """Refuse a value outside :data:`PLAUSIBLE` unless ``unusual_rig``.
+    """Refuse a value no micro drone rig has, unless ``unusual_rig``: the ranges of
+    :data:`PLAUSIBLE`, a base exit point further out than any tether
+    (:data:`BASE_COORDINATE_MAX_M`), a floor above the base, a follow threshold above
+    :data:`FOLLOW_THRESHOLD_MAX_WEIGHTS` times the drone's weight.
 
     Raises:
         ConfigError: one line with the key, the value and the likely unit mistake.
@@ -922,6 +960,39 @@ def _check_plausible(params: DroneParams | Settings, prefix: str) -> None:
         why = _implausible(key, value)
         if why is not None:
             raise ConfigError(f"invalid configuration: {prefix}{key} = {value:g}: {why}")
+    unusual = "(for an unusual rig set [drone] unusual_rig = true)"
+    base = params.base.position_m
+    far = BASE_COORDINATE_MAX_M
+    if any(abs(v) > far for v in base):
+        hint = ""
+        for short, name, f in (("cm", "centimetres", 1e-2), ("mm", "millimetres", 1e-3)):
+            if all(abs(v * f) <= far for v in base):
+                si = ", ".join(f"{v * f:.4g}" for v in base)
+                hint = f"; {name}? {list(base)!r} {short} is position_m = [{si}]"
+                break
+        raise ConfigError(
+            f"invalid configuration: {prefix}base.position_m = {list(base)!r}: further than "
+            f"{far:g} m from the origin, beyond any micro drone's tether{hint} {unusual}"
+        )
+    if params.base.floor_z_m > base[2]:
+        raise ConfigError(
+            f"invalid configuration: {prefix}base.floor_z_m = {params.base.floor_z_m:g}: above "
+            f"the base exit point (base.position_m z = {base[2]:g} m); the tether leaves the "
+            f"base above the floor it rests on (both heights in metres, in the world frame) "
+            f"{unusual}"
+        )
+    weight_n = params.drone.mass_kg * STANDARD_GRAVITY_MPS2
+    limit_n = FOLLOW_THRESHOLD_MAX_WEIGHTS * weight_n
+    threshold_n = params.follow.threshold_n
+    if threshold_n > limit_n:
+        hint = ""
+        if threshold_n * 1e-3 <= limit_n:
+            hint = f"; millinewtons? {threshold_n:g} mN is threshold_n = {threshold_n * 1e-3:.3g}"
+        raise ConfigError(
+            f"invalid configuration: {prefix}follow.threshold_n = {threshold_n:g}: above the "
+            f"drone's weight ({weight_n:.3g} N for drone.mass_kg = {params.drone.mass_kg:g}), "
+            f"a pull no micro drone resists{hint} {unusual}"
+        )
 
 
 def _lookup(data: Any, loc: tuple[int | str, ...]) -> Any:
@@ -985,6 +1056,61 @@ def _deep_merge(base: dict[str, Any], patch: Mapping[str, Any]) -> dict[str, Any
     return out
 
 
+ENV_PREFIX = "GROUNDSTATION_"
+ENV_NOT_SETTINGS = frozenset({"GROUNDSTATION_PUBLIC_CONTRACT"})
+"""``GROUNDSTATION_*`` variables that are not configuration (the contract test's path to the
+shared original): left alone by :func:`check_env_names`."""
+
+
+def check_env_names(environ: Mapping[str, str]) -> None:
+    """Refuse a ``GROUNDSTATION_*`` variable that names no setting, as a misspelt key in a
+    file is refused (pydantic-settings would drop an unknown section silently).
+
+    ``GROUNDSTATION_SECTION__KEY`` must name a table of :class:`Settings` and one of its
+    keys; ``GROUNDSTATION_DRONES__<ID>__<TABLE>__<KEY>`` one of :class:`DroneOverride`'s
+    tables and a key of that table. Case-insensitive, as the settings source is.
+
+    Raises:
+        ConfigError: names the variable and the nearest known names.
+    """
+    import difflib
+
+    for var in sorted(environ):
+        if not var.upper().startswith(ENV_PREFIX) or var.upper() in ENV_NOT_SETTINGS:
+            continue
+        parts = var[len(ENV_PREFIX) :].lower().split("__")
+        sections = list(Settings.model_fields)
+        where, known = "section", sections
+        problem: str | None = None
+        if parts[0] not in sections:
+            problem = parts[0]
+        elif parts[0] == "drones":
+            tables = list(DroneOverride.model_fields)
+            if len(parts) < 4:
+                problem, where, known = "", "GROUNDSTATION_DRONES__<ID>__<TABLE>__<KEY>", []
+            elif parts[2] not in tables:
+                problem, where, known = parts[2], "per-drone table", tables
+            else:
+                section_type = Settings.model_fields[parts[2]].annotation
+                keys = list(getattr(section_type, "model_fields", {}))
+                if keys and parts[3] not in keys:
+                    problem, where, known = parts[3], f"key of [{parts[2]}]", keys
+        else:
+            section_type = Settings.model_fields[parts[0]].annotation
+            keys = list(getattr(section_type, "model_fields", {}))
+            if len(parts) < 2:
+                problem, where, known = "", "GROUNDSTATION_SECTION__KEY", []
+            elif keys and parts[1] not in keys:
+                problem, where, known = parts[1], f"key of [{parts[0]}]", keys
+        if problem is None:
+            continue
+        if not known:
+            raise ConfigError(f"environment variable {var}: not of the form {where}")
+        near = difflib.get_close_matches(problem, known, n=1)
+        hint = f"; did you mean {near[0]!r}?" if near else f" (known: {', '.join(known)})"
+        raise ConfigError(f"environment variable {var}: unknown {where} {problem!r}{hint}")
+
+
 def load_settings(
     config_path: str | Path | None = None,
     cli_overrides: Mapping[str, Any] | None = None,
@@ -1018,6 +1144,7 @@ def load_settings(
 
     try:
         if use_env:
+            check_env_names(os.environ)
             # Environment beats the file: validate env alone, then lay it over the file.
             env_only = Settings()
             env_set = env_only.model_dump(exclude_unset=True)
@@ -1031,7 +1158,11 @@ def load_settings(
             layered = _deep_merge(layered, env_set)
         layered = _deep_merge(layered, dict(cli_overrides or {}))
         _check_tables_strictly(layered)
-        settings = Settings.model_validate(layered)
+        token = _ENV_SOURCE_ON.set(False)  # the environment is in ``layered`` already
+        try:
+            settings = Settings.model_validate(layered)
+        finally:
+            _ENV_SOURCE_ON.reset(token)
     except ValidationError as exc:
         raise ConfigError(_describe(exc, data=layered)) from None
     # Resolve every override once at start-up so a bad per-drone value fails now.

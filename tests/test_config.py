@@ -196,3 +196,80 @@ def test_plausible_edges_and_the_unusual_rig_override(tmp_path: Path) -> None:
         use_env=False,
     )
     assert s.for_drone("cf2").tether.length_m == 160.0
+
+
+@pytest.mark.parametrize(
+    ("var", "needle"),
+    [
+        (
+            "GROUNDSTATION_TEHTER__LENGTH_M",
+            "GROUNDSTATION_TEHTER__LENGTH_M: unknown section 'tehter'; did you mean 'tether'?",
+        ),
+        (
+            "GROUNDSTATION_TETHER__LENTGH_M",
+            "unknown key of [tether] 'lentgh_m'; did you mean 'length_m'?",
+        ),
+        (
+            "GROUNDSTATION_DRONES__CF2__TEHTER__LENGTH_M",
+            "unknown per-drone table 'tehter'; did you mean 'tether'?",
+        ),
+        ("GROUNDSTATION_TETHER", "not of the form GROUNDSTATION_SECTION__KEY"),
+    ],
+)
+def test_a_misspelt_environment_variable_is_an_error(
+    monkeypatch: pytest.MonkeyPatch, var: str, needle: str
+) -> None:
+    """As a misspelt key in a file is: pydantic-settings drops an unknown section silently."""
+    monkeypatch.setenv(var, "2.0")
+    with pytest.raises(ConfigError) as info:
+        load_settings(None)
+    assert needle in str(info.value) and "\n" not in str(info.value)
+    # use_env=False reads no variable, so none is judged
+    assert load_settings(None, use_env=False).tether.length_m == 1.6
+
+
+def test_known_environment_variables_still_apply(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("GROUNDSTATION_PUBLIC_CONTRACT", "/nowhere")  # the contract test's own
+    monkeypatch.setenv("groundstation_tether__length_m", "2.0")  # case-insensitive, as read
+    monkeypatch.setenv("GROUNDSTATION_DRONES__CF2__TETHER__LENGTH_M", "2.5")
+    s = load_settings(None)
+    assert s.tether.length_m == 2.0 and s.for_drone("cf2").tether.length_m == 2.5
+
+
+@pytest.mark.parametrize(
+    ("text", "needle"),
+    [
+        (
+            "[base]\nposition_m = [0, 0, 75.4]\n",
+            "base.position_m = [0.0, 0.0, 75.4]: further than 30 m from the origin, beyond any "
+            "micro drone's tether; centimetres? [0.0, 0.0, 75.4] cm is position_m = [0, 0, "
+            "0.754]",
+        ),
+        (
+            "[base]\nposition_m = [0, 0, 0.754]\nfloor_z_m = 1.0\n",
+            "base.floor_z_m = 1: above the base exit point (base.position_m z = 0.754 m)",
+        ),
+        (
+            "[follow]\nthreshold_n = 100\n",
+            "follow.threshold_n = 100: above the drone's weight (0.294 N for drone.mass_kg = "
+            "0.03), a pull no micro drone resists; millinewtons? 100 mN is threshold_n = 0.1",
+        ),
+        (
+            "[drones.cf2.follow]\nthreshold_n = 5\n",
+            "drones.cf2.follow.threshold_n = 5: above the drone's weight",
+        ),
+        (
+            "[calibration]\nthrust_axis_rad = [2.0, 0]\n",
+            "within ±0.35 rad (20°); degrees? [2.0, 0.0] degrees is thrust_axis_rad = [0.03491, 0]",
+        ),
+    ],
+)
+def test_more_unit_mistakes_are_refused_with_a_hint(tmp_path: Path, text: str, needle: str) -> None:
+    cfg = tmp_path / "rig.toml"
+    cfg.write_text(text)
+    with pytest.raises(ConfigError) as info:
+        load_settings(cfg, use_env=False)
+    assert needle in str(info.value) and "\n" not in str(info.value), str(info.value)
+    if "thrust_axis" not in text:  # a plausibility rule: an unusual rig may say so
+        cfg.write_text("[drone]\nunusual_rig = true\n" + text)
+        load_settings(cfg, use_env=False)
