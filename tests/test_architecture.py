@@ -62,10 +62,13 @@ ROOMS: dict[str, tuple[tuple[str, ...], tuple[str, ...], tuple[str, ...]]] = {
             "catenary",
             "smoother",
             "zenoh_bus",
+            "outputs",
             *CONTRACT,
         ),
         ("mcap", "zstandard", "pydantic", "numpy", "matplotlib"),
     ),
+    # Writing a user's files without destroying one: the standard library only.
+    "outputs": (("outputs",), (), ()),
     "bridges": (("bridges",), ("bridges", "zenoh_bus", *CONTRACT), ("numpy", "cflib")),
     # Entry points and the lock-step harness may wire anything together.
     "entry": (("cli", "__main__", "__init__", "evaluation"), ("*",), ("*",)),
