@@ -323,9 +323,12 @@ def cmd_serve(args: argparse.Namespace) -> int:
 
     settings = _load(args)
     if settings.service.record:
-        from groundstation.outputs import check_output
+        from groundstation.outputs import check_output, expand_time
 
-        check_output(settings.service.record, force=args.force, flag="--record")
+        record = expand_time(settings.service.record, time.time())
+        check_output(record, force=args.force, flag="--record")
+        service_section = settings.service.model_copy(update={"record": record})
+        settings = settings.model_copy(update={"service": service_section})
     endpoint = None
     if not args.headless:
         _check_web_port(settings)
@@ -572,13 +575,14 @@ def cmd_router(args: argparse.Namespace) -> int:
 
 
 def cmd_record(args: argparse.Namespace) -> int:
-    from groundstation.outputs import check_output
+    from groundstation.outputs import check_output, expand_time
     from groundstation.recording import run_record
 
-    check_output(args.out, force=args.force)  # before the session opens
+    out = expand_time(args.out, time.time())
+    check_output(out, force=args.force)  # before the session opens
     settings = _load(args)
     stop = _stop_on_signals()
-    return int(run_record(settings, args.out, args.key or ["tether/**"], stop, force=args.force))
+    return int(run_record(settings, out, args.key or ["tether/**"], stop, force=args.force))
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
@@ -742,7 +746,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--drones", metavar="CHUNK", help="own only drones matching tether/CHUNK/* (e.g. lab-a-*)"
     )
-    p.add_argument("--record", metavar="FILE", help="also record the bus to this MCAP file")
+    p.add_argument(
+        "--record",
+        metavar="FILE",
+        help="also record the bus to this MCAP file (a new one; {time} in it becomes the UTC "
+        "time, e.g. session-{time}.mcap)",
+    )
     p.add_argument("--force", action="store_true", help="let --record replace an existing file")
     p.set_defaults(func=cmd_serve)
 
@@ -824,7 +833,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--out",
         required=True,
         metavar="FILE.mcap",
-        help="the MCAP file to write (required; an existing file only with --force)",
+        help="the MCAP file to write (required; an existing file only with --force; "
+        "{time} in it becomes the UTC time, e.g. flight-{time}.mcap)",
     )
     p.add_argument("--force", action="store_true", help="replace an existing --out file")
     p.add_argument(

@@ -21,11 +21,12 @@ from __future__ import annotations
 import contextlib
 import os
 import tempfile
+import time
 from collections.abc import Iterable
 from pathlib import Path
 from typing import IO, Any
 
-__all__ = ["NewFile", "OutputError", "check_output", "file_mode"]
+__all__ = ["NewFile", "OutputError", "check_output", "expand_time", "file_mode"]
 
 
 class OutputError(RuntimeError):
@@ -37,6 +38,15 @@ def file_mode() -> int:
     mask = os.umask(0)
     os.umask(mask)
     return 0o666 & ~mask
+
+
+def expand_time(path: str, now_unix_s: float) -> str:
+    """``{time}`` in ``path`` replaced by the UTC time ``YYYYmmddTHHMMSSZ``: a recording name
+    that a restarted service does not find taken (``session-{time}.mcap``)."""
+    if "{time}" not in path:
+        return path
+    stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime(now_unix_s))
+    return path.replace("{time}", stamp)
 
 
 def _same_file(a: Path, b: Path) -> bool:

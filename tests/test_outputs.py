@@ -246,3 +246,10 @@ def test_record_onto_an_existing_flight_is_refused_before_the_bus_opens(
     rc = main(["serve", "--headless", "--record", str(keep), "--connect", "tcp/127.0.0.1:9"])
     assert rc == 2 and "--record" in capsys.readouterr().err
     assert keep.read_bytes() == before
+
+
+def test_a_time_in_the_name_gives_a_restarted_service_a_new_file() -> None:
+    from groundstation.outputs import expand_time
+
+    assert expand_time("/var/x/session-{time}.mcap", 0.0) == "/var/x/session-19700101T000000Z.mcap"
+    assert expand_time("flight.mcap", 0.0) == "flight.mcap"
