@@ -129,7 +129,9 @@ def judge(flight: Flight, config: Path, work: Path) -> Judged:
     if not rec.exists():
         copy_messages(flight.without_mocap, rec)
     out = work / f"{flight.name}-{config.stem}-est.mcap"
-    rc, text = _run(["replay", "--offline", str(rec), "--config", str(config), "--out", str(out)])
+    # The same flight is judged with the same configuration in more than one fold: --force.
+    replay = ["replay", "--offline", str(rec), "--config", str(config)]
+    rc, text = _run([*replay, "--out", str(out), "--force"])
     if rc != 0:
         raise RuntimeError(f"replay --offline failed ({rc}): {text}")
     return score(flight, out)
@@ -171,9 +173,9 @@ def calibrate(train: list[Flight], work: Path, tag: str, extra: list[str]) -> tu
             copy_messages(f.with_mocap, p)
         files.append(str(p))
     out = work / f"cal-{tag}.toml"
-    rc, text = _run(
-        ["calibrate", *files, "--untethered", "--config", str(base), "--out", str(out), *extra]
-    )
+    # Variants that share the calibration share its file: --force.
+    argv = ["calibrate", *files, "--untethered", "--config", str(base), "--out", str(out)]
+    rc, text = _run([*argv, "--force", *extra])
     if rc != 0:
         raise RuntimeError(f"calibrate failed ({rc}): {text}")
     return out, text
