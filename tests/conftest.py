@@ -26,10 +26,32 @@ from __future__ import annotations
 
 import json
 import os
+import platform
+import sys
 from pathlib import Path
 from typing import Any
 
 import pytest
+
+PORTABLE_FLOAT_KERNELS = {
+    "NPY_DISABLE_CPU_FEATURES": "X86_V4 AVX512_ICL AVX512_SPR",
+    "OPENBLAS_CORETYPE": "Nehalem",
+}
+"""Kernels the suite runs numpy with on x86-64, whatever the CPU: several tests demand that a
+rewrite on Python floats gives the very bits of the numpy code it replaced (a batch against
+one-by-one localization, the simulator's float step against its numpy step). On a CPU with
+AVX-512 numpy dispatches its own vector loops and OpenBLAS its SkylakeX kernels, which round
+3-vector dot products and some transcendentals differently (by an ULP) from Python's float
+arithmetic; the portable kernels (SSE4.2, numpy's X86_V3 loops at most) round as Python does,
+so those tests decide the same on every x86-64 machine. Set before numpy is imported, and
+inherited by every process a test starts; production is unaffected (the results differ by an
+ULP, not in meaning)."""
+
+if platform.machine() in ("x86_64", "AMD64"):
+    if "numpy" in sys.modules:  # too late: the kernels are chosen at import
+        raise RuntimeError("tests/conftest.py: numpy was imported before the kernels were set")
+    for _name, _value in PORTABLE_FLOAT_KERNELS.items():
+        os.environ.setdefault(_name, _value)
 
 DURATIONS = Path(__file__).with_name("durations.json")
 
