@@ -245,3 +245,32 @@ def test_the_offline_tap_draws_at_its_rate_of_log_time() -> None:
     late = tap.after("tether/cf1/status", json.dumps({}).encode(), t0 + 2 * 10**9)
     assert [m.topic for m in late] == [TRANSFORMS_TOPIC, SCENE_TOPIC]
     assert tap.after("tether/cf1/status", json.dumps({}).encode(), t0 + 3 * 10**9) == []
+
+
+def test_the_layout_shows_what_is_published() -> None:
+    """docs/foxglove_layout.json: its 3D panel shows the scene and transform topics, its plot
+    and message panels read fields the contract's models have."""
+    from pathlib import Path
+
+    from groundstation.messages import Truth
+
+    layout = json.loads(
+        (Path(__file__).resolve().parents[1] / "docs" / "foxglove_layout.json").read_text()
+    )
+    panels = layout["configById"]
+    three_d = next(v for k, v in panels.items() if k.startswith("3D!"))
+    assert set(three_d["topics"]) == {SCENE_TOPIC, TRANSFORMS_TOPIC}
+    assert three_d["followTf"] == "world"
+    plot = next(v for k, v in panels.items() if k.startswith("Plot!"))
+    models = {"estimate": Estimate, "truth": Truth}
+    for series in plot["paths"]:
+        topic, path = series["value"].split(".", 1)
+        assert topic.startswith("tether/cf1/")
+        assert path.split("[")[0] in models[topic.rsplit("/", 1)[1]].model_fields, series
+    raw = next(v for k, v in panels.items() if k.startswith("RawMessages!"))
+    assert raw["topicPath"] == "tether/cf1/estimate"
+
+    def leaves(node: Any) -> list[str]:
+        return [node] if isinstance(node, str) else leaves(node["first"]) + leaves(node["second"])
+
+    assert sorted(leaves(layout["layout"])) == sorted(panels)
