@@ -48,16 +48,21 @@ def run_case(
     dashboard: bool = False,
     sut: str = "service",
     foxglove: bool = False,
+    foxglove_topics: tuple[str, ...] = (),
 ) -> dict[str, Any]:
     """One steady window of ``n_drones`` × 250 Hz against ``sut`` (``service`` or ``echo``);
-    ``foxglove``: with ``--foxglove-port`` and a Foxglove client subscribed to everything."""
+    ``foxglove``: with ``--foxglove-port`` and a Foxglove client subscribed to everything
+    (or to the topics starting with one of ``foxglove_topics``)."""
     schedule = sr.Schedule.steady(seconds)
     payloads = sr.telemetry_payloads(n_drones, len(schedule.release_s), seed=n_drones)
-    with sr.rig(sut, dashboard=dashboard, foxglove=foxglove) as rig:
+    with sr.rig(
+        sut, dashboard=dashboard, foxglove=foxglove, foxglove_topics=foxglove_topics
+    ) as rig:
         row = sr.drive(rig.endpoint, n_drones, schedule, payloads, rig.pid)
     row["generator_late_ticks"] = row["late_ticks"]
     row["dashboard"] = dashboard
     row["foxglove"] = foxglove
+    row["foxglove_topics"] = list(foxglove_topics)
     row["sut"] = sut
     return row
 
@@ -85,7 +90,9 @@ def to_markdown(rows: list[dict[str, Any]], seconds: float, command: str) -> str
     ]
     for r in rows:
         system = r.get("sut", "service") + (" + dashboard" if r["dashboard"] else "")
-        system += " + Foxglove (client subscribed)" if r.get("foxglove") else ""
+        if r.get("foxglove"):
+            topics = ", ".join(r.get("foxglove_topics") or []) or "every channel"
+            system += f" + Foxglove (a client on {topics})"
         worker = f"{r['worker_us_per_msg']:.0f}" if r.get("sut") != "echo" else "—"
         lines.append(
             f"| {r['drones']} | {system} | {r['offered_hz']:.0f} "
@@ -139,6 +146,14 @@ def main() -> None:
         action="store_true",
         help="also run with --foxglove-port and a Foxglove client subscribed to every channel",
     )
+    parser.add_argument(
+        "--foxglove-topics",
+        nargs="+",
+        default=[],
+        metavar="PREFIX",
+        help="with --foxglove: the client subscribes to topics with these prefixes only "
+        "(the layout's: scene tf tether/cf1/estimate)",
+    )
     parser.add_argument("--no-floor", action="store_true", help="skip the echo floor")
     parser.add_argument("--quick", action="store_true", help="8 drones, 10 s (prints only)")
     parser.add_argument("--out", help="also write the page here (published: docs/RESULTS.md (c))")
@@ -161,7 +176,9 @@ def main() -> None:
             rows.append(row)
     if args.foxglove:
         for n in args.drones:
-            row = run_case(n, args.seconds, foxglove=True)
+            row = run_case(
+                n, args.seconds, foxglove=True, foxglove_topics=tuple(args.foxglove_topics)
+            )
             print(json.dumps(row), flush=True)
             rows.append(row)
     command = "python -m benchmarks.bench_service " + " ".join(sys.argv[1:])

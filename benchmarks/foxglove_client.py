@@ -1,7 +1,8 @@
 """A Foxglove client for the benchmarks: subscribes to every channel a Foxglove WebSocket
-server advertises (scene, transforms and each message channel) and reads until SIGTERM.
+server advertises (scene, transforms and each message channel; or those whose topic starts
+with one of the given prefixes) and reads until SIGTERM.
 
-Run:  python -m benchmarks.foxglove_client PORT
+Run:  python -m benchmarks.foxglove_client PORT [TOPIC_PREFIX ...]
 
 Prints one JSON line at the end: messages and bytes received per topic. A plain WebSocket
 client speaking Foxglove's protocol (subprotocol ``foxglove.sdk.v1``), as the app does: it
@@ -20,7 +21,7 @@ import sys
 import websockets
 
 
-async def run(port: int) -> dict[str, list[int]]:
+async def run(port: int, prefixes: tuple[str, ...] = ()) -> dict[str, list[int]]:
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     loop.add_signal_handler(signal.SIGTERM, stop.set)
@@ -45,10 +46,13 @@ async def run(port: int) -> dict[str, list[int]]:
                 if msg["op"] == "advertise":
                     new = []
                     for ch in msg["channels"]:
+                        if prefixes and not ch["topic"].startswith(prefixes):
+                            continue
                         sub_id = len(subs) + 1
                         subs[sub_id] = ch["topic"]
                         new.append({"id": sub_id, "channelId": ch["id"]})
-                    await ws.send(json.dumps({"op": "subscribe", "subscriptions": new}))
+                    if new:
+                        await ws.send(json.dumps({"op": "subscribe", "subscriptions": new}))
                 continue
             if raw[0] == 1:
                 (sub_id,) = struct.unpack_from("<I", raw, 1)
@@ -59,7 +63,7 @@ async def run(port: int) -> dict[str, list[int]]:
 
 
 def main() -> None:
-    counts = asyncio.run(run(int(sys.argv[1])))
+    counts = asyncio.run(run(int(sys.argv[1]), tuple(sys.argv[2:])))
     print(json.dumps({"foxglove_client": counts}), flush=True)
 
 

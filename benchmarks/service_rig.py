@@ -166,6 +166,8 @@ class Rig:
     foxglove: bool = False
     """With Foxglove's WebSocket server (``--foxglove-port``) and a client subscribed to
     every channel (:mod:`benchmarks.foxglove_client`)."""
+    foxglove_topics: tuple[str, ...] = ()
+    """Topic prefixes that client subscribes to (empty: every channel)."""
     endpoint: str = ""
     procs: list[subprocess.Popen[bytes]] = field(default_factory=list)
     pid: int = 0
@@ -215,7 +217,13 @@ class Rig:
             wait_port(fox_port)
             self.procs.append(
                 subprocess.Popen(
-                    [sys.executable, "-m", "benchmarks.foxglove_client", str(fox_port)],
+                    [
+                        sys.executable,
+                        "-m",
+                        "benchmarks.foxglove_client",
+                        str(fox_port),
+                        *self.foxglove_topics,
+                    ],
                     stdout=subprocess.DEVNULL,
                     stderr=subprocess.DEVNULL,
                     cwd=REPO,
@@ -241,9 +249,13 @@ class Rig:
 
 @contextmanager
 def rig(
-    sut: str, dashboard: bool = False, profile: str | None = None, foxglove: bool = False
+    sut: str,
+    dashboard: bool = False,
+    profile: str | None = None,
+    foxglove: bool = False,
+    foxglove_topics: tuple[str, ...] = (),
 ) -> Iterator[Rig]:
-    r = Rig(sut, dashboard, profile, foxglove)
+    r = Rig(sut, dashboard, profile, foxglove, foxglove_topics=foxglove_topics)
     try:
         r.start()
         yield r
