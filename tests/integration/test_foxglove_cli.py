@@ -39,6 +39,15 @@ FLOOR_Z_M = Settings().base.floor_z_m
 ARROW_M_PER_N = Settings().foxglove.arrow_m_per_n
 
 
+def _drawn_from(update: Any, estimates: dict[int, Any]) -> bool:
+    """The scene has cf1's tether, drawn from a received Estimate of a flying drone."""
+    for e in update.entities:
+        if e.id == "cf1/tether":
+            est = estimates.get(int(metadata(e)["seq"] or -1))
+            return est is not None and est["position_m"] is not None and not est["on_ground"]
+    return False
+
+
 async def _read_live(port: int, want_scenes: int, timeout_s: float) -> dict[str, Any]:
     """Subscribe to the scene and to cf1's estimates; collect until ``want_scenes`` scenes
     whose Estimate also arrived, or the timeout."""
@@ -93,15 +102,7 @@ async def _read_live(port: int, want_scenes: int, timeout_s: float) -> dict[str,
             else:
                 assert scene_cls is not None
                 out["scenes"].append(scene_cls.FromString(payload))
-            matched = [
-                s
-                for s in out["scenes"]
-                if any(
-                    e.id == "cf1/tether" and int(metadata(e)["seq"] or -1) in out["estimates"]
-                    for e in s.entities
-                )
-            ]
-            if len(matched) >= want_scenes:
+            if sum(_drawn_from(s, out["estimates"]) for s in out["scenes"]) >= want_scenes:
                 break
     return out
 
@@ -236,3 +237,34 @@ def test_a_recording_replayed_offline_opens_in_3d(procs: Procs, tmp_path: Path) 
     frames = {t.child_frame_id for tf in transforms for t in tf.transforms}
     assert {"cf1/base", "cf1/body"} <= frames
     assert {t.parent_frame_id for tf in transforms for t in tf.transforms} == {"world"}
+
+
+async def _server_info_and_channels(port: int, timeout_s: float) -> tuple[dict[str, Any], set[str]]:
+    async with websockets.connect(f"ws://127.0.0.1:{port}", subprotocols=[SUBPROTOCOL]) as ws:
+        info: dict[str, Any] = {}
+        topics: set[str] = set()
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline and not {"scene", "tether/cf1/estimate"} <= topics:
+            try:
+                raw = await asyncio.wait_for(ws.recv(), max(0.1, deadline - time.monotonic()))
+            except TimeoutError:
+                break
+            msg = json.loads(raw)
+            if msg["op"] == "serverInfo":
+                info = msg
+            elif msg["op"] == "advertise":
+                topics |= {ch["topic"] for ch in msg["channels"]}
+        return info, topics
+
+
+def test_demo_serves_foxglove_in_its_one_process(procs: Procs) -> None:
+    fox_port = free_port()
+    demo = procs.groundstation(
+        "demo", "demo", "--headless", "--foxglove-port", str(fox_port), "--duration", "60"
+    )
+    wait_for_port(fox_port, timeout_s=30)
+    info, topics = asyncio.run(_server_info_and_channels(fox_port, timeout_s=30))
+    assert info["name"] == "groundstation"
+    assert {"scene", "tf", "tether/cf1/estimate", "tether/cf1/telemetry"} <= topics, topics
+    assert f"foxglove: ws://127.0.0.1:{fox_port}" in demo.output()
+    assert demo.stop(signal.SIGTERM) == 0
