@@ -303,9 +303,7 @@ def run_replay_offline(
         from groundstation.pipeline import Pipeline
 
         pipeline = Pipeline(settings)
-    produced = replay_offline(
-        path, out_path, pipeline, force=force, scenes=SceneTap(settings)
-    )
+    produced = replay_offline(path, out_path, pipeline, force=force, scenes=SceneTap(settings))
     _log.info("offline replay of %s: %d outputs written to %s", path, produced, out_path)
     if figures_dir is not None:
         for png in write_figures(out_path, figures_dir):
