@@ -1,9 +1,11 @@
 """Service capacity: N drones × 250 Hz through a router into ``groundstation serve``.
 
 Run:  python -m benchmarks.bench_service [--drones 1 8 16 32] [--seconds 30] [--quick]
+      [--dashboard] [--foxglove]
 
 Topology (as deployed): a router, ``groundstation serve --headless`` as its client (or with
-the dashboard: ``--dashboard``), and this process as a second client that publishes
+the dashboard: ``--dashboard``; with Foxglove's WebSocket server and a client subscribed to
+every channel: ``--foxglove``), and this process as a second client that publishes
 realistic hover telemetry for N drones at 250 Hz each and subscribes to the estimates; the
 rig is :mod:`benchmarks.service_rig`. Latency is publish → estimate received, both stamped
 with this process's monotonic clock; delivery is estimates received / telemetry sent.
@@ -41,15 +43,26 @@ def _telemetry_payloads(n_drones: int, seconds: float, seed: int) -> list[list[b
 
 
 def run_case(
-    n_drones: int, seconds: float, dashboard: bool = False, sut: str = "service"
+    n_drones: int,
+    seconds: float,
+    dashboard: bool = False,
+    sut: str = "service",
+    foxglove: bool = False,
+    foxglove_topics: tuple[str, ...] = (),
 ) -> dict[str, Any]:
-    """One steady window of ``n_drones`` × 250 Hz against ``sut`` (``service`` or ``echo``)."""
+    """One steady window of ``n_drones`` × 250 Hz against ``sut`` (``service`` or ``echo``);
+    ``foxglove``: with ``--foxglove-port`` and a Foxglove client subscribed to everything
+    (or to the topics starting with one of ``foxglove_topics``)."""
     schedule = sr.Schedule.steady(seconds)
     payloads = sr.telemetry_payloads(n_drones, len(schedule.release_s), seed=n_drones)
-    with sr.rig(sut, dashboard=dashboard) as rig:
+    with sr.rig(
+        sut, dashboard=dashboard, foxglove=foxglove, foxglove_topics=foxglove_topics
+    ) as rig:
         row = sr.drive(rig.endpoint, n_drones, schedule, payloads, rig.pid)
     row["generator_late_ticks"] = row["late_ticks"]
     row["dashboard"] = dashboard
+    row["foxglove"] = foxglove
+    row["foxglove_topics"] = list(foxglove_topics)
     row["sut"] = sut
     return row
 
@@ -71,12 +84,15 @@ def to_markdown(rows: list[dict[str, Any]], seconds: float, command: str) -> str
         "the window; late ticks: published more than 4 ms after their time).",
         "",
         "| drones × 250 Hz | system | offered msg/s | delivered | p50 ms | p99 ms | max ms "
-        "| CPU µs/msg | worker µs/msg | CPU share | dashboard process CPU | RSS MB "
+        "| CPU µs/msg | worker µs/msg | CPU share | child process CPU | RSS MB "
         "| queue overflow | late ticks | client GCs |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         system = r.get("sut", "service") + (" + dashboard" if r["dashboard"] else "")
+        if r.get("foxglove"):
+            topics = ", ".join(r.get("foxglove_topics") or []) or "every channel"
+            system += f" + Foxglove (a client on {topics})"
         worker = f"{r['worker_us_per_msg']:.0f}" if r.get("sut") != "echo" else "—"
         lines.append(
             f"| {r['drones']} | {system} | {r['offered_hz']:.0f} "
@@ -88,7 +104,11 @@ def to_markdown(rows: list[dict[str, Any]], seconds: float, command: str) -> str
             f"| {r['client_gc_collections']} |"
         )
     lines.append("")
-    svc = [r for r in rows if r.get("sut", "service") == "service" and not r["dashboard"]]
+    svc = [
+        r
+        for r in rows
+        if r.get("sut", "service") == "service" and not r["dashboard"] and not r.get("foxglove")
+    ]
     floors = {r["drones"]: r for r in rows if r.get("sut") == "echo"}
     ratios = [
         f"{r['drones']} drones {r['p99_ms'] / floors[r['drones']]['p99_ms']:.1f}×"
@@ -121,6 +141,19 @@ def main() -> None:
     parser.add_argument("--drones", type=int, nargs="+", default=[1, 8, 16, 32])
     parser.add_argument("--seconds", type=float, default=MIN_WINDOW_S, help="≥ 30")
     parser.add_argument("--dashboard", action="store_true", help="also run with the dashboard")
+    parser.add_argument(
+        "--foxglove",
+        action="store_true",
+        help="also run with --foxglove-port and a Foxglove client subscribed to every channel",
+    )
+    parser.add_argument(
+        "--foxglove-topics",
+        nargs="+",
+        default=[],
+        metavar="PREFIX",
+        help="with --foxglove: the client subscribes to topics with these prefixes only "
+        "(the layout's: scene tf tether/cf1/estimate)",
+    )
     parser.add_argument("--no-floor", action="store_true", help="skip the echo floor")
     parser.add_argument("--quick", action="store_true", help="8 drones, 10 s (prints only)")
     parser.add_argument("--out", help="also write the page here (published: docs/RESULTS.md (c))")
@@ -139,6 +172,13 @@ def main() -> None:
     if args.dashboard:
         for n in args.drones:
             row = run_case(n, args.seconds, dashboard=True)
+            print(json.dumps(row), flush=True)
+            rows.append(row)
+    if args.foxglove:
+        for n in args.drones:
+            row = run_case(
+                n, args.seconds, foxglove=True, foxglove_topics=tuple(args.foxglove_topics)
+            )
             print(json.dumps(row), flush=True)
             rows.append(row)
     command = "python -m benchmarks.bench_service " + " ".join(sys.argv[1:])

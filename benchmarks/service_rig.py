@@ -163,6 +163,11 @@ class Rig:
     sut: str
     dashboard: bool = False
     profile: str | None = None  # py-spy output path (env BENCH_PYSPY names the binary)
+    foxglove: bool = False
+    """With Foxglove's WebSocket server (``--foxglove-port``) and a client subscribed to
+    every channel (:mod:`benchmarks.foxglove_client`)."""
+    foxglove_topics: tuple[str, ...] = ()
+    """Topic prefixes that client subscribes to (empty: every channel)."""
     endpoint: str = ""
     procs: list[subprocess.Popen[bytes]] = field(default_factory=list)
     pid: int = 0
@@ -183,6 +188,9 @@ class Rig:
         if self.sut in ("service", "baseline"):
             args = [sys.executable, "-m", "groundstation", "serve", "--connect", self.endpoint]
             args += ["--web-port", str(free_port())] if self.dashboard else ["--headless"]
+            if self.foxglove:
+                fox_port = free_port()
+                args += ["--foxglove-port", str(fox_port)]
             if self.sut == "baseline":
                 cwd = Path(os.environ["BENCH_BASELINE_TREE"])
                 env["PYTHONPATH"] = str(cwd)
@@ -205,6 +213,22 @@ class Rig:
         )
         self.procs.append(proc)
         self.pid = proc.pid
+        if self.foxglove and self.sut in ("service", "baseline"):
+            wait_port(fox_port)
+            self.procs.append(
+                subprocess.Popen(
+                    [
+                        sys.executable,
+                        "-m",
+                        "benchmarks.foxglove_client",
+                        str(fox_port),
+                        *self.foxglove_topics,
+                    ],
+                    stdout=subprocess.DEVNULL,
+                    stderr=subprocess.DEVNULL,
+                    cwd=REPO,
+                )
+            )
         if self.profile:  # the SUT is py-spy's child
             deadline = time.monotonic() + 10
             while time.monotonic() < deadline and not children(proc.pid):
@@ -224,8 +248,14 @@ class Rig:
 
 
 @contextmanager
-def rig(sut: str, dashboard: bool = False, profile: str | None = None) -> Iterator[Rig]:
-    r = Rig(sut, dashboard, profile)
+def rig(
+    sut: str,
+    dashboard: bool = False,
+    profile: str | None = None,
+    foxglove: bool = False,
+    foxglove_topics: tuple[str, ...] = (),
+) -> Iterator[Rig]:
+    r = Rig(sut, dashboard, profile, foxglove, foxglove_topics=foxglove_topics)
     try:
         r.start()
         yield r

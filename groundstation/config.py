@@ -52,6 +52,7 @@ __all__ = [
     "DroneSection",
     "FilterSection",
     "FollowSection",
+    "FoxgloveSection",
     "LocalizationSection",
     "RealisticSection",
     "ServiceSection",
@@ -383,6 +384,20 @@ class WebSection(_Section):
     forget_after_s: float = Field(60.0, ge=0.0)
     """(added) A drone silent this long (seconds) is dropped from the scene and the selector;
     it is drawn faded from ``[service] stale_after_s`` on. 0: never forget."""
+
+
+class FoxgloveSection(_Section):
+    """``[foxglove]``: Foxglove's WebSocket server (live 3D scene and the contract's messages);
+    off unless a port is given."""
+
+    host: str = "127.0.0.1"
+    """Bind address of the Foxglove WebSocket server (``0.0.0.0``: every interface)."""
+    port: int | None = Field(None, ge=0, le=65535)
+    """Its TCP port (Foxglove's default is 8765; 0: any free port); none: no server."""
+    scene_rate_hz: float = Field(15.0, ge=1.0, le=30.0)
+    """Scene and frame-transform updates per second (each drone's latest state)."""
+    arrow_m_per_n: float = Field(4.0, gt=0.0)
+    """Drawn length of the tension arrow per newton of tension, m/N."""
 
 
 class ServiceSection(_Section):
@@ -824,6 +839,7 @@ class Settings(BaseSettings):
     calibration: CalibrationSection = CalibrationSection()
     localization: LocalizationSection = LocalizationSection()
     web: WebSection = WebSection()
+    foxglove: FoxgloveSection = FoxgloveSection()
     service: ServiceSection = ServiceSection()
     sim: SimSection = SimSection()
     crazyflie: CrazyflieSection = CrazyflieSection()

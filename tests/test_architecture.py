@@ -52,10 +52,16 @@ ROOMS: dict[str, tuple[tuple[str, ...], tuple[str, ...], tuple[str, ...]]] = {
         ("dashboard", "catenary", *CONTRACT),
         ("numpy", "viser", "trimesh"),
     ),
+    "foxglove": (
+        ("foxglove",),
+        ("foxglove", "catenary", *CONTRACT),
+        ("numpy", "foxglove", "pydantic"),
+    ),
     "recording": (
         ("recording",),
         (
             "recording",
+            "foxglove",
             "pipeline",
             "calibration",
             "airframe",

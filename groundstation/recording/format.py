@@ -114,6 +114,25 @@ class ChannelTable:
             self._channels[key] = cid
         return cid
 
+    def typed_channel_id(
+        self, topic: str, schema_name: str, schema_encoding: str, schema_data: bytes, encoding: str
+    ) -> int:
+        """The channel of ``topic`` with a schema given here (a Foxglove protobuf schema, say)
+        rather than chosen by key: registered on first use, as :meth:`channel_id` does."""
+        cid = self._channels.get(topic)
+        if cid is None:
+            sid = self._schemas.get(schema_name)
+            if sid is None:
+                sid = self._writer.register_schema(
+                    name=schema_name, encoding=schema_encoding, data=schema_data
+                )
+                self._schemas[schema_name] = sid
+            cid = self._writer.register_channel(
+                topic=topic, message_encoding=encoding, schema_id=sid
+            )
+            self._channels[topic] = cid
+        return cid
+
 
 def open_writer(
     path: Path, chunk_size: int, *, force: bool = False, grow_in_place: bool = False

@@ -13,6 +13,7 @@ from typing import Any, Protocol
 
 from groundstation.bus import Bus, Sample, keyexpr_matches
 from groundstation.config import Settings
+from groundstation.foxglove.offline import SceneTap
 from groundstation.outputs import OutputError, check_output
 from groundstation.recording.figures import write_figures
 from groundstation.recording.format import (
@@ -114,6 +115,7 @@ def replay_offline(
     tick_period_s: float = 0.05,
     smooth: bool = True,
     force: bool = False,
+    scenes: SceneTap | None = None,
 ) -> int:
     """Re-run estimation on a recording as fast as possible and write inputs plus outputs.
 
@@ -125,7 +127,10 @@ def replay_offline(
     time (as the live service's staleness check does). Outputs are written at the log time of
     the input that produced them. With ``smooth`` (and the service's Pipeline) each Estimate the
     tension filter stepped for also gets its forward-backward smoothed tension and position,
-    ``tether/{drone}/estimate_smoothed`` at the same log time (docs/smoother.md).
+    ``tether/{drone}/estimate_smoothed`` at the same log time (docs/smoother.md). With
+    ``scenes``, the 3D scene of every drone at the tap's rate of log time: ``scene``
+    (``foxglove.SceneUpdate``) and ``tf`` (``foxglove.FrameTransforms``), protobuf with their
+    schemas, so the file opens in Foxglove in 3D (docs/foxglove.md).
 
     The output is written beside ``out_path`` and moved into place when complete: a failure
     leaves no output and an existing file as it was. ``out_path`` may not be ``path``, and an
@@ -147,9 +152,16 @@ def replay_offline(
     produced = 0
     next_tick_s: float | None = None
     tap = SmoothingTap(pipeline) if smooth else None
+    drawing = scenes is not None
 
     def write(key: str, payload: bytes, t_ns: int) -> None:
         writer.add_message(channels.channel_id(key), t_ns, payload, t_ns)
+        if drawing and scenes is not None:
+            for m in scenes.after(key, payload, t_ns):
+                cid = channels.typed_channel_id(
+                    m.topic, m.schema.name, m.schema.encoding, m.schema.data, "protobuf"
+                )
+                writer.add_message(cid, m.log_time_ns, m.data, m.log_time_ns)
 
     try:
         for msg in iter_messages(path, require_messages=True):
@@ -173,6 +185,7 @@ def replay_offline(
                     produced += 1
                 if tap is not None:
                     tap.after(msg.key, outs, msg.log_time_ns)
+        drawing = False  # the smoothed samples go back in time: no scene from them
         for key, payload, t_ns in tap.samples() if tap is not None else ():
             write(key, payload, t_ns)  # after the pass: smoothing needs the whole of it
         writer.finish()
@@ -290,7 +303,7 @@ def run_replay_offline(
         from groundstation.pipeline import Pipeline
 
         pipeline = Pipeline(settings)
-    produced = replay_offline(path, out_path, pipeline, force=force)
+    produced = replay_offline(path, out_path, pipeline, force=force, scenes=SceneTap(settings))
     _log.info("offline replay of %s: %d outputs written to %s", path, produced, out_path)
     if figures_dir is not None:
         for png in write_figures(out_path, figures_dir):
