@@ -198,9 +198,8 @@ SCENARIOS: dict[str, Scenario] = {
         ),
         Scenario(
             "calibration",
-            "the calibration protocol: disarmed and still on the floor at (0.5, 0, 0) m for "
-            "3 s, armed, 1 s spool-up, then the paper's six spots at 0.5 m/s, 4 s at each "
-            "(with --untethered: the flight of calibrate --untethered)",
+            "calibration protocol: 3 s disarmed on the floor at (0.5, 0, 0) m, then the six "
+            "spots at 0.5 m/s, 4 s each, 38 s (--untethered: for calibrate --untethered)",
             start_m=(0.5, 0.0, 0.0),
             waypoints=_CALIBRATION_WAYPOINTS,
             start_on_ground=True,
