@@ -224,7 +224,9 @@ def test_untethered_flies_past_the_tether_s_reach() -> None:
     """No taut stop: a setpoint beyond the tether's length is reached."""
     sim = _sim("hover", untethered=True)
     far = (2.5, 0.0, 1.0)  # 2.5 m from a base with 1.6 m of tether
-    sim.handle_command(Sample("tether/cf1/cmd/setpoint", json.dumps({"stamp_s": 0.0, "position_m": far}).encode()))
+    sim.handle_command(
+        Sample("tether/cf1/cmd/setpoint", json.dumps({"stamp_s": 0.0, "position_m": far}).encode())
+    )
     _run(sim, 8.0)
     np.testing.assert_allclose(sim.drones["cf1"].position_world_m, far, atol=0.02)
 
