@@ -19,6 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from groundstation.messages import Estimate, EstimateSmoothed, Telemetry, Truth
+from groundstation.outputs import NewFile, OutputError
 from groundstation.recording.format import (
     RecordingError,
 )
@@ -172,15 +173,17 @@ def write_figures(path: str | Path, figures_dir: str | Path) -> list[Path]:
 
     Per drone ``{drone}_tension.png`` (estimate ± 1 σ, smoothed estimate, truth) and
     ``{drone}_position.png`` (tether-based estimate, smoothed estimate, truth and motion
-    capture), each series where recorded (:func:`figure_series`); the legend sits above the
-    axes, clear of the data. Needs matplotlib (the ``dev`` extra); draws with the Agg
-    backend, no display.
+    capture), each series where recorded (:func:`figure_series`); the legend sits below the
+    axes, clear of the data. Each PNG is written beside its name and moved into place; an
+    existing one is replaced (``run_replay_offline`` asks for ``--force`` first). Needs
+    matplotlib (the ``dev`` extra); draws with the Agg backend, no display.
 
     Returns:
         The PNG files written.
 
     Raises:
-        RecordingError: matplotlib is missing, or the recording is unreadable.
+        RecordingError: matplotlib is missing, the recording is unreadable, or a PNG cannot
+            be written.
     """
     try:
         import matplotlib
@@ -245,8 +248,15 @@ def _draw(
     handles, labels = axs[0].get_legend_handles_labels()
     # Below the axes: a legend inside them sat on the data.
     fig.legend(handles, labels, loc="outside lower center", ncol=len(labels), fontsize=8)
-    fig.savefig(target, dpi=100)
-    plt.close(fig)
+    try:
+        # Whole or not at all; the caller decided whether an existing figure may be replaced
+        # (run_replay_offline: --force).
+        with NewFile(target, force=True) as out:
+            fig.savefig(out.stream, format="png", dpi=100)
+    except OutputError as exc:
+        raise RecordingError(str(exc)) from None
+    finally:
+        plt.close(fig)
     return target
 
 
