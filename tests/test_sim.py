@@ -252,3 +252,15 @@ def test_the_calibration_scenario_rests_disarmed_on_the_floor_then_tours_the_spo
     # Hovers at each spot and legs in between: some of the flight moves at ≥ 0.3 m/s.
     speed_h = [math.hypot(*t["velocity_mps"][:2]) for t in truth]
     assert float(np.percentile(speed_h, 90)) >= 0.3
+
+
+def test_sim_untethered_flag_sets_sim_untethered() -> None:
+    from groundstation.cli import _load, _sim_overrides, build_parser
+
+    args = build_parser().parse_args(["sim", "--untethered", "--scenario", "calibration"])
+    args.sim_overrides = _sim_overrides(args)
+    settings = _load(args)
+    assert settings.sim.untethered and settings.sim.scenario == "calibration"
+    args = build_parser().parse_args(["sim"])
+    args.sim_overrides = _sim_overrides(args)
+    assert not _load(args).sim.untethered
