@@ -487,7 +487,8 @@ def cmd_sim(args: argparse.Namespace) -> int:
         sim.start()
         try:
             print(
-                f"groundstation sim: scenario {sim.scenario.name} ({sim.profile} profile) for "
+                f"groundstation sim: scenario {sim.scenario.name} ({sim.profile} profile"
+                f"{', untethered' if sim.untethered else ''}) for "
                 f"{', '.join(sim.drones)}",
                 flush=True,
             )
@@ -922,6 +923,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="ideal: the estimator's assumptions; realistic: rigid body, lumped-mass tether, "
         "real sensor errors ([sim.realistic], docs/simulator.md)",
     )
+    p.add_argument(
+        "--untethered",
+        action="store_true",
+        help="fly without a tether: no tether force, no reel messages ([sim] untethered; "
+        "a flight for calibrate --untethered, docs/calibration.md)",
+    )
     p.set_defaults(func=cmd_sim)
 
     p = sub.add_parser("demo", help="simulator + service + dashboard in one process")
@@ -1102,6 +1109,8 @@ def _sim_overrides(args: argparse.Namespace) -> dict[str, Any]:
             over["rate_hz"] = args.rate
         if args.no_mocap:
             over["mocap"] = False
+        if args.untethered:
+            over["untethered"] = True
         if args.thrust_bias is not None:
             over["thrust_bias_ratio"] = args.thrust_bias
     return over

@@ -657,6 +657,10 @@ class SimSection(_Section):
     """Relative error of the reported thrust (0.02: reports 2 % too much)."""
     mocap: bool = True
     """Publish the motion-capture ``position_m`` in Telemetry."""
+    untethered: bool = False
+    """Fly without a tether (``sim --untethered``): no tether force on the drone and no Reel;
+    Truth's tension is only the scenario's pulls (none in ``calibration``), its ``length_m``
+    0. The flight ``calibrate --untethered`` fits (docs/calibration.md)."""
     exit_angles: bool = False
     """(added) A base sensor: publish the tether's ``exit_azimuth_rad`` / ``exit_elevation_rad``
     (and their σ) in Reel, from the simulated tether's first segment, with the noise below

@@ -77,6 +77,7 @@ UNITS = (
     "tests/test_cross_power_on.py::",  # `calibrated`: three fits
     "tests/test_calibrate_cli.py::",  # a module-scoped fit
     "tests/test_nanobench_cli.py::",
+    "tests/test_sim_calibration.py::",  # one simulated flight, recorded and replayed
 )
 """CPU modules that run whole on one worker (an expensive module-scoped fixture)."""
 

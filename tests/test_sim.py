@@ -199,3 +199,68 @@ def test_every_message_the_simulator_publishes_parses_with_the_contracts_models(
             continue
         counts[kind] += 1
     assert min(counts.values()) > 0, counts
+
+
+def test_untethered_hover_has_no_tether_force_and_publishes_no_reel() -> None:
+    sim = _sim("hover", untethered=True, accel_noise_mps2=0.0, thrust_noise_n=0.0)
+    samples = _run(sim, 6.0)
+    assert {s.key for s in samples} == {"tether/cf1/telemetry", "tether/cf1/truth"}
+    truth = [json.loads(s.payload) for s in samples if s.key.endswith("/truth")]
+    assert all(t["tension_n"] == [0.0, 0.0, 0.0] and t["length_m"] == 0.0 for t in truth)
+    assert not any(t["taut"] or t["floor_contact"] for t in truth)
+    drone = sim.drones["cf1"]
+    np.testing.assert_allclose(drone.position_world_m, (1.2, 0.0, 1.0), atol=2e-3)
+    # Nothing but the thrust holds the drone up: it carries the weight alone, level.
+    tel = json.loads([s for s in samples if s.key.endswith("/telemetry")][-1].payload)
+    assert tel["thrust_n"] == pytest.approx(drone.mass_kg * 9.81, rel=1e-3)
+    np.testing.assert_allclose(tel["accel_mps2"], (0.0, 0.0, 9.81), atol=1e-3)
+    # The same scenario on its tether leans on it (the tether is not switched off there).
+    tethered = _sim("hover", accel_noise_mps2=0.0, thrust_noise_n=0.0)
+    _run(tethered, 1.0)
+    assert np.linalg.norm(tethered.drones["cf1"].tension_world_n) > 0.01
+
+
+def test_untethered_flies_past_the_tether_s_reach() -> None:
+    """No taut stop: a setpoint beyond the tether's length is reached."""
+    sim = _sim("hover", untethered=True)
+    far = (2.5, 0.0, 1.0)  # 2.5 m from a base with 1.6 m of tether
+    sim.handle_command(
+        Sample("tether/cf1/cmd/setpoint", json.dumps({"stamp_s": 0.0, "position_m": far}).encode())
+    )
+    _run(sim, 8.0)
+    np.testing.assert_allclose(sim.drones["cf1"].position_world_m, far, atol=0.02)
+
+
+def test_the_coin_bench_has_no_untethered_flight() -> None:
+    from groundstation.config import ConfigError
+
+    with pytest.raises(ConfigError, match="coin"):
+        _sim("coin", untethered=True)
+
+
+def test_the_calibration_scenario_rests_disarmed_on_the_floor_then_tours_the_spots() -> None:
+    sim = _sim("calibration", untethered=True)
+    sc = SCENARIOS["calibration"]
+    samples = _run(sim, sc.duration_s or 0.0)
+    truth = [json.loads(s.payload) for s in samples if s.key.endswith("/truth")]
+    rest = [t for t in truth if t["stamp_s"] < sc.arm_at_s]
+    assert len(rest) > 2.5 * sim.settings.sim.rate_hz  # ≥ 2.5 s still, disarmed, on the floor
+    assert all(not t["armed"] and t["on_ground"] for t in rest)
+    assert all(t["velocity_mps"] == [0.0, 0.0, 0.0] for t in rest)
+    assert truth[-1]["armed"] and not truth[-1]["on_ground"]
+    np.testing.assert_allclose(truth[-1]["position_m"], (0.9, 0.6, 1.0), atol=0.05)
+    # Hovers at each spot and legs in between: some of the flight moves at ≥ 0.3 m/s.
+    speed_h = [math.hypot(*t["velocity_mps"][:2]) for t in truth]
+    assert float(np.percentile(speed_h, 90)) >= 0.3
+
+
+def test_sim_untethered_flag_sets_sim_untethered() -> None:
+    from groundstation.cli import _load, _sim_overrides, build_parser
+
+    args = build_parser().parse_args(["sim", "--untethered", "--scenario", "calibration"])
+    args.sim_overrides = _sim_overrides(args)
+    settings = _load(args)
+    assert settings.sim.untethered and settings.sim.scenario == "calibration"
+    args = build_parser().parse_args(["sim"])
+    args.sim_overrides = _sim_overrides(args)
+    assert not _load(args).sim.untethered

@@ -56,6 +56,8 @@ class DroneSim:
     thrust_ramp_s: float = 0.0
     """After arming, thrust ramps linearly 0 → weight over this time (level) before the
     position controller takes over (:attr:`Scenario.thrust_ramp_s`)."""
+    tethered: bool = True
+    """False: no tether (``[sim] untethered``): no tether force, no taut stop."""
     armed_for_s: float = 0.0
     """Time since the last arming, s."""
     # outputs of the last step
@@ -72,6 +74,8 @@ class DroneSim:
 
     def _tether(self, px: float, py: float, pz: float) -> tuple[Vec3, bool, bool]:
         """The tether's force on the drone at (px, py, pz), floor contact, taut."""
+        if not self.tethered:
+            return (0.0, 0.0, 0.0), False, False
         if self.coin_mass_kg is not None and self.coin_arm_m is not None:
             # The coin bench: a weightless thread over an arm, T = m_coin·g toward the arm.
             ax, ay, az = self.coin_arm_m.tolist()
@@ -197,7 +201,7 @@ class DroneSim:
                 v[2] = max(0.0, v[2])
             cx, cy, cz = p[0] - bx, p[1] - by, p[2] - bz
             dist = math.sqrt(cx * cx + cy * cy + cz * cz)
-            if dist > reach and self.coin_mass_kg is None:
+            if dist > reach and self.coin_mass_kg is None and self.tethered:
                 # Taut stop: the tether does not stretch; drop the outward velocity.
                 ux, uy, uz = cx / dist, cy / dist, cz / dist
                 p = [bx + ux * reach, by + uy * reach, bz + uz * reach]

@@ -85,6 +85,8 @@ class RealisticDrone:
         thrust_ramp_s: spool-up after arming, s.
         coin_mass_kg, coin_arm_m: the coin bench instead of a tether.
         mocap: publish motion capture (``[sim] mocap``); False: no ``position_m``.
+        tethered: False: no tether (``[sim] untethered``): no tether force, Truth's
+            ``length_m`` 0, no floor contact, never taut.
     """
 
     def __init__(
@@ -104,6 +106,7 @@ class RealisticDrone:
         coin_mass_kg: float | None = None,
         coin_arm_m: np.ndarray | None = None,
         mocap: bool = True,
+        tethered: bool = True,
     ) -> None:
         self.cfg = cfg
         self.sensors = sensor_params(cfg)
@@ -122,6 +125,7 @@ class RealisticDrone:
         self.offset_m = np.zeros(3)
         self.coin_mass_kg = coin_mass_kg
         self.publish_mocap = mocap
+        self.tethered = tethered
         self._attitude_offset_wxyz: np.ndarray | None = None
         self.coin_arm_m = coin_arm_m
         self.battery = Battery(self.sensors)
@@ -169,7 +173,7 @@ class RealisticDrone:
         self._mocap_new = False
         self.seq = 0
         # Start in equilibrium: the tether at rest, the controller holding against it.
-        if coin_mass_kg is None:
+        if coin_mass_kg is None and tethered:
             self.tether.settle(4.0, dt_s=self.physics_dt_s, extra_damping_per_s=3.0)
         self.tension_world_n = self._tether_force()
         if not start_on_ground and armed:
@@ -227,11 +231,11 @@ class RealisticDrone:
 
     @property
     def floor_contact(self) -> bool:
-        return self.coin_mass_kg is None and self.tether.floor_contact
+        return self.coin_mass_kg is None and self.tethered and self.tether.floor_contact
 
     @property
     def taut(self) -> bool:
-        return self.coin_mass_kg is None and self.tether.taut
+        return self.coin_mass_kg is None and self.tethered and self.tether.taut
 
     @property
     def thrust_n(self) -> float:
@@ -281,6 +285,8 @@ class RealisticDrone:
             # The coin bench: a weightless thread over an arm, T = m_coin·g toward the arm.
             d = self.coin_arm_m - self.body.position_world_m
             return d / np.linalg.norm(d) * (self.coin_mass_kg * GRAVITY_MPS2)
+        if not self.tethered:
+            return np.zeros(3)
         return self.tether.force_on_drone_world_n.copy()
 
     def _tick(self, h: float, length_m: float | None = None) -> None:
@@ -290,7 +296,7 @@ class RealisticDrone:
                 2.0 * math.pi * self.t_s / self.cfg.yaw_period_s
             )
         body.step(h, self.tension_world_n + self.external_world_n)
-        if self.coin_mass_kg is None:
+        if self.coin_mass_kg is None and self.tethered:
             self.tether.step(h, body.position_world_m, body.velocity_world_mps, length_m)
         self.tension_world_n = self._tether_force()
 
@@ -373,7 +379,7 @@ class RealisticDrone:
             "position_m": [float(v) for v in body.position_world_m],
             "velocity_mps": [float(v) for v in body.velocity_world_mps],
             "tension_n": [float(v) for v in self.tension_world_n + self.external_world_n],
-            "length_m": self.tether.length_m,
+            "length_m": self.tether.length_m if self.tethered else 0.0,
             "base_m": [float(v) for v in self.base_world_m],
             "floor_contact": self.floor_contact,
             "taut": self.taut,

@@ -1,7 +1,8 @@
 """Runs scenarios on a bus in (scaled) real time: the simulator as an edge.
 
 :class:`Simulator` publishes ``tether/{drone}/telemetry``, ``tether/{drone}/reel`` and the
-ground truth ``tether/{drone}/truth``, and obeys ``cmd/setpoint`` and ``cmd/stop``.
+ground truth ``tether/{drone}/truth``, and obeys ``cmd/setpoint`` and ``cmd/stop``. With
+``[sim] untethered`` the drones fly without a tether: no tether force and no Reel.
 
 Lock-step API (benchmarks, no bus, no clock), the same for both profiles::
 
@@ -30,7 +31,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from groundstation.bus import Bus, Sample, Subscription
-from groundstation.config import Settings
+from groundstation.config import ConfigError, Settings
 from groundstation.messages import InvalidMessage, SetpointIn, StopIn, Truth
 from groundstation.sim.scenarios import PAPER_BASE_M, SCENARIOS, scenario_names
 
@@ -62,6 +63,12 @@ class Simulator:
         self.settings = settings
         self.bus = bus
         self.scenario = SCENARIOS[name]
+        self.untethered = settings.sim.untethered
+        if self.untethered and self.scenario.coin_mass_kg is not None:
+            raise ConfigError(
+                f"[sim] untethered: scenario {name!r} hangs a coin on a thread in place of "
+                "the tether, it has no untethered flight"
+            )
         self.rng = np.random.default_rng(settings.sim.seed)
         # The base sensor draws from its own stream: switching it on changes no other noise.
         self._base_rng = np.random.default_rng([settings.sim.seed, 0xBA5E])
@@ -177,6 +184,7 @@ class Simulator:
             if sc.coin_mass_kg is not None
             else None,
             mocap=self.settings.sim.mocap,
+            tethered=not self.untethered,
         )
         drone.offset_m = offset
         return drone
@@ -201,6 +209,7 @@ class Simulator:
             coin_arm_m=np.array(sc.coin_arm_m, float) + offset
             if sc.coin_mass_kg is not None
             else None,
+            tethered=not self.untethered,
         )
         drone.offset_m = offset
         if not sc.start_on_ground:
@@ -342,7 +351,7 @@ class Simulator:
             position_m=_v3(drone.position_world_m),
             velocity_mps=_v3(drone.velocity_world_mps),
             tension_n=_v3(drone.tension_world_n + external),
-            length_m=drone.length_m,
+            length_m=0.0 if self.untethered else drone.length_m,
             base_m=_v3(drone.base_world_m),
             floor_contact=drone.floor_contact,
             taut=drone.taut,
@@ -351,7 +360,7 @@ class Simulator:
             phase=self.scenario.name,
         )
         out.append(Sample(f"tether/{drone_id}/truth", truth.to_json()))
-        if publish_reel and self.scenario.coin_mass_kg is None:
+        if publish_reel and self.scenario.coin_mass_kg is None and not self.untethered:
             reel: dict[str, object] = {
                 "stamp_s": round(self.t_s, 9),
                 "length_m": drone.length_m,
@@ -409,7 +418,7 @@ class Simulator:
                 errors=errors,
             )
             out.append(Sample(f"tether/{drone_id}/truth", truth.to_json()))
-        if publish_reel and self.scenario.coin_mass_kg is None:
+        if publish_reel and self.scenario.coin_mass_kg is None and not self.untethered:
             reel: dict[str, object] = {
                 "stamp_s": round(self.t_s, 9),
                 "length_m": drone.length_m,

@@ -115,6 +115,33 @@ def _climb(
     )
 
 
+def _calibration_flight(
+    floor_m: tuple[float, float, float],
+    arm_at_s: float,
+    ramp_s: float,
+    speed_mps: float,
+    dwell_s: float,
+) -> tuple[tuple[Waypoint, ...], float]:
+    """The calibration protocol's waypoints, and when the flight ends.
+
+    On the floor at ``floor_m`` until ``arm_at_s + ramp_s``; then up to the first of the
+    paper's hover spots and through all six at ``speed_mps``, ``dwell_s`` at each: hovers for
+    the tethered fit, legs in between for the rotor drag of the untethered one.
+    """
+    waypoints = [Waypoint(0.0, floor_m)]
+    at_s, here = arm_at_s + ramp_s, floor_m
+    for spot in PAPER_HOVER_SPOTS_M:
+        leg = _climb(here, spot, at_s, speed_mps)
+        waypoints.extend(leg)
+        at_s, here = leg[-1].at_s + dwell_s, spot
+    return tuple(waypoints), at_s
+
+
+_CALIBRATION_WAYPOINTS, _CALIBRATION_END_S = _calibration_flight(
+    (0.5, 0.0, 0.0), arm_at_s=3.0, ramp_s=1.0, speed_mps=0.5, dwell_s=4.0
+)
+
+
 def _spots_tour(dwell_s: float) -> tuple[Waypoint, ...]:
     return tuple(Waypoint(i * dwell_s, spot) for i, spot in enumerate(PAPER_HOVER_SPOTS_M))
 
@@ -168,6 +195,17 @@ SCENARIOS: dict[str, Scenario] = {
             arm_at_s=2.0,
             thrust_ramp_s=2.0,
             duration_s=15.0,
+        ),
+        Scenario(
+            "calibration",
+            "calibration protocol: 3 s disarmed on the floor at (0.5, 0, 0) m, then the six "
+            "spots at 0.5 m/s, 4 s each, 38 s (--untethered: for calibrate --untethered)",
+            start_m=(0.5, 0.0, 0.0),
+            waypoints=_CALIBRATION_WAYPOINTS,
+            start_on_ground=True,
+            arm_at_s=3.0,
+            thrust_ramp_s=1.0,
+            duration_s=_CALIBRATION_END_S,
         ),
         Scenario(
             "coin",
