@@ -6,8 +6,13 @@ The model is the hover model with the motion-capture acceleration, ``eq:NE_tethe
 accelerometer's reading replaced by the kinematics it should read::
 
     T_ref = m·(g·e3 + p̈) − R·u·F + R·D·Rᵀ·v                  # world frame, N
-    F     = thrust_n·(s + k·(vbat_v − v_ref)),   u = R_x(about_x)·R_y(about_y)·e3
+    F     = thrust_n·(s + k·(vbat_v − v_ref))                 # thrust_model "vbat_linear"
+    F     = 4·f_ref·(v_motor / v_ref)^n                       # thrust_model "motor_voltage"
+    u     = R_x(about_x)·R_y(about_y)·e3
     D     = diag(D_xy, D_xy, 0)                              # rotor drag, body frame
+
+(``v_motor`` the motor voltage the nominal thrust and the battery give,
+groundstation.thrust_model)
 
 with ``T_ref`` the catenary's force at the motion-capture position (tethered) or zero
 (untethered), ``p̈`` and ``v`` the motion-capture acceleration and velocity. The
@@ -15,9 +20,9 @@ accelerometer does not appear: its bias and misalignment change at every power-o
 to that power-on (the online estimator learns them there, groundstation.slow_accel). So the
 fit returns two kinds of numbers, kept apart:
 
-* **airframe constants**, shared by every flight: thrust scale ``s``, battery term ``k``,
-  thrust axis ``(about_x, about_y)``, rotor drag ``D_xy``. These are written to the
-  configuration.
+* **airframe constants**, shared by every flight: thrust scale ``s`` and battery term ``k``
+  (or the motor's ``f_ref`` and ``n``), thrust axis ``(about_x, about_y)``, rotor drag
+  ``D_xy``. These are written to the configuration.
 * **per-power-on nuisances**, one per flight (recording): the accelerometer's slow error
   (its mean reading minus what the kinematics say, body frame) and the tension residual that
   the constants leave in that flight (a flight's own tilt or thrust offset). These are
@@ -50,9 +55,17 @@ from groundstation.calibration import (
     hover_mask,
 )
 from groundstation.tension import thrust_axis_body
+from groundstation.thrust_model import (
+    EXPONENT_BOUNDS,
+    NOMINAL_PWM_MAP,
+    ROTOR_EXPONENT,
+    ThrustModel,
+    mean_motor_voltage_v_array,
+)
 
 __all__ = [
     "AIRFRAME_PARAMETERS",
+    "MOTOR_VOLTAGE_PARAMETERS",
     "MOVING",
     "AirframeFit",
     "FlightNuisance",
@@ -69,7 +82,17 @@ AIRFRAME_PARAMETERS: tuple[str, ...] = (
     "vbat_slope_per_v",
     "rotor_drag_n_s_per_m",
 )
-"""The constants, in order."""
+"""The constants of the ``vbat_linear`` thrust model, in order."""
+MOTOR_VOLTAGE_PARAMETERS: tuple[str, ...] = (
+    "thrust_motor_ref_n",
+    "about_x_rad",
+    "about_y_rad",
+    "thrust_motor_exponent",
+    "rotor_drag_n_s_per_m",
+)
+"""The constants of the ``motor_voltage`` thrust model, in order (the same slots)."""
+_MOTOR_SCALES = np.array([0.005, 0.02, 0.02, 0.5, 0.01])
+_MOTOR_SCALES.setflags(write=False)
 
 _SCALES = np.array([0.05, 0.02, 0.02, 0.1, 0.01])
 """Typical magnitude of each (the solver's scaling)."""
@@ -112,16 +135,19 @@ class AirframeFit:
     """Result of :func:`fit_airframe`.
 
     Attributes:
-        values: each of :data:`AIRFRAME_PARAMETERS`.
+        values: each of :attr:`parameters`.
         std: its standard error (None when fixed), inflated for autocorrelation.
         fixed: name → why it was not fitted.
         flights: the per-power-on nuisances.
         rms_before_n / rms_after_n: (3,) residual RMS per world axis with the starting values
             (the nominal map, no axis, no drag) and after the fit, N.
         samples: samples used; n_eff: their effective number (autocorrelation).
-        vbat_ref_v: voltage at which ``thrust_scale`` holds, V.
+        vbat_ref_v: voltage at which ``thrust_scale`` holds, V (``motor_voltage``: the
+            samples' median battery voltage, assumed for a Telemetry without ``vbat_v``).
         vbat_range_v: battery range of the samples used, V, or None.
         tethered: the reference was the catenary (else zero tension).
+        thrust_model: the model fitted; ``motor_voltage`` also its ``motor_ref_v`` (V) and
+            ``pwm_map``.
     """
 
     values: dict[str, float]
@@ -135,6 +161,17 @@ class AirframeFit:
     vbat_ref_v: float
     vbat_range_v: tuple[float, float] | None
     tethered: bool
+    thrust_model: ThrustModel = "vbat_linear"
+    motor_ref_v: float | None = None
+    pwm_map: tuple[float, float, float] = NOMINAL_PWM_MAP
+
+    @property
+    def parameters(self) -> tuple[str, ...]:
+        """The constants' names, in order (:data:`AIRFRAME_PARAMETERS` or
+        :data:`MOTOR_VOLTAGE_PARAMETERS`)."""
+        if self.thrust_model == "motor_voltage":
+            return MOTOR_VOLTAGE_PARAMETERS
+        return AIRFRAME_PARAMETERS
 
     @property
     def flight_spread_n(self) -> FloatArray:
@@ -186,15 +223,19 @@ def fit_airframe(
     vbat_ref_v: float = 3.9,
     samples: NDArray[np.bool_] | None = None,
     min_samples_s: float = 3.0,
+    thrust_model: ThrustModel = "vbat_linear",
+    pwm_map: tuple[float, float, float] = NOMINAL_PWM_MAP,
+    exponent_bounds: tuple[float, float] = EXPONENT_BOUNDS,
 ) -> AirframeFit:
     """Fit the airframe constants (module doc) across every flight in ``data``.
 
     Robust least squares (scipy ``least_squares``, Huber loss) of the world-frame residual
     ``m·(g·e3 + p̈) − R·u·F + R·D·Rᵀ·v − T_ref`` per sample, each axis whitened by its robust
     scale; standard errors from ``(JᵀJ)⁻¹`` times the residual variance and the integrated
-    autocorrelation time. The battery term is fitted only when the battery spans
-    :data:`MIN_VBAT_SPAN_V`, the drag only when the drone moved
-    (:data:`MIN_SPEED_FOR_DRAG_MPS`); otherwise each is fixed at 0 and said so.
+    autocorrelation time. The battery term (``k``, or the exponent ``n``) is fitted only
+    when the battery spans :data:`MIN_VBAT_SPAN_V` (else ``k`` is fixed at 0, ``n`` at
+    :data:`~groundstation.thrust_model.ROTOR_EXPONENT`), the drag only when the drone moved
+    (:data:`MIN_SPEED_FOR_DRAG_MPS`, else 0); each fixed one is said so.
 
     Args:
         data: one drone's samples, one segment per recording (power-on).
@@ -205,12 +246,18 @@ def fit_airframe(
         samples: (n,) which samples to use; None: steady hover (tethered) or flight within
             :data:`MOVING` (untethered), at least :data:`MIN_HEIGHT_M` above the floor.
         min_samples_s: less usable flight than this is refused, s.
+        thrust_model: ``vbat_linear`` or ``motor_voltage`` (module doc); the latter needs
+            ``vbat_v`` on at least 90 % of the samples.
+        pwm_map: ``motor_voltage``: the per-motor map that made ``thrust_n``.
+        exponent_bounds: ``motor_voltage``: the exponent is fitted within these
+            (:data:`~groundstation.thrust_model.EXPONENT_BOUNDS`); equal bounds fix it.
 
     Returns:
         The :class:`AirframeFit`.
 
     Raises:
-        CalibrationError: too little usable flight, or no catenary reference.
+        CalibrationError: too little usable flight, no catenary reference, or no battery
+            voltage for ``motor_voltage``.
     """
     tethered = weight_n_per_m is not None
     m = float(mass_kg)
@@ -246,11 +293,23 @@ def fit_airframe(
     drag_dir = np.einsum("nij,nj->ni", R, v_b)
     kin = m * (acc[idx] + np.array([0.0, 0.0, GRAVITY_MPS2]))
 
+    motor = thrust_model == "motor_voltage"
+    names = MOTOR_VOLTAGE_PARAMETERS if motor else AIRFRAME_PARAMETERS
+    scales = _MOTOR_SCALES if motor else _SCALES
     fixed: dict[str, str] = {}
     vbat_span = float(np.ptp(vb[have_v])) if have_v.any() else 0.0
-    if not (have_v.mean() > 0.9 and vbat_span >= MIN_VBAT_SPAN_V):
-        fixed["vbat_slope_per_v"] = (
-            f"battery spans {vbat_span:.2f} V (< {MIN_VBAT_SPAN_V} V, or no vbat_v): fixed at 0"
+    if motor and not have_v.mean() > 0.9:
+        raise CalibrationError(
+            f'thrust_model = "motor_voltage" needs vbat_v: {100 * have_v.mean():.0f} % of the '
+            'usable samples carry it (use thrust_model = "vbat_linear")'
+        )
+    n_lo, n_hi = exponent_bounds
+    if motor and n_lo == n_hi:
+        fixed[names[3]] = f"fixed at {n_lo:g} (asked)"
+    elif not (have_v.mean() > 0.9 and vbat_span >= MIN_VBAT_SPAN_V):
+        fixed[names[3]] = (
+            f"battery spans {vbat_span:.2f} V (< {MIN_VBAT_SPAN_V} V, or no vbat_v): fixed at "
+            + (f"{ROTOR_EXPONENT:g} (thrust ∝ ω², ω ∝ motor voltage)" if motor else "0")
         )
     speed_h = np.linalg.norm(v_w[:, :2], axis=1)
     p90 = float(np.percentile(speed_h, 90)) if speed_h.size else 0.0
@@ -259,19 +318,34 @@ def fit_airframe(
             f"90th-percentile horizontal speed {p90:.2f} m/s (< {MIN_SPEED_FOR_DRAG_MPS} m/s): "
             "fixed at 0"
         )
-    free = np.array([name not in fixed for name in AIRFRAME_PARAMETERS])
+    free = np.array([name not in fixed for name in names])
+    motor_ref_v: float | None = None
+    v_rel = np.ones_like(thr)  # motor voltage / its reference (motor_voltage only)
+    if motor:
+        v_motor = mean_motor_voltage_v_array(thr, np.where(have_v, vb, np.nanmedian(vb)), pwm_map)
+        motor_ref_v = round(float(np.median(v_motor)), 3)
+        v_rel = v_motor / motor_ref_v
 
     def residual(theta: FloatArray) -> FloatArray:
         s, ax, ay, k, d = theta
         u = np.asarray(thrust_axis_body(ax, ay))
-        F = thr * (s + k * dv)
+        F = 4.0 * s * v_rel**k if motor else thr * (s + k * dv)
         thrust_w = np.einsum("nij,j->ni", R, u) * F[:, None]
         return kin - thrust_w + d * drag_dir - ref  # (n, 3), N
 
-    theta0 = np.array([1.0, 0.0, 0.0, 0.0, 0.0])
-    r0 = residual(theta0)
+    n0 = n_lo if n_lo == n_hi else min(max(ROTOR_EXPONENT, n_lo), n_hi)
+    if motor and names[3] not in fixed:
+        n0 = 0.5 * (n_lo + n_hi)  # inside the bounds, as least_squares needs
+    theta0 = np.array([1.0, 0.0, 0.0, n0 if motor else 0.0, 0.0])
+    lower = np.full(5, -np.inf)
+    upper = np.full(5, np.inf)
+    if motor:
+        lower[3], upper[3] = n_lo, n_hi
+    r0 = kin - R[:, :, 2] * thr[:, None] - ref  # the nominal thrust along body z
     # Start the scale where the hover says (the nominal map may be far off).
     theta0[0] = float(np.median(kin[:, 2] - ref[:, 2]) / max(np.median(thr), 1e-9))
+    if motor:
+        theta0[0] = float(np.median(kin[:, 2] - ref[:, 2])) / 4.0
     segs = data.segment[idx]
 
     def whiten_scale(r: FloatArray) -> FloatArray:
@@ -288,11 +362,16 @@ def fit_airframe(
         th[free] = x
         return (residual(th) / sig).ravel()
 
-    sol = least_squares(fun, theta0[free], loss="huber", f_scale=1.5, x_scale=_SCALES[free])
+    bounds = (lower[free], upper[free])
+    sol = least_squares(
+        fun, theta0[free], loss="huber", f_scale=1.5, x_scale=scales[free], bounds=bounds
+    )
     theta = theta0.copy()
     theta[free] = sol.x
     sig = whiten_scale(residual(theta))
-    sol = least_squares(fun, theta[free], loss="huber", f_scale=1.5, x_scale=_SCALES[free])
+    sol = least_squares(
+        fun, theta[free], loss="huber", f_scale=1.5, x_scale=scales[free], bounds=bounds
+    )
     theta[free] = sol.x
     r1 = residual(theta)
 
@@ -311,9 +390,9 @@ def fit_airframe(
         diag = np.sqrt(np.maximum(np.diag(cov), 0.0))
     except np.linalg.LinAlgError:
         diag = np.full(int(free.sum()), math.inf)
-    std: dict[str, float | None] = dict.fromkeys(AIRFRAME_PARAMETERS)
+    std: dict[str, float | None] = dict.fromkeys(names)
     for c, i in enumerate(np.flatnonzero(free).tolist()):
-        std[AIRFRAME_PARAMETERS[i]] = float(diag[c])
+        std[names[i]] = float(diag[c])
 
     flights = []
     R_all = R
@@ -332,7 +411,7 @@ def fit_airframe(
             )
         )
     return AirframeFit(
-        values={p: float(theta[i]) for i, p in enumerate(AIRFRAME_PARAMETERS)},
+        values={p: float(theta[i]) for i, p in enumerate(names)},
         std=std,
         fixed=fixed,
         flights=tuple(flights),
@@ -340,7 +419,10 @@ def fit_airframe(
         rms_after_n=np.sqrt((r1**2).mean(axis=0)),
         samples=int(idx.size),
         n_eff=float(idx.size / tau),
-        vbat_ref_v=float(vbat_ref_v),
+        vbat_ref_v=round(float(np.median(vb[have_v])), 3) if motor else float(vbat_ref_v),
         vbat_range_v=(float(vb[have_v].min()), float(vb[have_v].max())) if have_v.any() else None,
         tethered=tethered,
+        thrust_model=thrust_model,
+        motor_ref_v=motor_ref_v,
+        pwm_map=pwm_map,
     )

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import contextvars
 import json
+import logging
 import math
 import os
 import re
@@ -41,6 +42,24 @@ from pydantic_settings import (
 )
 
 from groundstation.messages import DRONE_ID_RE
+
+NOMINAL_PWM_MAP: tuple[float, float, float] = (2.130295e-11, 1.032633e-6, 5.484560e-4)
+"""The widely used Crazyflie 2.x PWM→thrust map, per motor ``a·pwm² + b·pwm + c`` N (the
+same as groundstation.thrust_model's, tested equal: the contract imports no physics)."""
+ThrustModel = Literal["vbat_linear", "motor_voltage"]
+"""``[calibration] thrust_model`` (groundstation.thrust_model's, tested equal)."""
+
+_log = logging.getLogger(__name__)
+_warned: set[str] = set()
+"""Warnings already logged by this process (a key that lost its meaning: told once)."""
+
+
+def _warn_once(text: str) -> None:
+    """Log ``text`` as a warning the first time this process sees it."""
+    if text not in _warned:
+        _warned.add(text)
+        _log.warning("%s", text)
+
 
 __all__ = [
     "BaseSection",
@@ -288,10 +307,15 @@ class CalibrationSection(_Section):
     """``[calibration]`` (added; per drone ``[drones.<id>.calibration]``): sensor corrections.
 
     Applied in the tension observation (eq:NE_tether): ``accel = accel_mps2 − accel_bias``,
-    thrust ``F = thrust_n · (thrust_scale + thrust_vbat_slope_per_v · (vbat_v −
-    thrust_vbat_ref_v))`` (the voltage term only when Telemetry carries ``vbat_v``), along the
-    body axis ``R_x(about_x) · R_y(about_y) · e3`` instead of body +z. Written by
-    ``groundstation calibrate``; the defaults change nothing.
+    thrust by ``thrust_model`` (groundstation.thrust_model, docs/battery_model.md):
+    ``vbat_linear`` ``F = thrust_n · (thrust_scale + thrust_vbat_slope_per_v · (vbat_v −
+    thrust_vbat_ref_v))`` (the voltage term only when Telemetry carries ``vbat_v``);
+    ``motor_voltage`` ``F = thrust_scale · 4 · thrust_motor_ref_n · (v /
+    thrust_motor_ref_v)^thrust_motor_exponent`` with ``v = vbat_v · pwm / 65535`` the motor
+    voltage and ``pwm`` the mean motor command ``thrust_pwm_map`` gives ``thrust_n / 4``
+    (``thrust_vbat_ref_v`` stands in for a missing ``vbat_v``); along the body axis
+    ``R_x(about_x) · R_y(about_y) · e3`` instead of body +z. Written by ``groundstation
+    calibrate``; the defaults change nothing.
     """
 
     thrust_scale: float = Field(1.0, gt=0.2, lt=5.0)
@@ -302,9 +326,30 @@ class CalibrationSection(_Section):
     accel_bias_mps2: Vec3 = (0.0, 0.0, 0.0)
     """Subtracted from ``accel_mps2``, body frame, m/s²."""
     thrust_vbat_slope_per_v: float = 0.0
-    """Change of the thrust scale per volt of ``vbat_v`` above ``thrust_vbat_ref_v``, 1/V."""
+    """Change of the thrust scale per volt of ``vbat_v`` above ``thrust_vbat_ref_v``, 1/V
+    (fitted; ``vbat_linear`` only: ``motor_voltage`` has its exponent instead)."""
     thrust_vbat_ref_v: float = Field(3.9, gt=0.0)
-    """Battery voltage at which ``thrust_scale`` holds, V."""
+    """Battery voltage at which ``thrust_scale`` holds, V (``motor_voltage``: the battery
+    voltage assumed for a Telemetry without ``vbat_v``, the calibration's median)."""
+    thrust_model: ThrustModel = "vbat_linear"
+    """(added) How thrust follows the battery (docs/battery_model.md): ``vbat_linear``, a
+    straight line in ``vbat_v`` (holds over the calibrated range only); ``motor_voltage``,
+    a power of the motor voltage (duty × battery), which extrapolates below the range. The
+    latter needs ``thrust_n`` from the PWM map ``thrust_pwm_map`` (the bridge's ``thrust_model
+    = "pwm_map"``). ``groundstation calibrate`` fits the one configured here."""
+    thrust_pwm_map: tuple[float, float, float] = NOMINAL_PWM_MAP
+    """(added) ``[a, b, c]`` of the per-motor map ``a·pwm² + b·pwm + c`` N that made
+    Telemetry's ``thrust_n`` (the bridge's ``[crazyflie] thrust_map``; physical), inverted by
+    ``motor_voltage``; ``a > 0``, ``b >= 0``."""
+    thrust_motor_ref_n: float = Field(0.075, gt=0.0, lt=10.0)
+    """(added) ``motor_voltage``: one motor's thrust at motor voltage ``thrust_motor_ref_v``,
+    N (fitted by ``groundstation calibrate``)."""
+    thrust_motor_ref_v: float = Field(3.0, gt=0.0, lt=60.0)
+    """(added) ``motor_voltage``: the reference motor voltage, V (the calibration's median
+    motor voltage, so that ``thrust_motor_ref_n`` and the exponent are nearly independent)."""
+    thrust_motor_exponent: float = Field(2.0, gt=0.2, lt=5.0)
+    """(added) ``motor_voltage``: thrust ∝ (motor voltage)^this, dimensionless (fitted; 2,
+    thrust ∝ ω² with ω ∝ v, where the data do not determine it)."""
     accel_slow: bool = True
     """(added) Replace the accelerometer's slow content by what transfers across power-ons
     (groundstation.slow_accel, docs/estimator_design.md): its mean is learnt at rest and, in
@@ -355,6 +400,27 @@ class CalibrationSection(_Section):
         if not (0.0 < lo <= hi < 60.0):
             raise ValueError(f"{list(value)!r}: must be [lo, hi] volts with 0 < lo <= hi < 60")
         return value
+
+    @field_validator("thrust_pwm_map")
+    @classmethod
+    def _invertible_map(cls, value: tuple[float, float, float]) -> tuple[float, float, float]:
+        a, b, c = value
+        top = a * 65535.0**2 + b * 65535.0 + c
+        if not (all(math.isfinite(v) for v in value) and a > 0.0 and b >= 0.0 and 0 < top < 10):
+            raise ValueError(
+                f"{list(value)!r}: a > 0, b >= 0 and a thrust at pwm 65535 within (0, 10) N"
+            )
+        return value
+
+    @model_validator(mode="after")
+    def _keys_without_meaning(self) -> CalibrationSection:
+        if self.thrust_model == "motor_voltage" and self.thrust_vbat_slope_per_v != 0.0:
+            _warn_once(
+                f"[calibration] thrust_vbat_slope_per_v = {self.thrust_vbat_slope_per_v:g} is "
+                'not used with thrust_model = "motor_voltage": thrust_motor_exponent (the '
+                "power of the motor voltage) replaced it"
+            )
+        return self
 
     @model_validator(mode="after")
     def _rest_required_needs_rest(self) -> CalibrationSection:
@@ -684,7 +750,7 @@ class CrazyflieSection(_Section):
     ``[calibration]`` on top, so a thrust scale is never applied twice.
     """
 
-    thrust_map: tuple[float, float, float] = (2.130295e-11, 1.032633e-6, 5.484560e-4)
+    thrust_map: tuple[float, float, float] = NOMINAL_PWM_MAP
     """``[a, b, c]``: thrust of one motor, ``a·pwm² + b·pwm + c`` newtons, pwm in 0..65535
     (a motor at pwm 0 gives 0 N). The default is the widely used Crazyflie 2.x fit."""
     motor_variables: Literal["motor", "pwm"] = "motor"

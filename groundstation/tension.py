@@ -39,6 +39,14 @@ from groundstation.tension_change import _Ring as _Ring
 from groundstation.tension_drift import DriftAdaptation
 from groundstation.tension_kalman import DiagonalKalman
 from groundstation.tension_noise import NoiseEstimate, NoiseStatus
+from groundstation.thrust_model import (
+    MOTORS,
+    NOMINAL_PWM_MAP,
+    PWM_FULL_SCALE,
+    ROTOR_EXPONENT,
+    THRUST_MODELS,
+    ThrustModel,
+)
 
 __all__ = [
     "GRAVITY_MPS2",
@@ -228,15 +236,20 @@ class ObservationCalibration:
 
         f   = accel_mps2 - accel_bias_mps2
         F   = thrust_n * (thrust_scale + thrust_vbat_slope_per_v * (vbat_v - thrust_vbat_ref_v))
+                                              # thrust_model "vbat_linear"
+        F   = thrust_scale * 4 f_ref (v / v_ref)^n,   v = vbat_v pwm(thrust_n) / 65535
+                                              # thrust_model "motor_voltage"
         b   = R_x(about_x) R_y(about_y) e3
             = (sin about_y, -sin about_x cos about_y, cos about_x cos about_y)
         T   = m R f - R b F + R D R^T v          # eq:NE_tether with the corrections
 
     ``D = diag(D_xy, D_xy, 0)`` is the rotors' momentum drag in the body frame (the drag force
     ``-R D R^T v`` would otherwise read as tension; :mod:`groundstation.slow_accel` says where
-    ``v`` comes from). The voltage term applies only when the sample carries ``vbat_v``, the
-    drag term only with a velocity. The defaults change nothing (``T = m R f - R e3 F``, bit
-    for bit the uncalibrated formula).
+    ``v`` comes from). The linear voltage term applies only when the sample carries
+    ``vbat_v``; the motor-voltage model (:mod:`groundstation.thrust_model`) takes
+    ``thrust_vbat_ref_v`` for a sample without one. The drag term applies only with a
+    velocity. The defaults change nothing (``T = m R f - R e3 F``, bit for bit the
+    uncalibrated formula).
 
     Attributes:
         thrust_scale: Factor on the reported thrust (the nominal PWM->thrust map's error),
@@ -250,6 +263,12 @@ class ObservationCalibration:
         thrust_vbat_ref_v: Battery voltage at which ``thrust_scale`` holds, V, > 0.
         rotor_drag_n_s_per_m: ``D_xy``, the rotors' drag per body-horizontal speed,
             N·s/m, >= 0.
+        thrust_model: ``"vbat_linear"`` or ``"motor_voltage"`` (the model above).
+        thrust_pwm_map: ``(a, b, c)``: the per-motor map ``a·pwm² + b·pwm + c`` N that
+            made ``thrust_n`` (motor-voltage model; ``a > 0``, ``b >= 0``).
+        thrust_motor_ref_n: ``f_ref``, one motor's thrust at ``thrust_motor_ref_v``, N > 0.
+        thrust_motor_ref_v: ``v_ref``, the reference motor voltage, V > 0.
+        thrust_motor_exponent: ``n``, dimensionless, > 0.
     """
 
     thrust_scale: float = 1.0
@@ -258,8 +277,18 @@ class ObservationCalibration:
     thrust_vbat_slope_per_v: float = 0.0
     thrust_vbat_ref_v: float = 3.9
     rotor_drag_n_s_per_m: float = 0.0
+    thrust_model: ThrustModel = "vbat_linear"
+    thrust_pwm_map: tuple[float, float, float] = NOMINAL_PWM_MAP
+    thrust_motor_ref_n: float = 0.075
+    thrust_motor_ref_v: float = 3.0
+    thrust_motor_exponent: float = ROTOR_EXPONENT
     thrust_axis_body: tuple[float, float, float] = field(init=False, repr=False)
     """``b = R_x(about_x) R_y(about_y) e3``, body frame, unit (derived)."""
+    _motor: tuple[float, float, float, float, float] = field(init=False, repr=False)
+    """The motor-voltage model folded into ``(k, a, c4, b², b)`` (derived, module
+    groundstation.thrust_model): ``F = k·(vbat·(√(b² + a·thrust_n − c4) − b))^n`` with
+    ``k = s·4·f_ref / (2a·65535·v_ref)^n``, ``c4 = 4ac``: the map's inversion and the power
+    in one expression, as cheap per message as the straight line."""
 
     def __post_init__(self) -> None:
         values = (
@@ -288,27 +317,64 @@ class ObservationCalibration:
                 f"{self.thrust_scale!r} and {self.thrust_vbat_ref_v!r}"
             )
         object.__setattr__(self, "thrust_axis_body", thrust_axis_body(*self.thrust_axis_rad))
+        a, b, c = self.thrust_pwm_map
+        motor = (
+            self.thrust_motor_ref_n,
+            self.thrust_motor_ref_v,
+            self.thrust_motor_exponent,
+            a,
+            b,
+            c,
+        )
+        if self.thrust_model not in THRUST_MODELS:
+            raise ValueError(f"ObservationCalibration.thrust_model {self.thrust_model!r}")
+        if not all(math.isfinite(v) for v in motor) or min(motor[:4]) <= 0.0 or b < 0.0:
+            raise ValueError(
+                "ObservationCalibration: thrust_motor_ref_n, thrust_motor_ref_v, "
+                "thrust_motor_exponent and the map's a must be finite and > 0, b >= 0, got "
+                f"{motor!r}"
+            )
+        n = self.thrust_motor_exponent
+        k = (
+            self.thrust_scale
+            * MOTORS
+            * self.thrust_motor_ref_n
+            / (2.0 * a * PWM_FULL_SCALE * self.thrust_motor_ref_v) ** n
+        )
+        object.__setattr__(self, "_motor", (k, a, 4.0 * a * c, b * b, b))
 
     @property
     def is_identity(self) -> bool:
         """True when the corrections change nothing (the defaults, any ``vbat_v``)."""
         return (
-            self.thrust_scale == 1.0
+            self.thrust_model == "vbat_linear"
+            and self.thrust_scale == 1.0
             and self.thrust_axis_rad == (0.0, 0.0)
             and self.accel_bias_mps2 == (0.0, 0.0, 0.0)
             and self.thrust_vbat_slope_per_v == 0.0
             and self.rotor_drag_n_s_per_m == 0.0
         )
 
-    def thrust_factor(self, vbat_v: float | None) -> float:
-        """Factor on ``thrust_n``: ``thrust_scale + slope * (vbat_v - ref)``, dimensionless.
+    def thrust_n(self, thrust_n: float, vbat_v: float | None) -> float:
+        """The calibrated collective thrust ``F`` of the class's model, N.
 
         Args:
-            vbat_v: Battery voltage of the sample, V, or None (then ``thrust_scale``).
+            thrust_n: Telemetry's (nominal) collective thrust, N, >= 0.
+            vbat_v: Battery voltage of the sample, V, or None.
         """
-        if vbat_v is None or self.thrust_vbat_slope_per_v == 0.0:
-            return self.thrust_scale
-        return self.thrust_scale + self.thrust_vbat_slope_per_v * (vbat_v - self.thrust_vbat_ref_v)
+        if self.thrust_model == "vbat_linear":
+            if vbat_v is None or self.thrust_vbat_slope_per_v == 0.0:
+                return thrust_n * self.thrust_scale
+            return thrust_n * (
+                self.thrust_scale + self.thrust_vbat_slope_per_v * (vbat_v - self.thrust_vbat_ref_v)
+            )
+        # groundstation.thrust_model.motor_voltage_thrust_n, folded (``_motor``)
+        k, a, c4, b2, b = self._motor
+        d = b2 + a * thrust_n - c4  # b² + 4a·(thrust_n/4 − c)
+        if d <= b2:  # the mean command at or below 0: the motors are off
+            return 0.0
+        vbat = self.thrust_vbat_ref_v if vbat_v is None else vbat_v
+        return k * (vbat * (math.sqrt(d) - b)) ** self.thrust_motor_exponent
 
 
 NO_CALIBRATION = ObservationCalibration()
@@ -409,7 +475,7 @@ def observe_tension(
     drag = 0.0
     if calibration is not None:
         drag = calibration.rotor_drag_n_s_per_m
-        thrust_n = thrust_n * calibration.thrust_factor(vbat_v)
+        thrust_n = calibration.thrust_n(thrust_n, vbat_v)
         ax, ay, az = calibration.accel_bias_mps2
         accel = [accel[0] - ax, accel[1] - ay, accel[2] - az]
         bx, by, bz = calibration.thrust_axis_body

@@ -78,6 +78,7 @@ UNITS = (
     "tests/test_calibrate_cli.py::",  # a module-scoped fit
     "tests/test_nanobench_cli.py::",
     "tests/test_sim_calibration.py::",  # one simulated flight, recorded and replayed
+    "tests/test_thrust_model_nanobench.py::",  # two fits and six replays
 )
 """CPU modules that run whole on one worker (an expensive module-scoped fixture)."""
 

@@ -32,6 +32,7 @@ PHYSICS = (
     "contact",
     "slow_accel",
     "airframe",
+    "thrust_model",
     "smoother",
     "frozen",
 )
@@ -95,6 +96,7 @@ NEVER = {
         "contact",
         "slow_accel",
         "airframe",
+        "thrust_model",
     ),
 }
 

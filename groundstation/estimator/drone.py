@@ -105,6 +105,11 @@ def calibration_from_config(
         thrust_vbat_slope_per_v=section.thrust_vbat_slope_per_v,
         thrust_vbat_ref_v=section.thrust_vbat_ref_v,
         rotor_drag_n_s_per_m=section.rotor_drag_n_s_per_m,
+        thrust_model=section.thrust_model,
+        thrust_pwm_map=section.thrust_pwm_map,
+        thrust_motor_ref_n=section.thrust_motor_ref_n,
+        thrust_motor_ref_v=section.thrust_motor_ref_v,
+        thrust_motor_exponent=section.thrust_motor_exponent,
     )
     if cal.is_identity:
         return None, section.source

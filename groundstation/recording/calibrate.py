@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from groundstation import messages
-from groundstation.airframe import AIRFRAME_PARAMETERS, AirframeFit, fit_airframe
+from groundstation.airframe import AirframeFit, fit_airframe
 from groundstation.calibration import (
     CalibrationData,
     CalibrationError,
@@ -91,6 +91,9 @@ class DroneRecording:
     invalid: int
     tether_messages: tuple[int, ...] = ()
     """Per file (as ``files``): reel and tether-parameter messages of this drone."""
+    segments: tuple[int, ...] = ()
+    """``data.segment`` of each of :attr:`files`, in order (the file's index on the command
+    line); empty: 0, 1, 2, ..."""
 
 
 _NAN3 = (math.nan, math.nan, math.nan)
@@ -231,6 +234,7 @@ def read_recordings(
             base_from_reel=any(c.base_from_reel for _, _, c in parts),
             invalid=invalid[d],
             tether_messages=tuple(c.tether_messages for _, _, c in parts),
+            segments=tuple(i for i, _, _ in parts),
         )
     return out
 
@@ -622,6 +626,13 @@ def airframe_drone(rec: DroneRecording, settings: Settings, *, untethered: bool)
         CalibrateInputError: too little usable flight.
     """
     params = settings.for_drone(rec.drone)
+    model = params.calibration.thrust_model
+    if model == "motor_voltage" and settings.crazyflie.thrust_model != "pwm_map":
+        raise CalibrateInputError(
+            f'drone {rec.drone!r}: [calibration] thrust_model = "motor_voltage" inverts the '
+            "PWM map that made thrust_n, but [crazyflie] thrust_model = "
+            f'"{settings.crazyflie.thrust_model}" (use thrust_model = "vbat_linear")'
+        )
     try:
         return fit_airframe(
             rec.data,
@@ -630,6 +641,8 @@ def airframe_drone(rec: DroneRecording, settings: Settings, *, untethered: bool)
             floor_z_m=params.base.floor_z_m,
             vbat_ref_v=params.calibration.thrust_vbat_ref_v,
             min_samples_s=MIN_HOVER_S,
+            thrust_model=model,
+            pwm_map=settings.crazyflie.thrust_map,
         )
     except CalibrationError as exc:
         files = ", ".join(repr(f) for f in rec.files)
@@ -644,28 +657,49 @@ def _pm_airframe(fit: AirframeFit, name: str, fmt: str) -> str:
     return f"{value:{fmt}} (fixed)"
 
 
-def format_airframe(drone: str, fit: AirframeFit, files: Sequence[str]) -> str:
-    """The report printed for one drone: constants, then each power-on's nuisances."""
+def format_airframe(
+    drone: str, fit: AirframeFit, files: Sequence[str], segments: Sequence[int] = ()
+) -> str:
+    """The report printed for one drone: constants, then each power-on's nuisances.
+
+    ``segments``: the ``data.segment`` of each file (empty: 0, 1, 2, ...); a power-on with
+    no usable sample has no nuisance and is left out, the others keep their file's name.
+    """
+    by_segment = dict(zip(segments or range(len(files)), files, strict=True))
     mn = 1e3
     ref = "the catenary at the motion-capture position" if fit.tethered else "zero (untethered)"
     lines = [
         f"drone {drone}: {fit.samples} samples (n_eff {fit.n_eff:.0f} after autocorrelation) "
         f"from {len(fit.flights)} power-on(s): {', '.join(files)}; reference tension: {ref}",
         "  airframe constants (written):",
-        f"    thrust_scale             {_pm_airframe(fit, 'thrust_scale', '.4f')}",
+    ]
+    if fit.thrust_model == "motor_voltage":
+        lines += [
+            '    thrust_model             "motor_voltage"',
+            f"    thrust_motor_ref_n       {_pm_airframe(fit, 'thrust_motor_ref_n', '.5f')}"
+            f"  (one motor at thrust_motor_ref_v = {fit.motor_ref_v:g} V)",
+            f"    thrust_motor_exponent    {_pm_airframe(fit, 'thrust_motor_exponent', '.3f')}",
+        ]
+    else:
+        lines.append(f"    thrust_scale             {_pm_airframe(fit, 'thrust_scale', '.4f')}")
+    lines.append(
         "    thrust_axis_rad          ["
         + ", ".join(_pm_airframe(fit, n, ".4f") for n in ("about_x_rad", "about_y_rad"))
-        + "]",
-        f"    thrust_vbat_slope_per_v  {_pm_airframe(fit, 'vbat_slope_per_v', '.4f')}"
-        f"  (about thrust_vbat_ref_v = {fit.vbat_ref_v:g} V)",
-        f"    rotor_drag_n_s_per_m     {_pm_airframe(fit, 'rotor_drag_n_s_per_m', '.4f')}",
-    ]
+        + "]"
+    )
+    if fit.thrust_model != "motor_voltage":
+        lines.append(
+            f"    thrust_vbat_slope_per_v  {_pm_airframe(fit, 'vbat_slope_per_v', '.4f')}"
+            f"  (about thrust_vbat_ref_v = {fit.vbat_ref_v:g} V)"
+        )
+    lines.append(f"    rotor_drag_n_s_per_m     {_pm_airframe(fit, 'rotor_drag_n_s_per_m', '.4f')}")
     for name, why in fit.fixed.items():
-        lines.append(f"    fixed {name} = 0: {why}")
+        lines.append(f"    fixed {name}: {why}")
     lines.append(
         "  per power-on (printed, NOT written: the service learns these at each power-on):"
     )
-    for f, path in zip(fit.flights, files, strict=False):
+    for f in fit.flights:
+        path = by_segment.get(f.segment, f"recording {f.segment}")
         a = f.accel_offset_body_mps2
         r = f.residual_mean_n * mn
         vr = "" if f.vbat_range_v is None else f", battery {f.vbat_range_v[0]:.2f}–"
@@ -692,12 +726,27 @@ def format_airframe(drone: str, fit: AirframeFit, files: Sequence[str]) -> str:
 def _airframe_table(fit: AirframeFit, cal: Any, source: str) -> dict[str, Any]:
     v = fit.values
     vbat = _vbat_range(fit)
+    thrust: dict[str, Any]
+    if fit.thrust_model == "motor_voltage":
+        thrust = {
+            "thrust_model": "motor_voltage",
+            "thrust_scale": 1.0,
+            "thrust_motor_ref_n": round(v["thrust_motor_ref_n"], 7),
+            "thrust_motor_ref_v": fit.motor_ref_v,
+            "thrust_motor_exponent": round(v["thrust_motor_exponent"], 5),
+            "thrust_pwm_map": list(fit.pwm_map),
+            "thrust_vbat_slope_per_v": 0.0,
+        }
+    else:
+        thrust = {
+            "thrust_scale": round(v["thrust_scale"], 6),
+            "thrust_vbat_slope_per_v": round(v["vbat_slope_per_v"], 6),
+        }
     return {
-        "thrust_scale": round(v["thrust_scale"], 6),
+        **thrust,
         "thrust_axis_rad": [round(v["about_x_rad"], 6), round(v["about_y_rad"], 6)],
         # Per power-on: learnt by the service at each power-on, never carried (issue 20).
         "accel_bias_mps2": [0.0, 0.0, 0.0],
-        "thrust_vbat_slope_per_v": round(v["vbat_slope_per_v"], 6),
         "thrust_vbat_ref_v": fit.vbat_ref_v,
         "rotor_drag_n_s_per_m": round(v["rotor_drag_n_s_per_m"], 6),
         **({} if vbat is None else {"thrust_vbat_range_v": vbat}),
@@ -762,7 +811,7 @@ def run_calibrate(
         for d in sorted(recs):
             rec = recs[d]
             afit = airframe_drone(rec, settings, untethered=untethered)
-            echo(format_airframe(d, afit, rec.files))
+            echo(format_airframe(d, afit, rec.files, rec.segments))
             source = f"groundstation calibrate {stamp} from {names}"
             table = _airframe_table(afit, settings.for_drone(d).calibration, source)
             patch["drones"][d] = {"calibration": table}
@@ -774,12 +823,12 @@ def run_calibrate(
                 + " mN; accel_bias_mps2 is zero on purpose: the accelerometer's offsets "
                 "belong to each power-on and the service learns them there",
             ]
-            for name in AIRFRAME_PARAMETERS:
+            for name in afit.parameters:
                 std = afit.std[name]
                 if std is not None:
                     head.append(f"  {name} = {afit.values[name]:.6g} ± {std:.2g}")
             for name, why in afit.fixed.items():
-                head.append(f"  {name} fixed at 0: {why}")
+                head.append(f"  {name}: {why}")
             comments[f"drones.{d}.calibration"] = head
         return _write_config(settings, config_path, patch, comments, out_path, echo, force)
     if untethered:
