@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 import struct
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -284,8 +285,12 @@ class ObservationCalibration:
     thrust_motor_exponent: float = ROTOR_EXPONENT
     thrust_axis_body: tuple[float, float, float] = field(init=False, repr=False)
     """``b = R_x(about_x) R_y(about_y) e3``, body frame, unit (derived)."""
-    _motor: tuple[float, float, float, float, float] = field(init=False, repr=False)
-    """The motor-voltage model folded into ``(k, a, c4, b², b)`` (derived, module
+    thrust_n: Callable[[float, float | None], float] = field(init=False, repr=False, compare=False)
+    """``thrust_n(thrust_n, vbat_v)``: the calibrated collective thrust ``F`` of
+    :attr:`thrust_model`, N, from Telemetry's ``thrust_n`` (N, >= 0) and ``vbat_v`` (V, or
+    None); the model's method, chosen once here rather than on every message."""
+    _motor: tuple[float, float, float, float, float, float] = field(init=False, repr=False)
+    """The motor-voltage model folded into ``(k, a, c4, b², b, n)`` (derived, module
     groundstation.thrust_model): ``F = k·(vbat·(√(b² + a·thrust_n − c4) − b))^n`` with
     ``k = s·4·f_ref / (2a·65535·v_ref)^n``, ``c4 = 4ac``: the map's inversion and the power
     in one expression, as cheap per message as the straight line."""
@@ -341,7 +346,9 @@ class ObservationCalibration:
             * self.thrust_motor_ref_n
             / (2.0 * a * PWM_FULL_SCALE * self.thrust_motor_ref_v) ** n
         )
-        object.__setattr__(self, "_motor", (k, a, 4.0 * a * c, b * b, b))
+        object.__setattr__(self, "_motor", (k, a, 4.0 * a * c, b * b, b, n))
+        linear = self.thrust_model == "vbat_linear"
+        object.__setattr__(self, "thrust_n", self._thrust_linear if linear else self._thrust_motor)
 
     @property
     def is_identity(self) -> bool:
@@ -355,26 +362,24 @@ class ObservationCalibration:
             and self.rotor_drag_n_s_per_m == 0.0
         )
 
-    def thrust_n(self, thrust_n: float, vbat_v: float | None) -> float:
-        """The calibrated collective thrust ``F`` of the class's model, N.
+    def _thrust_linear(self, thrust_n: float, vbat_v: float | None) -> float:
+        """:attr:`thrust_n` of ``vbat_linear``, N."""
+        if vbat_v is None or self.thrust_vbat_slope_per_v == 0.0:
+            return thrust_n * self.thrust_scale
+        return thrust_n * (
+            self.thrust_scale + self.thrust_vbat_slope_per_v * (vbat_v - self.thrust_vbat_ref_v)
+        )
 
-        Args:
-            thrust_n: Telemetry's (nominal) collective thrust, N, >= 0.
-            vbat_v: Battery voltage of the sample, V, or None.
-        """
-        if self.thrust_model == "vbat_linear":
-            if vbat_v is None or self.thrust_vbat_slope_per_v == 0.0:
-                return thrust_n * self.thrust_scale
-            return thrust_n * (
-                self.thrust_scale + self.thrust_vbat_slope_per_v * (vbat_v - self.thrust_vbat_ref_v)
-            )
-        # groundstation.thrust_model.motor_voltage_thrust_n, folded (``_motor``)
-        k, a, c4, b2, b = self._motor
+    def _thrust_motor(self, thrust_n: float, vbat_v: float | None) -> float:
+        """:attr:`thrust_n` of ``motor_voltage``, N: groundstation.thrust_model's
+        ``motor_voltage_thrust_n`` times the scale, folded (``_motor``; tested equal)."""
+        k, a, c4, b2, b, n = self._motor
         d = b2 + a * thrust_n - c4  # b² + 4a·(thrust_n/4 − c)
         if d <= b2:  # the mean command at or below 0: the motors are off
             return 0.0
-        vbat = self.thrust_vbat_ref_v if vbat_v is None else vbat_v
-        return k * (vbat * (math.sqrt(d) - b)) ** self.thrust_motor_exponent
+        if vbat_v is None:
+            vbat_v = self.thrust_vbat_ref_v
+        return k * (vbat_v * (d**0.5 - b)) ** n
 
 
 NO_CALIBRATION = ObservationCalibration()
