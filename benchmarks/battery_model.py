@@ -18,6 +18,10 @@ or above it. Three ways to hold data out:
 * **day split**: whole flights, calibrated on the other days (nanobench_cli's
   cross-day figure).
 
+and, for the firmware's own thrust model, Telemetry's thrust made as the bridge makes it
+with ``[crazyflie] thrust_model = "cubic_21plus"`` (the 2.1+ propellers' cubic in the
+motor voltage, ``VMOTOR2THRUST``), calibrated with today's straight line on top.
+
 Per thrust model (``[calibration] thrust_model``, groundstation.thrust_model):
 ``vbat_linear`` (a straight line in the battery voltage), ``motor_voltage`` with its
 exponent fitted within the physical bounds 1–2 (the default), left free (0.2–5), and fixed
@@ -36,7 +40,7 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from functools import partial
@@ -48,7 +52,9 @@ import numpy as np
 import groundstation.recording.calibrate as calibrate_mod
 from benchmarks.nanobench_cli import DATA, DAYS, Flight, _run, load
 from groundstation.airframe import fit_airframe
+from groundstation.bridges.crazyflie.bridge import VMOTOR2THRUST
 from groundstation.recording.reader import RecordedMessage, copy_messages, iter_messages
+from groundstation.thrust_model import PWM_FULL_SCALE
 
 SPLIT_V = 3.5
 """The split voltage of the acceptance test, V (issue: "calibrated on the parts flown above
@@ -64,6 +70,8 @@ class Variant:
     model: str
     bounds: tuple[float, float] | None
     """Exponent bounds for ``motor_voltage`` (None: calibrate's own)."""
+    telemetry: str = "pwm_map"
+    """What made Telemetry's thrust: the bridge's ``[crazyflie] thrust_model``."""
 
 
 VARIANTS = (
@@ -73,7 +81,22 @@ VARIANTS = (
     Variant(
         "motor_voltage, exponent 2: thrust ∝ (duty·V)²", "motor n = 2", "motor_voltage", (2.0, 2.0)
     ),
+    Variant(
+        "the firmware's cubic (bridge thrust_model cubic_21plus), vbat_linear on top",
+        "firmware cubic + line",
+        "vbat_linear",
+        None,
+        "cubic_21plus",
+    ),
 )
+
+
+def cubic_thrust_n(pwm: np.ndarray, vbat_v: np.ndarray) -> np.ndarray:
+    """The bridge's thrust with ``[crazyflie] thrust_model = "cubic_21plus"``, N (n,)."""
+    c0, c1, c2, c3 = VMOTOR2THRUST["cubic_21plus"]
+    v = np.nan_to_num(vbat_v)[:, None] * pwm / PWM_FULL_SCALE
+    per_motor = np.maximum(c0 + v * (c1 + v * (c2 + v * c3)), 0.0)
+    return np.where(pwm > 0, per_motor, 0.0).sum(axis=1)
 
 
 MODELS_TEXT = """\
@@ -81,7 +104,10 @@ The models (`[calibration] thrust_model`, `groundstation/thrust_model.py`):
 `vbat_linear` is `F = thrust_n·(s + k·(vbat_v − 3.5 V))`; `motor_voltage` inverts the
 nominal PWM map at `thrust_n/4` to the mean motor command `pwm`, takes the motor voltage
 `v = vbat_v·pwm/65535` (what the 2025+ firmware's battery compensation works in: it sets
-the duty so that the motor voltage gives the thrust asked) and `F = 4·f_ref·(v/v_ref)^n`.
+the duty so that the motor voltage gives the thrust asked) and `F = 4·f_ref·(v/v_ref)^n`;
+`firmware cubic + line` makes Telemetry's thrust as the bridge does with `[crazyflie]
+thrust_model = "cubic_21plus"` (the firmware's own cubic in each motor's voltage, 2.1+
+propellers) and calibrates `vbat_linear` on top.
 Held-out ways: **voltage split**, calibrated on the runs (≥ 1 s) of samples at or above the
 split voltage and judged on the samples below it (in range: on those at or above it,
 which the calibration saw); **voltage + day split**, the same calibrated on the
@@ -197,15 +223,15 @@ def _summary(values: list[float]) -> tuple[float, float, int]:
     return statistics.median(vals), max(vals), len(vals)
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", help="write the markdown page here")
-    ap.add_argument("--data", default=str(DATA), help="the NanoBench directory")
-    ap.add_argument("--split-v", type=float, default=SPLIT_V, help="split voltage, V")
-    args = ap.parse_args(argv)
-    t0 = time.time()
-    split_v = args.split_v
-    flights = {n: load(n, Path(args.data)) for n in DAYS}
+Fold = tuple[str, str, list[tuple[str, list[RecordedMessage]]], list[str]]
+
+
+def _setup(
+    data: Path, thrust_n: Callable[[np.ndarray, np.ndarray], np.ndarray] | None, split_v: float
+) -> tuple[dict[str, Flight], dict[str, np.ndarray], list[Fold]]:
+    """The flights with Telemetry's thrust made by ``thrust_n``, their ``vbat_v``, and the
+    folds: ``(kind, name, recordings to calibrate on, flights to judge)``."""
+    flights = {n: load(n, data, thrust_n) for n in DAYS}
     vbat = {n: vbat_of(f.without_mocap) for n, f in flights.items()}
     above = {
         n: runs_above(f.with_mocap, vbat[n], split_v, float(np.median(np.diff(f.stamp_s))))
@@ -215,29 +241,38 @@ def main(argv: list[str] | None = None) -> int:
     def above_parts(names: list[str]) -> list[tuple[str, list[RecordedMessage]]]:
         return [(f"{n}-above{k}", run) for n in names for k, run in enumerate(above[n])]
 
-    days = sorted(set(DAYS.values()))
-    folds: list[tuple[str, str, list[tuple[str, list[RecordedMessage]]], list[str]]] = [
-        ("voltage", "all flights", above_parts(list(DAYS)), list(DAYS))
-    ]
-    for d in days:
+    folds: list[Fold] = [("voltage", "all flights", above_parts(list(DAYS)), list(DAYS))]
+    for d in sorted(set(DAYS.values())):
         held = [n for n in DAYS if DAYS[n] == d]
         rest = [n for n in DAYS if n not in held]
         folds.append(("voltage+day", f"day {d} held out", above_parts(rest), held))
-        folds.append(
-            (
-                "day",
-                f"day {d} held out",
-                [(f"{n}-mocap", flights[n].with_mocap) for n in rest],
-                held,
-            )
-        )
+        mocap = [(f"{n}-mocap", flights[n].with_mocap) for n in rest]
+        folds.append(("day", f"day {d} held out", mocap, held))
+    return flights, vbat, folds
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", help="write the markdown page here")
+    ap.add_argument("--data", default=str(DATA), help="the NanoBench directory")
+    ap.add_argument("--split-v", type=float, default=SPLIT_V, help="split voltage, V")
+    args = ap.parse_args(argv)
+    t0 = time.time()
+    split_v = args.split_v
+    thrusts = {"pwm_map": None, "cubic_21plus": cubic_thrust_n}
+    setups = {
+        tele: _setup(Path(args.data), thrusts[tele], split_v)
+        for tele in dict.fromkeys(v.telemetry for v in VARIANTS)
+    }
     lines: list[str] = []
     say = lines.append
     results: dict[str, dict[str, list[Parts]]] = {}
     reports: dict[str, str] = {}
     with tempfile.TemporaryDirectory() as tmp:
-        work = Path(tmp)
         for vi, variant in enumerate(VARIANTS):
+            work = Path(tmp) / variant.telemetry  # recordings named by flight: one set each
+            work.mkdir(exist_ok=True)
+            flights, vbat, folds = setups[variant.telemetry]
             results[variant.label] = {"voltage": [], "voltage+day": [], "day": []}
             for fi, (kind, fold, parts, held) in enumerate(folds):
                 cal, report = calibrate(parts, work, f"{vi}-{fi}", variant)
@@ -331,7 +366,10 @@ def main(argv: list[str] | None = None) -> int:
             say(text.strip())
             say("```")
         say("")
-        page = "\n".join(lines).replace(f"{work}/", "") + "\n"
+        page = "\n".join(lines)
+        for tele in setups:
+            page = page.replace(f"{Path(tmp) / tele}/", "")
+        page += "\n"
     if args.out:
         Path(args.out).write_text(page, encoding="utf-8")
     sys.stdout.write(page)

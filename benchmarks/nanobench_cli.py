@@ -26,6 +26,7 @@ import statistics
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -71,10 +72,16 @@ class Flight:
     without_mocap: list[RecordedMessage]
 
 
-def load(name: str, data_dir: Path = DATA) -> Flight:
+def load(
+    name: str,
+    data_dir: Path = DATA,
+    thrust_n: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
+) -> Flight:
+    """One flight as recordings; ``thrust_n(pwm (n, 4), vbat (n,))`` makes Telemetry's
+    thrust (None: :func:`nominal_thrust_n`, the bridge's default PWM map)."""
     a = np.genfromtxt(data_dir / f"{name}.csv", delimiter=",", names=True)
     pwm = np.stack([a[f"motor_motor_m{i}"] for i in range(1, 5)], axis=1)
-    thrust = nominal_thrust_n(pwm)
+    thrust = nominal_thrust_n(pwm) if thrust_n is None else thrust_n(pwm, a["pwr_pm_vbat"])
     acc = np.stack([a[f"imu_acc_{k}"] for k in "xyz"], 1) * G0
     gyro = np.stack([a[f"imu_gyro_{k}"] for k in "xyz"], 1)
     quat = np.stack([a[f"att_stateEstimate_q{k}"] for k in "wxyz"], 1)
