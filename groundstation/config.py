@@ -341,9 +341,10 @@ class CalibrationSection(_Section):
     """(added) ``[a, b, c]`` of the per-motor map ``a·pwm² + b·pwm + c`` N that made
     Telemetry's ``thrust_n`` (the bridge's ``[crazyflie] thrust_map``; physical), inverted by
     ``motor_voltage``; ``a > 0``, ``b >= 0``."""
-    thrust_motor_ref_n: float = Field(0.075, gt=0.0, lt=10.0)
+    thrust_motor_ref_n: float | None = Field(None, gt=0.0, lt=10.0)
     """(added) ``motor_voltage``: one motor's thrust at motor voltage ``thrust_motor_ref_v``,
-    N (fitted by ``groundstation calibrate``)."""
+    N (fitted by ``groundstation calibrate``); none: not calibrated, ``motor_voltage`` only
+    says what ``calibrate`` is to fit and the thrust is ``thrust_n · thrust_scale``."""
     thrust_motor_ref_v: float = Field(3.0, gt=0.0, lt=60.0)
     """(added) ``motor_voltage``: the reference motor voltage, V (the calibration's median
     motor voltage, so that ``thrust_motor_ref_n`` and the exponent are nearly independent)."""

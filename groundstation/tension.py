@@ -267,7 +267,9 @@ class ObservationCalibration:
         thrust_model: ``"vbat_linear"`` or ``"motor_voltage"`` (the model above).
         thrust_pwm_map: ``(a, b, c)``: the per-motor map ``a·pwm² + b·pwm + c`` N that
             made ``thrust_n`` (motor-voltage model; ``a > 0``, ``b >= 0``).
-        thrust_motor_ref_n: ``f_ref``, one motor's thrust at ``thrust_motor_ref_v``, N > 0.
+        thrust_motor_ref_n: ``f_ref``, one motor's thrust at ``thrust_motor_ref_v``, N > 0;
+            None (not calibrated): the motor model is not in force, the straight line's
+            terms apply.
         thrust_motor_ref_v: ``v_ref``, the reference motor voltage, V > 0.
         thrust_motor_exponent: ``n``, dimensionless, > 0.
     """
@@ -280,7 +282,7 @@ class ObservationCalibration:
     rotor_drag_n_s_per_m: float = 0.0
     thrust_model: ThrustModel = "vbat_linear"
     thrust_pwm_map: tuple[float, float, float] = NOMINAL_PWM_MAP
-    thrust_motor_ref_n: float = 0.075
+    thrust_motor_ref_n: float | None = None
     thrust_motor_ref_v: float = 3.0
     thrust_motor_exponent: float = ROTOR_EXPONENT
     thrust_axis_body: tuple[float, float, float] = field(init=False, repr=False)
@@ -323,8 +325,9 @@ class ObservationCalibration:
             )
         object.__setattr__(self, "thrust_axis_body", thrust_axis_body(*self.thrust_axis_rad))
         a, b, c = self.thrust_pwm_map
+        ref_n = self.thrust_motor_ref_n
         motor = (
-            self.thrust_motor_ref_n,
+            1.0 if ref_n is None else ref_n,
             self.thrust_motor_ref_v,
             self.thrust_motor_exponent,
             a,
@@ -343,18 +346,24 @@ class ObservationCalibration:
         k = (
             self.thrust_scale
             * MOTORS
-            * self.thrust_motor_ref_n
+            * motor[0]
             / (2.0 * a * PWM_FULL_SCALE * self.thrust_motor_ref_v) ** n
         )
         object.__setattr__(self, "_motor", (k, a, 4.0 * a * c, b * b, b, n))
-        linear = self.thrust_model == "vbat_linear"
+        linear = not self.motor_model_in_force
         object.__setattr__(self, "thrust_n", self._thrust_linear if linear else self._thrust_motor)
+
+    @property
+    def motor_model_in_force(self) -> bool:
+        """``motor_voltage`` with its constants (``thrust_motor_ref_n`` fitted); without them
+        the straight line's terms apply (the defaults: none)."""
+        return self.thrust_model == "motor_voltage" and self.thrust_motor_ref_n is not None
 
     @property
     def is_identity(self) -> bool:
         """True when the corrections change nothing (the defaults, any ``vbat_v``)."""
         return (
-            self.thrust_model == "vbat_linear"
+            not self.motor_model_in_force
             and self.thrust_scale == 1.0
             and self.thrust_axis_rad == (0.0, 0.0)
             and self.accel_bias_mps2 == (0.0, 0.0, 0.0)

@@ -114,7 +114,14 @@ def test_without_vbat_the_reference_battery_is_assumed() -> None:
 def test_the_default_calibration_changes_nothing() -> None:
     cal, label = calibration_from_config(CalibrationSection())
     assert cal is None and label == "none"
-    mv, _ = calibration_from_config(CalibrationSection(thrust_model="motor_voltage"))
+    # motor_voltage before calibrate wrote its constants: what calibrate is to fit, no more
+    asked, label = calibration_from_config(CalibrationSection(thrust_model="motor_voltage"))
+    assert asked is None and label == "none"
+    uncalibrated = ObservationCalibration(thrust_model="motor_voltage")
+    assert uncalibrated.is_identity and uncalibrated.thrust_n(0.4, 3.2) == 0.4
+    mv, _ = calibration_from_config(
+        CalibrationSection(thrust_model="motor_voltage", thrust_motor_ref_n=0.07)
+    )
     assert mv is not None and not mv.is_identity
 
 
