@@ -92,6 +92,7 @@ MOTOR_VOLTAGE_PARAMETERS: tuple[str, ...] = (
 )
 """The constants of the ``motor_voltage`` thrust model, in order (the same slots)."""
 _MOTOR_SCALES = np.array([0.005, 0.02, 0.02, 0.5, 0.01])
+"""Typical magnitude of each of :data:`MOTOR_VOLTAGE_PARAMETERS` (the solver's scaling)."""
 _MOTOR_SCALES.setflags(write=False)
 
 _SCALES = np.array([0.05, 0.02, 0.02, 0.1, 0.01])
@@ -164,6 +165,16 @@ class AirframeFit:
     thrust_model: ThrustModel = "vbat_linear"
     motor_ref_v: float | None = None
     pwm_map: tuple[float, float, float] = NOMINAL_PWM_MAP
+    exponent_bounds: tuple[float, float] = EXPONENT_BOUNDS
+
+    @property
+    def exponent_at_bound(self) -> bool:
+        """``motor_voltage``: the fitted exponent sits on a bound (the data would put it
+        outside the physical range: something else varies with the motor voltage)."""
+        if self.thrust_model != "motor_voltage" or "thrust_motor_exponent" in self.fixed:
+            return False
+        n = self.values["thrust_motor_exponent"]
+        return any(abs(n - b) < 1e-3 for b in self.exponent_bounds)
 
     @property
     def parameters(self) -> tuple[str, ...]:
@@ -425,4 +436,5 @@ def fit_airframe(
         thrust_model=thrust_model,
         motor_ref_v=motor_ref_v,
         pwm_map=pwm_map,
+        exponent_bounds=exponent_bounds,
     )

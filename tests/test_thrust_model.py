@@ -220,3 +220,15 @@ def test_calibrate_recovers_the_motor_model_and_it_extrapolates() -> None:
         err_line.append(line.thrust_n(thrust, vbat) - true_n)
     assert abs(float(np.mean(err_mv))) < 0.5e-3  # N
     assert abs(float(np.mean(err_line))) > 2e-3  # N: the line misses the curve below
+
+
+def test_an_exponent_outside_what_a_motor_does_is_held_at_its_bound_and_said() -> None:
+    data = _synthetic_flight(0.0745, 2.9, 0.7, seconds=30.0)
+    fit = fit_airframe(data, 0.030, weight_n_per_m=None, thrust_model="motor_voltage")
+    assert fit.values["thrust_motor_exponent"] == pytest.approx(1.0, abs=1e-3)
+    assert fit.exponent_at_bound
+    free = fit_airframe(
+        data, 0.030, weight_n_per_m=None, thrust_model="motor_voltage", exponent_bounds=(0.2, 5)
+    )
+    assert free.values["thrust_motor_exponent"] == pytest.approx(0.7, abs=0.02)
+    assert not free.exponent_at_bound

@@ -678,7 +678,13 @@ def format_airframe(
             '    thrust_model             "motor_voltage"',
             f"    thrust_motor_ref_n       {_pm_airframe(fit, 'thrust_motor_ref_n', '.5f')}"
             f"  (one motor at thrust_motor_ref_v = {fit.motor_ref_v:g} V)",
-            f"    thrust_motor_exponent    {_pm_airframe(fit, 'thrust_motor_exponent', '.3f')}",
+            f"    thrust_motor_exponent    {_pm_airframe(fit, 'thrust_motor_exponent', '.3f')}"
+            + (
+                f"  (at its bound, {fit.exponent_bounds[0]:g}–{fit.exponent_bounds[1]:g}: "
+                "the data would put it outside what a motor does)"
+                if fit.exponent_at_bound
+                else ""
+            ),
         ]
     else:
         lines.append(f"    thrust_scale             {_pm_airframe(fit, 'thrust_scale', '.4f')}")
