@@ -319,7 +319,8 @@ class CalibrationSection(_Section):
     """
 
     thrust_scale: float = Field(1.0, gt=0.2, lt=5.0)
-    """Multiplies ``thrust_n`` (the nominal PWM→thrust map's error)."""
+    """Multiplies ``thrust_n`` (the nominal PWM→thrust map's error; ``motor_voltage``: a
+    factor on the model's thrust, 1 as ``calibrate`` writes it)."""
     thrust_axis_rad: tuple[float, float] = (0.0, 0.0)
     """Thrust axis as a small rotation of body +z, ``[about_x, about_y]``, radians, in the body
     frame of the attitude Telemetry reports."""
