@@ -416,7 +416,8 @@ class CalibrationSection(_Section):
 
     @model_validator(mode="after")
     def _keys_without_meaning(self) -> CalibrationSection:
-        if self.thrust_model == "motor_voltage" and self.thrust_vbat_slope_per_v != 0.0:
+        motor = self.thrust_model == "motor_voltage" and self.thrust_motor_ref_n is not None
+        if motor and self.thrust_vbat_slope_per_v != 0.0:
             _warn_once(
                 f"[calibration] thrust_vbat_slope_per_v = {self.thrust_vbat_slope_per_v:g} is "
                 'not used with thrust_model = "motor_voltage": thrust_motor_exponent (the '

@@ -409,3 +409,27 @@ def test_a_corrupt_chunk_costs_its_messages_not_the_calibration(tmp_path: Path) 
     cal = load_settings(out, use_env=False).for_drone("cf1").calibration
     want = load_settings(clean, use_env=False).for_drone("cf1").calibration
     assert abs(cal.thrust_scale - want.thrust_scale) < 0.005, (cal, want)
+
+
+def test_a_configured_motor_model_is_fitted_or_refused_and_never_half_written(
+    recordings: tuple[Path, Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``[calibration] thrust_model = "motor_voltage"`` asks calibrate for the motor model:
+    the full model cannot fit it and writes the line it fits as such; the airframe model
+    needs the battery voltage and refuses recordings without it."""
+    a, b, _ = recordings
+    cfg = tmp_path / "motor.toml"
+    cfg.write_text(
+        "[drone]\nmass_kg = 0.030\n[tether]\nweight_n_per_m = 0.05\n"
+        '[calibration]\nthrust_model = "motor_voltage"\n'
+    )
+    out = tmp_path / "full.toml"
+    args = ["calibrate", "--model", "full", str(a), str(b), "--config", str(cfg)]
+    assert main([*args, "--out", str(out)]) == 0
+    cal = load_settings(out, use_env=False).for_drone("cf1").calibration
+    assert cal.thrust_model == "vbat_linear" and abs(cal.thrust_scale - 0.93) < 0.005
+    assert 'thrust_model = "vbat_linear" written' in capsys.readouterr().out
+    refused = tmp_path / "airframe.toml"
+    argv = ["calibrate", str(a), str(b), "--config", str(cfg), "--out", str(refused)]
+    assert main(argv) == 2
+    assert "needs vbat_v" in capsys.readouterr().err and not refused.exists()

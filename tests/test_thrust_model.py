@@ -140,14 +140,18 @@ def test_a_slope_without_meaning_is_accepted_with_one_warning(
     config_mod._warned.clear()
     with caplog.at_level(logging.WARNING, logger="groundstation.config"):
         for _ in range(3):
-            sec = CalibrationSection(thrust_model="motor_voltage", thrust_vbat_slope_per_v=0.3)
+            sec = CalibrationSection(
+                thrust_model="motor_voltage", thrust_motor_ref_n=0.07, thrust_vbat_slope_per_v=0.3
+            )
     assert sec.thrust_vbat_slope_per_v == 0.3
     said = [r.getMessage() for r in caplog.records]
     assert len(said) == 1 and "thrust_motor_exponent" in said[0] and "replaced" in said[0]
     caplog.clear()
     with caplog.at_level(logging.WARNING, logger="groundstation.config"):
         CalibrationSection(thrust_vbat_slope_per_v=0.3)  # meaningful for vbat_linear
-        CalibrationSection(thrust_model="motor_voltage")
+        CalibrationSection(thrust_model="motor_voltage", thrust_motor_ref_n=0.07)
+        # motor_voltage not yet calibrated: the line's terms still apply, and mean something
+        CalibrationSection(thrust_model="motor_voltage", thrust_vbat_slope_per_v=0.3)
     assert caplog.records == []
 
 

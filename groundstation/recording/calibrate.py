@@ -849,6 +849,13 @@ def run_calibrate(
         params = settings.for_drone(d)
         source = f"groundstation calibrate {stamp} from {names}"
         tables: dict[str, Any] = {"calibration": _calibration_table(cals[d], source)}
+        if params.calibration.thrust_model != "vbat_linear":
+            # the full model fits the straight battery line only: say so in what it writes
+            tables["calibration"]["thrust_model"] = "vbat_linear"
+            echo(
+                f"  {d}: --model full fits the straight battery line: thrust_model = "
+                '"vbat_linear" written (the configured motor_voltage needs --model airframe)'
+            )
         head = [
             f"groundstation calibrate, {stamp}, from {names}:",
             f"{fit.hover_s:.1f} s of hover under motion capture, {fit.rest_samples} still"
