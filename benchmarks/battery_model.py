@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import statistics
 import subprocess
 import sys
@@ -144,6 +145,17 @@ def runs_above(
     edges = np.diff(keep)
     starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
     return [messages[a:b] for a, b in zip(starts, ends, strict=True) if (b - a) * dt_s >= MIN_RUN_S]
+
+
+def battery_term(report: str) -> str:
+    """The battery term from what calibrate printed: the line's slope or the motor's
+    exponent, with its ± or ``(fixed)``, and ``at a bound`` when it says so."""
+    m = re.search(
+        r"(thrust_vbat_slope_per_v|thrust_motor_exponent)\s+(\S+ (± \S+|\(fixed\)))", report
+    )
+    if m is None:
+        return "?"
+    return m.group(2) + (" at a bound" if "at its bound" in report else "")
 
 
 @contextmanager
@@ -268,6 +280,7 @@ def main(argv: list[str] | None = None) -> int:
     say = lines.append
     results: dict[str, dict[str, list[Parts]]] = {}
     reports: dict[str, str] = {}
+    terms: dict[str, list[tuple[str, str]]] = {}
     with tempfile.TemporaryDirectory() as tmp:
         for vi, variant in enumerate(VARIANTS):
             work = Path(tmp) / variant.telemetry  # recordings named by flight: one set each
@@ -278,6 +291,9 @@ def main(argv: list[str] | None = None) -> int:
                 cal, report = calibrate(parts, work, f"{vi}-{fi}", variant)
                 if kind == "voltage":
                     reports[variant.label] = report
+                terms.setdefault(variant.label, []).append(
+                    (f"{kind}, {fold}", battery_term(report))
+                )
                 for n in held:
                     results[variant.label][kind].append(
                         judge(flights[n], vbat[n], cal, work, split_v)
@@ -358,6 +374,20 @@ def main(argv: list[str] | None = None) -> int:
                         )
                 say(f"| {name} ({DAYS[name]}) | " + " | ".join(cells) + " |")
             say("")
+        say("## The battery term calibrate fitted, per fold")
+        say("")
+        say(
+            "`thrust_vbat_slope_per_v` (1/V) for the line, `thrust_motor_exponent` for the "
+            "motor model (± its standard error; at a bound: the data would put it outside "
+            "1–2)."
+        )
+        say("")
+        fold_names = [f for f, _ in terms[VARIANTS[0].label]]
+        say("| fold | " + " | ".join(v.short for v in VARIANTS) + " |")
+        say("| --- |" + " --- |" * len(VARIANTS))
+        for i, fold_name in enumerate(fold_names):
+            say(f"| {fold_name} | " + " | ".join(terms[v.label][i][1] for v in VARIANTS) + " |")
+        say("")
         say("## What calibrate printed (voltage split, each model)")
         say("")
         for label, text in reports.items():
