@@ -344,9 +344,10 @@ def fit_airframe(
         thrust_w = np.einsum("nij,j->ni", R, u) * F[:, None]
         return kin - thrust_w + d * drag_dir - ref  # (n, 3), N
 
-    n0 = n_lo if n_lo == n_hi else min(max(ROTOR_EXPONENT, n_lo), n_hi)
-    if motor and names[3] not in fixed:
-        n0 = 0.5 * (n_lo + n_hi)  # inside the bounds, as least_squares needs
+    # the exponent: fitted from the middle of its bounds (least_squares starts inside them),
+    # else where it is fixed (asked, or the rotor's 2 when the battery does not vary)
+    n_fixed = n_lo if n_lo == n_hi else ROTOR_EXPONENT
+    n0 = 0.5 * (n_lo + n_hi) if names[3] not in fixed else n_fixed
     theta0 = np.array([1.0, 0.0, 0.0, n0 if motor else 0.0, 0.0])
     lower = np.full(5, -np.inf)
     upper = np.full(5, np.inf)
