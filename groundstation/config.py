@@ -348,7 +348,8 @@ class CalibrationSection(_Section):
     says what ``calibrate`` is to fit and the thrust is ``thrust_n · thrust_scale``."""
     thrust_motor_ref_v: float = Field(3.0, gt=0.0, lt=60.0)
     """(added) ``motor_voltage``: the reference motor voltage, V (the calibration's median
-    motor voltage, so that ``thrust_motor_ref_n`` and the exponent are nearly independent)."""
+    motor voltage, so that ``thrust_motor_ref_n`` and the exponent are nearly independent;
+    the default is unused while ``thrust_motor_ref_n`` is none)."""
     thrust_motor_exponent: float = Field(2.0, gt=0.2, lt=5.0)
     """(added) ``motor_voltage``: thrust ∝ (motor voltage)^this, dimensionless (fitted; 2,
     thrust ∝ ω² with ω ∝ v, where the data do not determine it)."""
