@@ -192,13 +192,21 @@ class AirframeFit:
         return np.std([f.residual_mean_n for f in self.flights], axis=0, ddof=1)
 
 
+MOCAP_GAP_PERIODS = 1.5
+"""A step of the drone's clock longer than this many median periods cuts a run of
+motion-capture samples (derived: evenly spaced samples step by one period, give or take the
+clock's jitter; a lost message makes a step of at least two)."""
+
+
 def mocap_kinematics(
     data: CalibrationData, window_s: float = 0.25
 ) -> tuple[FloatArray, FloatArray]:
     """Motion-capture velocity and acceleration, world frame, (n, 3) each; NaN where unknown.
 
     Savitzky–Golay derivatives (cubic, ``window_s`` wide) per run of consecutive
-    motion-capture samples, on the run's median sample period.
+    motion-capture samples, on the run's median sample period. The filter assumes evenly
+    spaced samples: a run is also cut where the drone's clock steps by more than
+    :data:`MOCAP_GAP_PERIODS` median periods (messages lost) or not forward.
     """
     n = len(data)
     vel = np.full((n, 3), math.nan)
@@ -210,18 +218,23 @@ def mocap_kinematics(
         edges = np.diff(np.concatenate(([0], have.astype(np.int8), [0])))
         for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1), strict=True):
             run = idx[a:b]
-            t = data.stamp_s[run]
-            if run.size < 9:
+            if run.size < 2:
                 continue
-            dt = float(np.median(np.diff(t)))
-            if not dt > 0:
+            steps = np.diff(data.stamp_s[run])
+            dt_run = float(np.median(steps))
+            if not dt_run > 0:
                 continue
-            win = max(round(window_s / dt) | 1, 7)
-            if win > run.size:
-                continue
-            p = data.position_world_m[run]
-            vel[run] = savgol_filter(p, win, 3, deriv=1, delta=dt, axis=0)
-            acc[run] = savgol_filter(p, win, 3, deriv=2, delta=dt, axis=0)
+            cuts = np.flatnonzero(~(steps > 0) | (steps > MOCAP_GAP_PERIODS * dt_run)) + 1
+            for piece in np.split(run, cuts):
+                if piece.size < 9:
+                    continue
+                dt = float(np.median(np.diff(data.stamp_s[piece])))
+                win = max(round(window_s / dt) | 1, 7)
+                if win > piece.size:
+                    continue
+                p = data.position_world_m[piece]
+                vel[piece] = savgol_filter(p, win, 3, deriv=1, delta=dt, axis=0)
+                acc[piece] = savgol_filter(p, win, 3, deriv=2, delta=dt, axis=0)
     return vel, acc
 
 
