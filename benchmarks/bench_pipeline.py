@@ -57,6 +57,7 @@ import numpy as np
 from filterpy.kalman import KalmanFilter
 
 from benchmarks import git
+from benchmarks.figures import write_figures
 from benchmarks.bench_service import _telemetry_payloads
 from groundstation import follow as follow_mod
 from groundstation.bus import Sample
@@ -723,6 +724,7 @@ def main(argv: list[str] | None = None) -> None:
     if not (args.quick or args.no_doc):
         DOC_PATH.write_text(text)
         print(f"wrote {DOC_PATH}")
+        write_figures(DOC_PATH.stem, result, argv if argv is not None else sys.argv[1:])
 
 
 if __name__ == "__main__":

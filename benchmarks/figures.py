@@ -1,0 +1,243 @@
+"""Each benchmark's figures as a file beside its page, and the code they measure.
+
+A benchmark whose figures README.md or a page in docs/ quotes writes them to
+``docs/<page>.json`` beside ``docs/<page>.md`` with :func:`write_figures`::
+
+    {
+      "benchmark": "pipeline_benchmark",
+      "command": ".venv/bin/python -m benchmarks.bench_pipeline",
+      "commit": "dc8d3ff0a1b2",             # HEAD when it ran
+      "uncommitted": [],                    # measured files that differed from HEAD
+      "generated_utc": "2026-12-04T18:30:00Z",
+      "measures": {"groundstation/tension.py": "<code hash>", ...},
+      "figures": {"handle_median_us": 116.3, ...}
+    }
+
+A page or README.md quotes a figure with a marker right after the number (the marker is an
+HTML comment, so it does not show once rendered)::
+
+    116 µs<!-- fig pipeline_benchmark.json handle_median_us -->
+
+``tests/test_docs_numbers.py`` reads every such marker: the number just before it must equal
+the figure in the named file (``docs/`` is implied; a dotted key walks nested tables) rounded
+to the quote's decimals, and every file's ``measures`` must still match the code, or the
+test names the command to rerun.
+
+What a benchmark measures is listed here, in :data:`BENCHMARKS`, by hand: the estimator's
+modules, the simulator where it draws the flights, the benchmark's own modules, and for
+``groundstation/config.py`` its default values only (a new check or flag there changes no
+figure). The command-line, the dashboard, the Zenoh adapter and the docs are not listed, so
+a change to them leaves the figures current. A file's hash is of its code: its syntax tree
+with the docstrings left out, so a comment or a docstring edited does not make a page stale.
+"""
+
+from __future__ import annotations
+
+import ast
+import datetime
+import hashlib
+import json
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from benchmarks import REPO, git, git_commit
+
+DOCS = REPO / "docs"
+
+CONFIG_DEFAULTS = "groundstation/config.py:defaults"
+"""The pseudo-file for the configuration's default values (:func:`config_defaults_hash`)."""
+
+ESTIMATOR: tuple[str, ...] = (
+    "groundstation/airframe.py",
+    "groundstation/calibration.py",
+    "groundstation/catenary.py",
+    "groundstation/contact.py",
+    "groundstation/estimator",
+    "groundstation/follow.py",
+    "groundstation/frozen.py",
+    "groundstation/localization.py",
+    "groundstation/messages.py",
+    "groundstation/pipeline.py",
+    "groundstation/slow_accel.py",
+    "groundstation/tension.py",
+    "groundstation/tension_change.py",
+    "groundstation/tension_drift.py",
+    "groundstation/tension_kalman.py",
+    "groundstation/tension_noise.py",
+    CONFIG_DEFAULTS,
+)
+"""One drone's estimator and the pipeline that routes messages to it."""
+
+SIMULATOR: tuple[str, ...] = ("groundstation/sim", "groundstation/evaluation.py")
+"""The simulator and the closed loop that flies it against a pipeline."""
+
+RECORDING: tuple[str, ...] = (
+    "groundstation/recording/calibrate.py",
+    "groundstation/recording/format.py",
+    "groundstation/recording/reader.py",
+    "groundstation/recording/replay.py",
+    "groundstation/recording/smoothed.py",
+    "groundstation/recording/writer.py",
+    "groundstation/smoother.py",
+)
+"""``calibrate`` and ``replay --offline``: what they read, fit and write."""
+
+
+@dataclass(frozen=True)
+class Benchmark:
+    """A benchmark whose page has a figures file.
+
+    Attributes:
+        command: the command that writes the page and its figures file, as its page says.
+        measures: files and folders (every ``*.py`` in them), relative to the repository.
+    """
+
+    command: str
+    measures: tuple[str, ...]
+
+
+BENCHMARKS: dict[str, Benchmark] = {
+    "pipeline_benchmark": Benchmark(
+        ".venv/bin/python -m benchmarks.bench_pipeline",
+        (
+            *ESTIMATOR,
+            "groundstation/bus.py",
+            "groundstation/evaluation.py",
+            "groundstation/sim/rotation.py",
+            "benchmarks/bench_pipeline.py",
+            "benchmarks/bench_service.py",
+            "benchmarks/service_rig.py",
+        ),
+    ),
+    "nanobench_cli": Benchmark(
+        ".venv/bin/python -m benchmarks.nanobench_cli",
+        (*ESTIMATOR, *RECORDING, "benchmarks/nanobench.py", "benchmarks/nanobench_cli.py"),
+    ),
+}
+"""Page name (``docs/<name>.md``, figures in ``docs/<name>.json``) → its benchmark."""
+
+
+def _without_docstrings(tree: ast.AST) -> ast.AST:
+    """Drop every statement that is a bare string: docstrings, attribute docstrings."""
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Module | ast.ClassDef | ast.FunctionDef | ast.AsyncFunctionDef):
+            node.body = [
+                s
+                for s in node.body
+                if not (
+                    isinstance(s, ast.Expr)
+                    and isinstance(s.value, ast.Constant)
+                    and isinstance(s.value.value, str)
+                )
+            ] or [ast.Pass()]
+    return tree
+
+
+def code_hash(path: Path) -> str:
+    """SHA-256 (16 hex digits) of a Python file's code: its syntax tree without docstrings.
+
+    Comments are not in the tree; line numbers are not hashed, so moving code down a file
+    by a docstring edit does not change the hash.
+    """
+    tree = _without_docstrings(ast.parse(path.read_text(encoding="utf-8"), str(path)))
+    return hashlib.sha256(ast.dump(tree).encode()).hexdigest()[:16]
+
+
+def config_defaults_hash() -> str:
+    """SHA-256 (16 hex digits) of the configuration's default values, as JSON.
+
+    ``model_construct`` builds the defaults without reading the environment or a file.
+    """
+    from groundstation.config import Settings
+
+    defaults = Settings.model_construct().model_dump(mode="json")
+    return hashlib.sha256(json.dumps(defaults, sort_keys=True).encode()).hexdigest()[:16]
+
+
+def _files(measures: tuple[str, ...]) -> list[str]:
+    files: list[str] = []
+    for entry in measures:
+        path = REPO / entry
+        if entry == CONFIG_DEFAULTS:
+            files.append(entry)
+        elif path.is_dir():
+            files += sorted(str(p.relative_to(REPO)) for p in path.rglob("*.py"))
+        else:
+            files.append(entry)
+    return files
+
+
+def measured_hashes(measures: tuple[str, ...]) -> dict[str, str]:
+    """Each measured file (folders expanded) → its :func:`code_hash` ("missing" if gone)."""
+    out: dict[str, str] = {}
+    for name in _files(measures):
+        if name == CONFIG_DEFAULTS:
+            out[name] = config_defaults_hash()
+        elif (REPO / name).is_file():
+            out[name] = code_hash(REPO / name)
+        else:
+            out[name] = "missing"
+    return out
+
+
+def figures_path(page: str) -> Path:
+    return DOCS / f"{page}.json"
+
+
+def write_figures(page: str, figures: Mapping[str, Any], argv: list[str] | None = None) -> Path:
+    """Write ``docs/<page>.json``: the figures, the command, the commit and the code measured.
+
+    Args:
+        page: a key of :data:`BENCHMARKS` (``docs/<page>.md`` is the page).
+        figures: name → number (or a nested table of them), as the page and README quote them.
+        argv: the command's arguments beyond :attr:`Benchmark.command`, if any.
+
+    Returns:
+        The path written.
+    """
+    bench = BENCHMARKS[page]
+    measures = measured_hashes(bench.measures)
+    real_files = [f for f in measures if f != CONFIG_DEFAULTS]
+    changed = git("status", "--porcelain", "--", *real_files).splitlines()
+    record = {
+        "benchmark": page,
+        "command": " ".join([bench.command, *(argv or [])]),
+        "commit": git_commit(),
+        "uncommitted": sorted(line[3:] for line in changed),
+        "generated_utc": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
+        "measures": measures,
+        "figures": _finite(figures),
+    }
+    path = figures_path(page)
+    path.write_text(json.dumps(record, indent=1, ensure_ascii=False) + "\n", encoding="utf-8")
+    print(f"wrote {path}")
+    return path
+
+
+def _finite(value: Any) -> Any:
+    """JSON has no NaN or infinity: such a figure is written as null."""
+    if isinstance(value, Mapping):
+        return {str(k): _finite(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_finite(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def stale_files(record: Mapping[str, Any]) -> list[str]:
+    """The measured files whose code differs from when ``record``'s figures were made.
+
+    The files are those the benchmark measures now (:data:`BENCHMARKS`) and those the record
+    lists, so a file added to the list, or a file removed, counts as a change too.
+    """
+    page = record["benchmark"]
+    recorded: dict[str, str] = record["measures"]
+    now = measured_hashes(BENCHMARKS[page].measures) if page in BENCHMARKS else {}
+    for name in recorded:
+        if name not in now:
+            now[name] = measured_hashes((name,))[name]
+    return sorted(name for name in set(now) | set(recorded) if now.get(name) != recorded.get(name))
