@@ -113,7 +113,7 @@ BENCHMARKS: dict[str, Benchmark] = {
         ),
     ),
     "nanobench_cli": Benchmark(
-        ".venv/bin/python -m benchmarks.nanobench_cli",
+        ".venv/bin/python -m benchmarks.nanobench_cli",  # --out docs/nanobench_cli.md
         (*ESTIMATOR, *RECORDING, "benchmarks/nanobench.py", "benchmarks/nanobench_cli.py"),
     ),
 }

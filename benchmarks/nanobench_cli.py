@@ -12,7 +12,12 @@ Estimate and the share of airborne rows not flagged ``on_ground``.
 
 ``B6_linear_ramp_rep1`` is left out (a ground-effect hover at 0.07–0.2 m; the data README).
 
-Run:  python -m benchmarks.nanobench_cli [--out docs/nanobench_cli.md]
+Run:  python -m benchmarks.nanobench_cli --out docs/nanobench_cli.md [--data DIR]
+
+The flights are not in the repository: ``--data`` names the directory of the NanoBench CSV
+files, by default ``../shared/data/nanobench`` beside the repository. With ``--out
+docs/nanobench_cli.md`` the figures also go to ``docs/nanobench_cli.json``
+(:mod:`benchmarks.figures`).
 """
 
 from __future__ import annotations
@@ -29,9 +34,12 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
+from benchmarks import git_commit
+from benchmarks.figures import DOCS, write_figures
 from groundstation.cli import main as gs_main
 from groundstation.recording.reader import RecordedMessage, copy_messages, iter_messages
 
@@ -209,10 +217,24 @@ def variant_config(src: Path, dst: Path, extra_toml: str) -> Path:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", help="write the markdown page here")
-    ap.add_argument("--data", default=str(DATA), help="the NanoBench directory")
+    ap.add_argument(
+        "--data",
+        type=Path,
+        default=DATA,
+        help="the directory of the NanoBench CSV files (default: ../shared/data/nanobench "
+        "beside the repository)",
+    )
     args = ap.parse_args(argv)
+    missing = [f"{n}.csv" for n in DAYS if not (args.data / f"{n}.csv").is_file()]
+    if missing:
+        what = "missing " + ", ".join(missing) if args.data.is_dir() else "no such directory"
+        ap.error(
+            f"--data {args.data}: {what}. The NanoBench flights are not in the repository: "
+            "pass --data DIR, the directory of their CSV files (../shared/data/nanobench "
+            "beside the repository on the project's machines)"
+        )
     t0 = time.time()
-    flights = {n: load(n, Path(args.data)) for n in DAYS}
+    flights = {n: load(n, args.data) for n in DAYS}
     lines: list[str] = []
     say = lines.append
     with tempfile.TemporaryDirectory() as tmp:
@@ -248,6 +270,8 @@ def main(argv: list[str] | None = None) -> int:
             ),
         ]
         results: dict[str, dict[str, list[Judged]]] = {v[0]: {} for v in variants}
+        keys = ("uncalibrated", "full", "mean_trusted", "no_rotor_drag", "default", "hover_vib")
+        figures: dict[str, dict[str, Any]] = {}
         reports: dict[str, str] = {}
         refused: dict[str, str] = {}
         for fold, train, held in folds:
@@ -269,8 +293,12 @@ def main(argv: list[str] | None = None) -> int:
         say("# NanoBench through the command line (real untethered Crazyflie flights)")
         say("")
         say(
-            "`python -m benchmarks.nanobench_cli` (this page; "
-            f"{time.time() - t0:.0f} s). Six shared flights (B6_linear_ramp_rep1 left out), "
+            "`python -m benchmarks.nanobench_cli --out docs/nanobench_cli.md` (this page and "
+            f"its figures, docs/nanobench_cli.json; {time.time() - t0:.0f} s at commit "
+            f"{git_commit()}). The flights are not in the repository: `--data DIR` names the "
+            "directory of the NanoBench CSV files (default `../shared/data/nanobench`, beside "
+            "the repository; its README says where they come from). "
+            "Six shared flights (B6_linear_ramp_rep1 left out), "
             "recorded as Telemetry with Vicon `position_m`, calibrated with `groundstation "
             "calibrate --untethered`, served without motion capture by `groundstation replay "
             "--offline` (the service's pipeline). Truth: zero tension. Per held-out flight: "
@@ -282,7 +310,10 @@ def main(argv: list[str] | None = None) -> int:
         for label, _, _ in variants:
             say(f"## {label}")
             say("")
+            key = keys[[v[0] for v in variants].index(label)]
+            figures[key] = {"label": label}
             if label in refused:
+                figures[key]["refused"] = refused[label]
                 say(f"calibrate refused: `{refused[label]}`")
                 say("")
                 say(
@@ -296,6 +327,9 @@ def main(argv: list[str] | None = None) -> int:
             loo = []
             for fold, _, _ in folds:
                 for j in results[label][fold]:
+                    figures[key].setdefault("rows", []).append(
+                        [fold, j.flight, j.median_abs_t_mn, j.answered, j.airborne_not_on_ground]
+                    )
                     say(
                         f"| {fold} | {j.flight} | {j.median_abs_t_mn:.1f} | "
                         f"{100 * j.answered:.1f} % | {100 * j.airborne_not_on_ground:.1f} % |"
@@ -308,6 +342,12 @@ def main(argv: list[str] | None = None) -> int:
                 if fold.startswith("day")
                 for j in results[label][fold]
             ]
+            figures[key].update(
+                cross_day_median_mn=statistics.median(cross),
+                cross_day_worst_mn=max(cross),
+                leave_one_out_median_mn=statistics.median(loo),
+                leave_one_out_worst_mn=max(loo),
+            )
             say("")
             say(
                 f"Cross-day: median over flights {statistics.median(cross):.1f} mN, worst "
@@ -326,6 +366,8 @@ def main(argv: list[str] | None = None) -> int:
     page = "\n".join(lines).replace(f"{work}/", "") + "\n"  # the file names alone
     if args.out:
         Path(args.out).write_text(page, encoding="utf-8")
+        if Path(args.out).resolve() == DOCS / "nanobench_cli.md":
+            write_figures("nanobench_cli", figures, ["--out", "docs/nanobench_cli.md"])
     sys.stdout.write(page)
     return 0
 
