@@ -57,8 +57,8 @@ import numpy as np
 from filterpy.kalman import KalmanFilter
 
 from benchmarks import git
-from benchmarks.figures import write_figures
 from benchmarks.bench_service import _telemetry_payloads
+from benchmarks.figures import write_figures
 from groundstation import follow as follow_mod
 from groundstation.bus import Sample
 from groundstation.evaluation import settings_for
@@ -665,7 +665,7 @@ def render(result: dict[str, Any], before: dict[str, Any] | None, argv: list[str
     io = st["validate"] + st["estimate"]
     lines += [
         "",
-        f"Issue 22's target, ≤ 50 µs per message with validation and encoding: "
+        f"The target, ≤ 50 µs per message with validation and encoding: "
         f"**{'met' if median <= 50.0 else 'not met'}** (median {median:.0f} µs). Of it, "
         f"the contract's JSON in and out (validate + estimate) is {io:.0f} µs, the "
         f"localization's catenary solves (the drone and six sigma points) {st['localize']:.0f} "

@@ -1,4 +1,4 @@
-"""The estimator on the realistic simulator against an oracle computed in the same run (issue 9).
+"""The estimator on the realistic simulator against an oracle computed in the same run.
 
 Run from the repository root::
 
@@ -62,6 +62,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks import git_commit
+from benchmarks.figures import write_figures
 from groundstation.bus import Sample
 from groundstation.config import CalibrationSection, Settings, load_settings
 from groundstation.evaluation import closed_loop
@@ -814,12 +815,12 @@ _BEFORE_SLOW_STAGE = {
     "tug_t90_s": {0.5: 0.31, 1.0: 1.98},
     "envelope_median_cm": {"misalignment": 23.2, "accel_scale": 24.2, "accel_bias": 10.5},
 }
-"""The page's figures before the slow accelerometer stage of issue 20 (the run at b6d0e7c,
+"""The page's figures before the slow accelerometer stage (the run at b6d0e7c,
 ``--tug-seeds 8``): what the first bullet of the reading compares with."""
 
 
 def _render_slow_stage(res: dict[str, Any]) -> list[str]:
-    """The first bullet of the reading: this run against the estimator before issue 20."""
+    """The first bullet of the reading: this run against the estimator before the slow stage."""
     b = _BEFORE_SLOW_STAGE
     parts = []
     hover = {h["noise"]: h for h in res.get("hover", [])}
@@ -844,7 +845,7 @@ def _render_slow_stage(res: dict[str, Any]) -> list[str]:
         if any(100.0 * hover[n]["ours_p95_m"] > b["hover_p95_cm"][n] for n in levels):
             text += (
                 " (where the hover crossover switches on and off and the near-plumb spot "
-                "(0.5, -0.6, 1.0) holds the tail: the open problem of issue 20, "
+                "(0.5, -0.6, 1.0) holds the tail: an open problem, "
                 "docs/estimator_design.md)"
             )
         parts.append(text)
@@ -888,8 +889,8 @@ def _render_slow_stage(res: dict[str, Any]) -> list[str]:
     if not parts:
         return []
     return [
-        f"- **The estimator of issue 20** (the slow accelerometer stage and the airframe "
-        f"calibration, docs/estimator_design.md) against this page's previous run at "
+        f"- **The slow accelerometer stage and the airframe calibration** "
+        f"(docs/estimator_design.md) against this page's previous run at "
         f"{b['commit']}, before it: " + "; ".join(parts) + "."
     ]
 
@@ -940,7 +941,7 @@ def _render_reading(res: dict[str, Any]) -> list[str]:
             "spot. There the localization blends the position toward the base as the "
             "filter's P grows, so the position error depends on the filter's memory more "
             "than elsewhere: with a fixed 6 s hover time constant ours reached (before the "
-            "slow stage of issue 20) 2.0x the oracle's p95 on seed 200 (the oracle's best "
+            "slow stage) 2.0x the oracle's p95 on seed 200 (the oracle's best "
             "was 20-40 s); the time constant "
             "now follows the noise (groundstation/tension.py, *Process noise in seconds*).",
             "- With calibration = truth a flight's vertical tension error is its noise's "
@@ -956,7 +957,7 @@ def _render_reading(res: dict[str, Any]) -> list[str]:
         ]
     if "tug" in res:
         L.append(
-            "- (Measured before the slow stage of issue 20.) The hover time constant against "
+            "- (Measured before the slow stage.) The hover time constant against "
             "the tug (measured with `--only tug --levels L "
             "--tug-seeds 8 --fixed-tau` at b70b80a: the same flights with the earlier fixed 6"
             " s): detections are the step test's and do not depend on it (the same first dete"
@@ -1102,6 +1103,9 @@ def main(argv: list[str] | None = None) -> int:
         args.json.write_text(json.dumps(res, indent=1, default=str))
     if not quick and args.only is None:
         DOC_PATH.write_text(text)
+        figures = {**res, "levels": list(levels)}
+        figures["envelope"] = {row["class"]: row for row in res["envelope"]}
+        write_figures(DOC_PATH.stem, figures, cmd.split()[3:])
     return 0
 
 

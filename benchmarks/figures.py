@@ -38,6 +38,7 @@ import datetime
 import hashlib
 import json
 import math
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -97,6 +98,8 @@ class Benchmark:
 
     command: str
     measures: tuple[str, ...]
+    page: str = ""
+    """The page in docs/ whose figures these are, if its name is not the figures file's."""
 
 
 BENCHMARKS: dict[str, Benchmark] = {
@@ -115,6 +118,34 @@ BENCHMARKS: dict[str, Benchmark] = {
     "nanobench_cli": Benchmark(
         ".venv/bin/python -m benchmarks.nanobench_cli",  # --out docs/nanobench_cli.md
         (*ESTIMATOR, *RECORDING, "benchmarks/nanobench.py", "benchmarks/nanobench_cli.py"),
+    ),
+    "realistic_benchmark": Benchmark(
+        ".venv/bin/python -m benchmarks.bench_realistic",  # --tug-seeds 8
+        (*ESTIMATOR, *SIMULATOR, "groundstation/bus.py", "benchmarks/bench_realistic.py"),
+    ),
+    "hover_exit": Benchmark(
+        ".venv/bin/python -m benchmarks.hover_exit",
+        (
+            *ESTIMATOR,
+            *SIMULATOR,
+            "groundstation/bus.py",
+            "benchmarks/bench_realistic.py",
+            "benchmarks/hover_exit.py",
+        ),
+    ),
+    "results_envelope": Benchmark(
+        ".venv/bin/python -m benchmarks.results",  # or --only envelope
+        (
+            *ESTIMATOR,
+            *SIMULATOR,
+            "groundstation/bus.py",
+            "benchmarks/bench_realistic.py",
+            "benchmarks/results.py",
+            "benchmarks/results_envelope.py",
+            "benchmarks/results_paper.py",
+            "benchmarks/results_sim.py",
+        ),
+        page="RESULTS.md",
     ),
 }
 """Page name (``docs/<name>.md``, figures in ``docs/<name>.json``) → its benchmark."""
@@ -142,7 +173,11 @@ def code_hash(path: Path) -> str:
     Comments are not in the tree; line numbers are not hashed, so moving code down a file
     by a docstring edit does not change the hash.
     """
-    tree = _without_docstrings(ast.parse(path.read_text(encoding="utf-8"), str(path)))
+    return _text_hash(path.read_text(encoding="utf-8"), str(path))
+
+
+def _text_hash(source: str, name: str) -> str:
+    tree = _without_docstrings(ast.parse(source, name))
     return hashlib.sha256(ast.dump(tree).encode()).hexdigest()[:16]
 
 
@@ -201,20 +236,37 @@ def write_figures(page: str, figures: Mapping[str, Any], argv: list[str] | None 
     bench = BENCHMARKS[page]
     measures = measured_hashes(bench.measures)
     real_files = [f for f in measures if f != CONFIG_DEFAULTS]
-    changed = git("status", "--porcelain", "--", *real_files).splitlines()
+    changed = [line[3:] for line in git("status", "--porcelain", "--", *real_files).splitlines()]
     record = {
         "benchmark": page,
         "command": " ".join([bench.command, *(argv or [])]),
         "commit": git_commit(),
-        "uncommitted": sorted(line[3:] for line in changed),
+        "uncommitted": sorted(f for f in changed if _code_differs_from_head(f)),
         "generated_utc": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
         "measures": measures,
         "figures": _finite(figures),
     }
     path = figures_path(page)
-    path.write_text(json.dumps(record, indent=1, ensure_ascii=False) + "\n", encoding="utf-8")
+    text = json.dumps(record, indent=1, ensure_ascii=False, default=_plain)
+    path.write_text(text + "\n", encoding="utf-8")
     print(f"wrote {path}")
     return path
+
+
+def _code_differs_from_head(name: str) -> bool:
+    """Whether a changed file's code (not only its docstrings or comments) differs from HEAD."""
+    committed = git("show", f"HEAD:{name}")
+    path = REPO / name
+    if not committed or not path.is_file():
+        return True
+    return _text_hash(committed, name) != code_hash(path)
+
+
+def _plain(value: Any) -> Any:
+    """numpy scalars and arrays as Python numbers and lists (JSON's ``default``)."""
+    if hasattr(value, "tolist"):
+        return value.tolist()
+    raise TypeError(f"not a figure: {value!r}")
 
 
 def _finite(value: Any) -> Any:
@@ -241,3 +293,80 @@ def stale_files(record: Mapping[str, Any]) -> list[str]:
         if name not in now:
             now[name] = measured_hashes((name,))[name]
     return sorted(name for name in set(now) | set(recorded) if now.get(name) != recorded.get(name))
+
+
+# ---------------------------------------------------------------------------- quotes
+
+QUOTE = re.compile(
+    r"(?P<number>[-−]?\d[\d,]*(?:\.\d+)?)(?P<unit>[^\d\n<]{0,16}?)"
+    r"<!-- fig (?P<file>[\w./-]+\.json) (?P<key>[\w.-]+)(?: ×(?P<scale>[\d.e+-]+))? -->"
+)
+"""A number, at most a unit or a closing ``**`` after it, then the marker naming its figure
+(and, if the page quotes it in other units than the file, the factor: ``×100`` for a figure
+in metres quoted in cm)."""
+
+MARKER = re.compile(r"<!-- fig\b[^>]*-->")
+
+
+@dataclass(frozen=True)
+class Quote:
+    """A number a page quotes, with the figure it names."""
+
+    where: str  # "README.md:39"
+    number: str  # as written, e.g. "1,234.5" or "−9.1"
+    file: str  # relative to docs/
+    key: str  # dotted path into the file's "figures"
+    scale: float = 1.0  # the quote is the figure times this
+
+
+def find_quotes(text: str, name: str) -> tuple[list[Quote], list[str]]:
+    """The quotes in a page, and the markers that follow no number (each a problem)."""
+    quotes, bad = [], []
+    for line_no, line in enumerate(text.splitlines(), 1):
+        matched = 0
+        for m in QUOTE.finditer(line):
+            matched += 1
+            scale = float(m["scale"]) if m["scale"] else 1.0
+            quotes.append(Quote(f"{name}:{line_no}", m["number"], m["file"], m["key"], scale))
+        markers = len(MARKER.findall(line))
+        if markers != matched:
+            bad.append(f"{name}:{line_no}: {markers - matched} marker(s) follow no number")
+    return quotes, bad
+
+
+def lookup(figures: Any, key: str) -> Any:
+    """``figures["a"]["b"][2]`` for key ``a.b.2``; KeyError naming the missing part."""
+    value = figures
+    for part in key.split("."):
+        if isinstance(value, list) and part.isdigit() and int(part) < len(value):
+            value = value[int(part)]
+        elif isinstance(value, Mapping) and part in value:
+            value = value[part]
+        else:
+            raise KeyError(f"{key!r}: no {part!r}")
+    return value
+
+
+def check_quote(quote: Quote, docs: Path = DOCS) -> str | None:
+    """None if the quoted number is the named figure at the quote's decimals, else why not."""
+    path = docs / quote.file
+    if not path.is_file():
+        return f"{quote.where}: {quote.file} does not exist"
+    try:
+        value = lookup(json.loads(path.read_text(encoding="utf-8"))["figures"], quote.key)
+    except KeyError as exc:
+        return f"{quote.where}: {quote.file} has no figure {exc.args[0]}"
+    if not isinstance(value, int | float) or isinstance(value, bool):
+        return f"{quote.where}: {quote.file} {quote.key} is {value!r}, not a number"
+    written = quote.number.replace(",", "").replace("−", "-")
+    decimals = len(written.split(".")[1]) if "." in written else 0
+    value = value * quote.scale
+    expected = f"{value:.{decimals}f}"
+    if float(expected) == 0.0:
+        expected = expected.lstrip("-")
+    if expected != written:
+        return (
+            f"{quote.where}: quotes {quote.number} for {quote.file} {quote.key}, "
+            f"which is {value!r} ({expected} at the quote's {decimals} decimal(s))"
+        )
+    return None

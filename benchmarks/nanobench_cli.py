@@ -313,7 +313,7 @@ def main(argv: list[str] | None = None) -> int:
             key = keys[[v[0] for v in variants].index(label)]
             figures[key] = {"label": label}
             if label in refused:
-                figures[key]["refused"] = refused[label]
+                figures[key]["refused"] = refused[label].replace(f"{work}/", "")
                 say(f"calibrate refused: `{refused[label]}`")
                 say("")
                 say(

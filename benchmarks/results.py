@@ -56,6 +56,7 @@ from benchmarks import results_figures as rfig
 from benchmarks import results_paper as rp
 from benchmarks import results_peers as rpeers
 from benchmarks.bench_catenary import machine
+from benchmarks.figures import write_figures
 from benchmarks.results_sim import run_jobs
 
 REPO = Path(__file__).resolve().parents[1]
@@ -668,6 +669,63 @@ def envelope_headline(env: renv.EnvelopeResult) -> dict[str, Any]:
         },
         "envelope_real_tension_median_n": {
             c.cls.name: c.real.raw.tension_median_n for c in env.classes
+        },
+    }
+
+
+def _stats_figures(st: renv.Stats | None) -> dict[str, float] | None:
+    """A point's errors in the units the pages print them (cm, mN)."""
+    if st is None:
+        return None
+    return {
+        "median_cm": 100 * st.median_m,
+        "p95_cm": 100 * st.p95_m,
+        "horizontal_median_cm": 100 * st.horizontal_median_m,
+        "height_median_cm": 100 * st.vertical_median_m,
+        "tension_median_mn": 1e3 * st.tension_median_n,
+        "tension_p95_mn": 1e3 * st.tension_p95_n,
+        "availability": st.availability,
+    }
+
+
+def envelope_figures(env: renv.EnvelopeResult) -> dict[str, Any]:
+    """Section (d) as ``docs/results_envelope.json``'s figures (:mod:`benchmarks.figures`):
+    per error class its real size uncalibrated and with calibration = truth, every size
+    flown, and the sweeps."""
+    return {
+        "profile": renv.PROFILE,
+        "quick": env.plan.quick,
+        "spots": list(env.plan.spots),
+        "seconds": env.plan.seconds,
+        "steady_from_s": env.plan.steady_from_s,
+        "baseline_noise_mps2": renv.BASELINE_NOISE_MPS2,
+        "classes": {
+            c.cls.name: {
+                "real": c.cls.real,
+                "uncalibrated": _stats_figures(c.real.raw),
+                "calibrated": _stats_figures(c.real.cal),
+                "points": [
+                    {
+                        "value": p.value,
+                        "uncalibrated": _stats_figures(p.raw),
+                        "calibrated": _stats_figures(p.cal),
+                    }
+                    for p in c.points
+                ],
+            }
+            for c in env.classes
+        },
+        "sweeps": {
+            sw.sweep.name: [
+                {
+                    "value": pt.value,
+                    **(_stats_figures(pt.stats) or {}),
+                    "azimuth_determined": pt.azimuth_determined,
+                    "floor_contact": pt.floor_contact,
+                }
+                for pt in sw.points
+            ]
+            for sw in env.sweeps
         },
     }
 
@@ -1686,6 +1744,9 @@ def main(argv: list[str] | None = None) -> int:
             print(
                 f"rewrote the bullets and figure of the results block of {README}", file=sys.stderr
             )
+            write_figures(
+                "results_envelope", envelope_figures(only.envelope), ["--only", "envelope"]
+            )
         print(f"wall time {wall:.0f} s", file=sys.stderr)
         return 0
     outcome = run(args.quick, out_dir, max(1, args.workers))
@@ -1695,6 +1756,7 @@ def main(argv: list[str] | None = None) -> int:
     if not args.quick and not args.no_readme and out_dir == (REPO / "docs").resolve():
         write_readme_block(readme_block(outcome, prov, wall))
         print(f"rewrote the results block of {README}", file=sys.stderr)
+        write_figures("results_envelope", envelope_figures(outcome.envelope))
     print(f"wall time {wall:.0f} s", file=sys.stderr)
     return 0
 
