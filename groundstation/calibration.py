@@ -416,7 +416,7 @@ class RestOffset:
 
 
 class RestCalibrator:
-    """The accelerometer's x/y offset from a still, disarmed drone (issue 10 §3).
+    """The accelerometer's x/y offset from a still, disarmed drone.
 
     Feed every telemetry sample to :meth:`update`. While the drone is disarmed and still
     (every sample's gyro within ``max_gyro_rps``, its accelerometer within

@@ -517,7 +517,7 @@ class ServiceSection(_Section):
 class RealisticSection(_Section):
     """``[sim.realistic]``: the ``realistic`` profile (docs/simulator.md has every source).
 
-    Defaults are the real tethered Crazyflie 2.1 flights of issue 9 (30.7 g, 1.6 m tether,
+    Defaults are measured on real tethered Crazyflie 2.1 flights (30.7 g, 1.6 m tether,
     motion capture); each error class has a switch and a size; per-flight constants are drawn
     from ``[sim] seed`` and the drone's index. Sign conventions of every error and the
     equivalent ``[calibration]`` values: :mod:`groundstation.sim.sensors`.
@@ -537,7 +537,7 @@ class RealisticSection(_Section):
     motor_lag: bool = True
     """Switch: first-order motor lag (``motor_tau_s``)."""
     motor_tau_s: float = Field(0.030, ge=0.0, le=0.5)
-    """Motor time constant, s (issue 9: ~30 ms)."""
+    """Motor time constant, s (real flights: ~30 ms)."""
     rotor_drag: bool = True
     """Switch: rotor drag (``rotor_drag_n_s_per_m``)."""
     rotor_drag_n_s_per_m: float = Field(0.0073, ge=0.0)
@@ -564,19 +564,19 @@ class RealisticSection(_Section):
     vibration: bool = True
     """Switch: vibration noise (off: only ``accel_noise_floor_mps2``)."""
     accel_noise_mps2: float = Field(1.0, ge=0.0)
-    """Vibration noise std per axis at hover, m/s² (issue 9: 0.7–2.0; newer firmware
+    """Vibration noise std per axis at hover, m/s² (real flights: 0.7–2.0; newer firmware
     0.06–0.39)."""
     accel_noise_lag1: float = Field(0.2, ge=0.0, lt=1.0)
-    """Lag-1 autocorrelation of the noise per IMU sample (issue 9: up to 0.3)."""
+    """Lag-1 autocorrelation of the noise per IMU sample (real flights: up to 0.3)."""
     draw_levels: bool = False
     """Draw ``accel_noise_mps2``, ``accel_noise_lag1`` and ``battery_soc_start`` per flight,
     uniform in their ``*_range`` keys, from ``[sim] seed`` and the drone's index (a stream of
     their own: the other drawn errors stay as they are); off: the fixed values above (every
     benchmark's, so its numbers do not move)."""
     accel_noise_range_mps2: tuple[float, float] = (0.7, 2.0)
-    """Range of the drawn vibration noise, m/s² (issue 9: 0.7–2.0 on real flights)."""
+    """Range of the drawn vibration noise, m/s² (0.7–2.0 on real flights)."""
     accel_noise_lag1_range: tuple[float, float] = (0.0, 0.3)
-    """Range of the drawn lag-1 autocorrelation (issue 9: up to 0.3)."""
+    """Range of the drawn lag-1 autocorrelation (real flights: up to 0.3)."""
     battery_soc_range: tuple[float, float] = (0.6, 1.0)
     """Range of the drawn state of charge at t = 0 (0.6: ~3.74 V at hover, where the
     thrust map reads ~1.17 times its value at 4.05 V)."""
@@ -590,11 +590,11 @@ class RealisticSection(_Section):
     """Switch: per-boot accelerometer misalignment."""
     misalignment_max_rad: float = Field(0.052, ge=0.0, le=0.35)
     """Per-boot accelerometer tilt against the attitude frame, magnitude up to this, rad
-    (issue 9: ~3°)."""
+    (real flights: ~3°)."""
     accel_scale: bool = True
     """Switch: per-boot accelerometer scale error."""
     accel_scale_max: float = Field(0.025, ge=0.0, le=0.5)
-    """Per-boot accelerometer scale error, uniform in ±this (issue 9: up to 2.5 %)."""
+    """Per-boot accelerometer scale error, uniform in ±this (real flights: up to 2.5 %)."""
     accel_bias: bool = True
     """Switch: per-boot accelerometer bias."""
     accel_bias_std_mps2: float = Field(0.05, ge=0.0)
@@ -607,18 +607,18 @@ class RealisticSection(_Section):
     thrust_axis: bool = True
     """Switch: thrust axis off body +z."""
     thrust_axis_rad: tuple[float, float] = (-0.037, -0.016)
-    """Thrust axis ``[about_x, about_y]`` of body +z, rad, airframe constant (issue 9)."""
+    """Thrust axis ``[about_x, about_y]`` of body +z, rad, airframe constant (as measured)."""
     thrust_map: bool = True
     """Switch: reported thrust through an erroneous nominal map."""
     thrust_report_error: float = Field(-0.0909, ge=-0.5, le=2.0)
-    """Reported/true thrust − 1 at ``thrust_vbat_ref_v`` (issue 9: true = 1.10 × reported,
+    """Reported/true thrust − 1 at ``thrust_vbat_ref_v`` (real flights: true = 1.10 × reported,
     i.e. −0.091; range −0.10..+0.90)."""
     thrust_report_error_std: float = Field(0.01, ge=0.0)
     """Per-flight spread of ``thrust_report_error``."""
     thrust_vbat_exponent: float = Field(2.0, ge=0.0, le=5.0)
     """γ: reported/true grows as (V_ref/V)^γ as the battery sags."""
     thrust_vbat_ref_v: float = Field(4.05, gt=0.0)
-    """Battery voltage at which ``thrust_report_error`` holds, V (issue 9: 4.03–4.06 V)."""
+    """Battery voltage at which ``thrust_report_error`` holds, V (real flights: 4.03–4.06 V)."""
     battery: bool = True
     """A sagging battery; off: constant ``thrust_vbat_ref_v`` and no ``vbat_v``."""
     publish_vbat: bool = True
@@ -639,7 +639,7 @@ class RealisticSection(_Section):
     imu_timing: bool = True
     """Switch: IMU jitter (off: exactly every 1/``imu_rate_hz``)."""
     imu_rate_hz: float = Field(100.0, gt=0.0, le=1000.0)
-    """Mean IMU Telemetry rate, Hz (issue 9: 100 Hz)."""
+    """Mean IMU Telemetry rate, Hz (real flights: 100 Hz)."""
     imu_jitter_std_s: float = Field(0.0015, ge=0.0)
     """IMU spacing jitter std, s."""
     imu_late_prob: float = Field(0.05, ge=0.0, le=1.0)
@@ -647,21 +647,21 @@ class RealisticSection(_Section):
     imu_spacing_min_s: float = Field(0.006, gt=0.0)
     """Shortest IMU spacing, s."""
     imu_spacing_max_s: float = Field(0.027, gt=0.0)
-    """IMU spacing bounds, s (issue 9: 6–27 ms)."""
+    """IMU spacing bounds, s (real flights: 6–27 ms)."""
     mocap_timing: bool = True
     """Off: a motion-capture frame at every IMU sample, no latency, no bursts."""
     mocap_rate_min_hz: float = Field(70.0, gt=0.0)
     """Lowest per-flight motion-capture rate, Hz."""
     mocap_rate_max_hz: float = Field(116.0, gt=0.0)
-    """Per-flight frame rate, uniform in [min, max], Hz (issue 9: 70–116 Hz)."""
+    """Per-flight frame rate, uniform in [min, max], Hz (real flights: 70–116 Hz)."""
     mocap_latency_s: float = Field(0.010, ge=0.0)
     """Capture → arrival latency of motion capture, s."""
     mocap_burst_prob: float = Field(0.175, ge=0.0, lt=1.0)
-    """Fraction of frames held back and delivered with the next (issue 9: 15–20 % < 1 ms)."""
+    """Fraction of frames held back and delivered with the next (real flights: 15–20 % < 1 ms)."""
     mocap_outage_rate_per_s: float = Field(0.2, ge=0.0)
     """Motion-capture outages per second (Poisson)."""
     mocap_outage_max_s: float = Field(0.150, gt=0.0)
-    """Longest gap, s (issue 9: up to 150 ms)."""
+    """Longest gap, s (real flights: up to 150 ms)."""
     mocap_noise_m: float = Field(0.0003, ge=0.0)
     """Motion-capture position noise std per axis, m."""
     mocap_attach: Literal["latest", "new"] = "latest"

@@ -12,7 +12,7 @@ trusted, and a touch-down is noticed where it can be:
 
 * **On the ground, seen at rest** (any state): disarmed, or thrust below
   ``ground_thrust_ratio`` of the weight *while the accelerometer shows the floor holding the
-  drone still*. A low thrust alone is no evidence (issue 23: the demo's controller cuts the
+  drone still*. A low thrust alone is no evidence (the demo's controller cuts the
   thrust to 7 % of the weight for 60 ms at a jump from 1.2 m to 0.5 m, and the rule "below
   the ratio is the ground" learnt a resting height of 1.2 m in mid-air and stayed on the
   ground for good). Physics tells the two apart: on the floor the specific force is about

@@ -1035,7 +1035,7 @@ class TensionFilter:
     ``m (R f + g)`` (the accelerometer, no thrust) and ``-R F t - m g`` (attitude x
     thrust, no accelerometer). Their difference at DC is the accelerometer's offset minus
     the thrust's errors: one equation for two sets of unknowns. Where the attitude is
-    independent of the accelerometer (the motion-capture body of issue 9's flights; the
+    independent of the accelerometer (the motion-capture body of the real tethered flights; the
     realistic simulator's reported attitude, which is the true one) the difference is
     informative, but weighing the two routes only moves the per-boot accelerometer error
     into the thrust's: solving for the accelerometer offset needs the thrust scale and

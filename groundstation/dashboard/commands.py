@@ -4,8 +4,8 @@ Payloads are built with the models of :mod:`groundstation.messages` (FollowComma
 TetherParams, Stop), so what the panel sends is what the service accepts. A follow setting
 the operator types is checked against the selected drone here, with the service's own rules
 (its threshold floor ``[service] follow_threshold_min_n``, the tether's reach, no follow
-without a trusted position), and a refusal is a sentence on the panel, never a silent clamp
-(issue 14). What the service refuses anyway comes back on ``tether/{drone}/events`` and is
+without a trusted position), and a refusal is a sentence on the panel, never a silent clamp.
+What the service refuses anyway comes back on ``tether/{drone}/events`` and is
 shown in the same place.
 """
 

@@ -245,7 +245,7 @@ class Panel:
         with gui.add_folder("Follow"):
             self.follow = _Synced(
                 # No hint (tooltip) on these two: after a click it stayed over the emergency
-                # stop buttons just above (issue 23); the note below says what they do.
+                # stop buttons just above; the note below says what they do.
                 gui.add_checkbox("Follow mode", False, disabled=True)
             )
             self.follow.handle.on_update(self._on_follow_toggled)

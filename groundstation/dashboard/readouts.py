@@ -126,7 +126,7 @@ UNCALIBRATED_NOTE = (
     "errors: median 95 cm, p95 128 cm; calibrated 8 cm; real flights 0.9-1.4 m), even on the "
     "wrong side of the base. Calibrate: groundstation calibrate (docs/calibration.md)."
 )
-"""Said where the position is shown (issue 23: 167 cm off with only a small badge). The
+"""Said where the position is shown (a small badge alone went unnoticed at 167 cm off). The
 figures are docs/results_summary.md's (realistic profile, every error class at its size)."""
 
 

@@ -1,4 +1,4 @@
-"""Contact stage: ground or air for one accepted message (issue 23's evidence rule).
+"""Contact stage: ground or air for one accepted message (no ground without evidence).
 
 Control around :func:`groundstation.contact.contact_step` (the state machine and its
 evidence: the vertical specific force, the thrust against the weight, motion capture's
@@ -8,8 +8,8 @@ thrust of the observation stage, the world vertical acceleration of the IMU read
 one — and says what the rest of the step takes as "on the ground": the contact state's
 decision, or a disarmed drone.
 
-A low thrust alone is no ground (the demo's mid-air latch of issue 23): the contact state
-decides. Pure functions of frozen inputs.
+A low thrust alone is no ground (a controller that cuts the thrust in mid-air would
+latch it there): the contact state decides. Pure functions of frozen inputs.
 """
 
 from __future__ import annotations

@@ -490,7 +490,7 @@ def _calibration_table(cal: DroneCalibration, source: str) -> dict[str, Any]:
         ],
         "thrust_vbat_slope_per_v": round(v["vbat_slope_per_v"], 6),
         "thrust_vbat_ref_v": fit.vbat_ref_v,
-        # Where the thrust map holds: the service flags flight outside it (issue 10).
+        # Where the thrust map holds: the service flags flight outside it.
         **({} if vbat_range is None else {"thrust_vbat_range_v": vbat_range}),
         "rest": cal.rest,
         "rest_required": cal.rest_required,
@@ -751,7 +751,7 @@ def _airframe_table(fit: AirframeFit, cal: Any, source: str) -> dict[str, Any]:
     return {
         **thrust,
         "thrust_axis_rad": [round(v["about_x_rad"], 6), round(v["about_y_rad"], 6)],
-        # Per power-on: learnt by the service at each power-on, never carried (issue 20).
+        # Per power-on: learnt by the service at each power-on, never carried.
         "accel_bias_mps2": [0.0, 0.0, 0.0],
         "thrust_vbat_ref_v": fit.vbat_ref_v,
         "rotor_drag_n_s_per_m": round(v["rotor_drag_n_s_per_m"], 6),

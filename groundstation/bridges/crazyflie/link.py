@@ -158,7 +158,7 @@ SERIAL_REFUSED = (
     "sync without a timeout, which would hang the bridge. Use radio:// (a Crazyradio) or "
     "usb:// (the Crazyflie's USB port)"
 )
-"""Why ``serial://`` is refused (issue 21: it works or it goes)."""
+"""Why ``serial://`` is refused (a link that can hang the bridge is not offered)."""
 PARAM_TIMEOUT_S = 10.0
 """Longest wait for the firmware's parameter values after connecting (cflib reads them all
 once before it writes one)."""
