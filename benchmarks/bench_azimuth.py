@@ -1,4 +1,4 @@
-"""Position error per azimuth source, from a plumb tether to a nearly taut one (issue 11 §1).
+"""Position error per azimuth source, from a plumb tether to a nearly taut one.
 
 Run from the repository root::
 
@@ -22,8 +22,8 @@ it; no other row reads it for localization).
 
 Rows (``[localization] azimuth`` / ``elevation``):
 
-* ``tension``: β from the horizontal tension's direction; r, z from the tension (this code
-  before issue 11).
+* ``tension``: β from the horizontal tension's direction; r, z from the tension (the paper's
+  localization without motion capture).
 * ``tension + elevation``: the same β; the exit elevation fused with the tension in (a, s2).
 * ``reel``: β from the reel's exit azimuth; r, z from the tension.
 * ``mocap (paper)``: β from the motion-capture position; r, z from the tension (the paper).
@@ -191,7 +191,7 @@ def render_header(profile: str, seconds: float, seed: int, quick: bool, elapsed_
             "",
             f"From `{cmd}` ({elapsed_s:.0f} s on a shared 2-core machine; commit "
             f"`{commit}`, Python {platform.python_version()}, numpy "
-            f"{np.__version__}). Issue 11 §1; the method is in the benchmark's docstring.",
+            f"{np.__version__}). The method is in the benchmark's docstring.",
             "",
             f"Simulator profile **{profile}** (each section names its own); seed {seed}; "
             "base sensor (`[sim] exit_angles`): "

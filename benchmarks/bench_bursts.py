@@ -21,7 +21,7 @@ router with the same client code:
 * ``offline``: the same messages through ``Pipeline.handle`` in this process (no bus), CPU
   µs per message: what the maths alone costs right now on this machine, for comparison.
 
-Targets (issue 13): under bursts p99 ≤ 3× the echo floor's; ≥ 20,000 msg/s on one core
+Targets: under bursts p99 ≤ 3× the echo floor's; ≥ 20,000 msg/s on one core
 (≤ 50 µs per message with a backlog). The machine may be shared: compare ratios from one run.
 """
 

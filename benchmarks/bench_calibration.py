@@ -1,4 +1,4 @@
-"""Leave-one-out evidence for ``groundstation calibrate`` on the realistic simulator (issue 10 §4).
+"""Leave-one-out evidence for ``groundstation calibrate`` on the realistic simulator.
 
 One flight per case tours the paper's six hover spots under motion capture (realistic profile:
 rigid body, lumped-mass tether, motor lag, rotor drag, vibration, misalignment, scale, bias,
@@ -601,7 +601,7 @@ def _battery_verdict(results: list[dict[str, Any]]) -> list[str]:
         " NanoBench's short manoeuvring flights drain faster and sag more (table). The"
         f" simulator's defaults ({sp.battery_internal_ohm:g} Ω, {sp.battery_hover_current_a:g} A"
         f" at hover) sag {sp.battery_internal_ohm * sp.battery_hover_current_a:.2f} V, to the"
-        " 4.02–4.06 V of issue 9's tethered flights, and drain no faster than a battery-only"
+        " 4.02–4.06 V of the real tethered flights, and drain no faster than a battery-only"
         " Crazyflie 2.1 (1.2 A empties 250 mAh in 12.5 min, against its 5–7 min; the tethered"
         " hovers here draw more, see the trend column). The size of"
         " the effect per volt: the simulator's thrust-map slope is γ/((1 + e)·V_ref)"

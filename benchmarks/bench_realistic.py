@@ -155,7 +155,7 @@ def _true_calibration(
     sim = Simulator(_settings(noise_mps2, seed, classes, None), _NullBus(), scenario=scenario)  # type: ignore[arg-type]
     errors = sim.drawn_errors(DRONE)
     assert errors is not None
-    # The estimator's own oracle (issue 20): the airframe's constants as the airframe model
+    # The estimator's own oracle: the airframe's constants as the airframe model
     # sees them (thrust scale and battery term, the thrust axis in the frame the attitude is
     # reported in); the accelerometer's per-power-on errors are left to the service, which
     # learns them at this power-on (accel_slow, the default), exactly as after `calibrate`.

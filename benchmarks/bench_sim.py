@@ -84,8 +84,8 @@ def measure(profile: str, scenario: str, seconds: float) -> tuple[float, float, 
 
 def service_table(seconds: float = 12.0, after_s: float = 8.0) -> None:
     """The service (its defaults, no calibration, no motion capture) at the paper's six spots:
-    median 3D position error after ``after_s``, per profile. Issue 9 measured 0.9–1.4 m per
-    real flight with the nominal configuration."""
+    median 3D position error after ``after_s``, per profile. The real tethered flights were
+    0.9–1.4 m off per flight with the nominal configuration."""
     from benchmarks.results_sim import hover_scenario
     from groundstation.evaluation import closed_loop
     from groundstation.sim import PAPER_HOVER_SPOTS_M, SCENARIOS

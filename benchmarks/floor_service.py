@@ -13,9 +13,8 @@ steps no implementation can skip:
 * the tension observed from the IMU and the thrust (``tension.observe_tension``,
   ``eq:NE_tether``);
 * one predict + update of the Kalman filter per drone, its Q and R set once: three scalar
-  filters in closed form, as the service's (issue 22's house rule; until then a filterpy
-  ``KalmanFilter``, ~20 µs a step, which the floor of the earlier pages of
-  docs/service_profile.md used);
+  filters in closed form, as the service's (a filterpy ``KalmanFilter`` step costs
+  ~20 µs, which the floor of the earlier pages of docs/service_profile.md used);
 * the Estimate encoded (``messages.encode_estimate``) and published.
 
 Everything else the service does is left out: no noise learning, no change or step test,
@@ -43,7 +42,7 @@ _FOLLOW = FollowInfo(enabled=False, active=False, threshold_n=0.1, reason="floor
 
 class FloorFilter:
     """One drone's Kalman step: three scalar filters in closed form (the service's
-    ``tension_kalman.DiagonalKalman``, issue 22's house rule for the per-message filter,
+    ``tension_kalman.DiagonalKalman``, the per-message filter's form,
     tested equal to filterpy's ``KalmanFilter`` in tests/test_tension_equivalence.py), with
     Q and R fixed."""
 

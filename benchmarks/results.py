@@ -8,8 +8,8 @@ Run from the repository root::
     .venv/bin/python -m benchmarks.results --only envelope   # section (d) into the page
 
 Writes ``<out-dir>/RESULTS.md`` and ``<out-dir>/figures/*.png`` (default ``docs/``). A full
-run into ``docs/`` also rewrites the block of ``docs/results_summary.md`` (the README's
-until issue 23) between ``<!-- results:start`` and ``<!-- results:end -->``, so every number
+run into ``docs/`` also rewrites the block of ``docs/results_summary.md`` (once part of
+the README) between ``<!-- results:start`` and ``<!-- results:end -->``, so every number
 there comes from this command; a quick run or another ``--out-dir`` never touches it.
 ``--only envelope`` reruns section (d) (and (a)'s deterministic runs, which its bullets cite)
 into the existing page and that block's bullets and figure, leaving the timing sections as
@@ -61,8 +61,8 @@ from benchmarks.results_sim import run_jobs
 
 REPO = Path(__file__).resolve().parents[1]
 README = REPO / "docs" / "results_summary.md"
-"""The page whose results block a full run rewrites (the README's until issue 23 moved the
-paper-notation results out of the README; the constant keeps its name for the tests)."""
+"""The page whose results block a full run rewrites (the paper-notation results, once in the
+README; the constant keeps its name for the tests)."""
 README_START = re.compile(r"^<!-- results:start.*-->[ \t]*$", re.MULTILINE)
 README_END = "<!-- results:end -->"
 SECTIONS = (
@@ -208,7 +208,7 @@ def run(quick: bool, out_dir: Path, workers: int) -> Outcome:
         )
     else:
         # 30 s windows: a 10 s window ended just before the load client's first full garbage
-        # collection and so hid it (issue 13); the rig now keeps the client's collector out.
+        # collection and so hid it; the rig keeps the client's collector out.
         svc = rpeers.service(
             (1, 8, 16, 24, 32), 30.0, (8,), extend_to=128, progress=lambda m: _log(m, t0)
         )
@@ -733,7 +733,7 @@ def envelope_figures(env: renv.EnvelopeResult) -> dict[str, Any]:
 # ---------------------------------------------------------------------------- markdown
 
 
-# Issue 9, item 5: why the take-off's hover T_v error grew (python -m benchmarks.takeoff_lag).
+# Why the take-off's hover T_v error grew (python -m benchmarks.takeoff_lag).
 TAKEOFF_LAG_NOTE = (
     "The hover error at 1.3 m is a lag, not noise: the climb overshoots to ~1.40 m and "
     "settles to 1.30 m over ~8 s (T_v falls by ~5 mN, the last 0.3 mN after 8 s), "

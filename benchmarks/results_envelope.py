@@ -1,6 +1,6 @@
 """The envelope on the realistic profile: which error costs how many cm, and what calibration buys.
 
-Section (d) of the results page (issue 9). Every flight is the ``realistic`` profile of
+Section (d) of the results page. Every flight is the ``realistic`` profile of
 :mod:`groundstation.sim` (rigid body, lumped-mass tether, 100 Hz IMU; docs/simulator.md), no
 motion capture reaches the service, and the service is not told the noise level
 (``[drone] accel_noise_mps2`` stays at its 0.3 m/s² default).
@@ -9,7 +9,7 @@ motion capture reaches the service, and the service is not told the noise level
 error class off* (``[sim.realistic]`` switches), L = 1.6 m, ω = 0.05 N/m known exactly.
 
 **Error classes** (:func:`error_classes`): one at a time on top of the baseline, swept over its
-real range (off, half, the figure measured on the real flights of issue 9, twice that; the
+real range (off, half, the figure measured on the real flights, twice that; the
 thrust map also at newer firmware's +60 %; the dynamics classes off, real, twice), each value
 flown *uncalibrated* (``[calibration]`` at its defaults, ``source = "none"``). Where the
 calibration model has parameters for the class (accelerometer misalignment, scale and bias
@@ -57,7 +57,7 @@ PROFILE = "realistic"
 BASELINE_NOISE_MPS2 = 1.0
 NOMINAL_WEIGHT_N_PER_M = 0.05
 TRUST_P95_M = 0.10  # "trust the estimate" when the 95th percentile error is within this
-THRUST_AXIS_RAD = (-0.037, -0.016)  # the airframe's thrust axis (issue 9)
+THRUST_AXIS_RAD = (-0.037, -0.016)  # the airframe's thrust axis, as measured
 SEED0 = 500
 
 BASELINE: dict[str, Any] = {
@@ -79,7 +79,7 @@ class ErrorClass:
         name: identifier (a ``[sim.realistic]`` switch, or ``all``).
         label: what the value is, with its unit.
         values: sizes flown (0: the class off, i.e. the baseline).
-        real: the size measured on the real flights (issue 9), one of ``values``.
+        real: the size measured on the real flights, one of ``values``.
         settings: size -> ``[sim.realistic]`` overrides on top of :data:`BASELINE`.
         calibratable: the calibration model has parameters for this class.
         drawn: what the simulator drew per flight for this class, reported beside the size

@@ -545,7 +545,7 @@ def envelope(env: EnvelopeResult, out_dir: Path) -> str:
     ax2.axhline(100 * base.median_m, color="0.4", ls="--", lw=0.8)
     ax2.set_yscale("log")
     ax2.set_ylim(1, 500)
-    ax2.set_xlabel("size / its real size (0: off; 1: the real flights of issue 9)")
+    ax2.set_xlabel("size / its real size (0: off; 1: the real flights)")
     ax2.set_ylabel("median 3D position error, uncalibrated (cm, log)")
     ax2.set_title("Over the range (same sign as the real size)")
     ax2.legend(fontsize=7.5, ncol=2)

@@ -33,8 +33,8 @@ CATENARY_NAMES = {
 """bench_catenary's method keys → names on the results page (the page's order)."""
 SERVICE_TARGET_DELIVERY = 0.999  # bench_service's targets
 SERVICE_TARGET_P99_MS = 10.0
-SERVICE_TARGET_BURST_RATIO = 3.0  # issue 13: p99 under bursts ≤ 3× the echo floor's
-SERVICE_TARGET_CAPACITY_HZ = 20_000.0  # issue 13: msgs/s on one core with a backlog
+SERVICE_TARGET_BURST_RATIO = 3.0  # p99 under bursts ≤ 3× the echo floor's
+SERVICE_TARGET_CAPACITY_HZ = 20_000.0  # msgs/s on one core with a backlog
 
 
 # ---------------------------------------------------------------------------- (b) catenary

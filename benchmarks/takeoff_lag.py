@@ -1,4 +1,4 @@
-"""The take-off's hover T_v error against the hover time constant (issue 9, item 5).
+"""The take-off's hover T_v error against the hover time constant.
 
 Run from the repository root::
 

@@ -1,4 +1,4 @@
-"""Which thrust model needs the smaller calibration on the NanoBench flights (issue 21).
+"""Which thrust model needs the smaller calibration on the NanoBench flights.
 
 The NanoBench Crazyflie 2.1 (firmware 2025.12.1, untethered, README in
 ``../shared/data/nanobench/``) flies with no tether: its thrust along body z is the mass times

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Issue 22's trial of a compiled estimator without a second implementation: Cython compiles
+# A trial of a compiled estimator without a second implementation: Cython compiles
 # the estimator's modules as they are (pure Python mode, no type declarations added), and
 # Pipeline.handle is timed on a converged hover, compiled and not, alternately, in one run.
 # Needs gcc, the Python headers and PyPI (Cython and setuptools go into a throw-away venv).

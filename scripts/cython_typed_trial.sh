@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Issue 22: what a compiled second implementation of one stage buys. The arithmetic of the
+# What a compiled second implementation of one stage buys. The arithmetic of the
 # localization's fast path (localization._localize_tension_free: the drone's and six sigma
 # points' closed-form catenary positions, the unscented transform) written in typed Cython
 # (C doubles, in the Python's order of operations), compiled, and timed against the Python

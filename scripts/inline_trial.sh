@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Issue 22's trial of stepping telemetry in zenoh's callback thread (as the contract floor
+# A trial of stepping telemetry in zenoh's callback thread (as the contract floor
 # does) instead of handing it to the service's worker: a copy of this tree with
 # Service._on_sample patched runs as bench_bursts' `baseline`, beside the service as it is,
 # the echo and the floor, in one run.

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Issue 22's trial of mypyc (mypy's compiler, in the dev tools already): the localization and
+# A trial of mypyc (mypy's compiler, in the dev tools already): the localization and
 # the catenary (the per-message path's float arithmetic: the drone's and six sigma points'
 # catenary solves) compiled from their own type annotations, no second implementation, and
 # the stages timed compiled and not, alternately, by benchmarks.bench_pipeline --quick.
