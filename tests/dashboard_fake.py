@@ -81,7 +81,7 @@ class FakeService:
         self.obey_stop = obey_stop
         """A Stop disarms the drone (its telemetry then says armed: false, thrust 0)."""
         self.peers = peers
-        """The status' ``peers`` (None: not reported, as a service before issue 14)."""
+        """The status' ``peers`` (None: not reported, as an older service)."""
         self.alone_ok = alone_ok
         """The status' ``alone_ok`` (None: not reported)."""
         self.bases = {d: tuple((bases or {}).get(d, BASE_M)) for d in drones}

@@ -118,7 +118,7 @@ def test_patterns_overlap_on_drone_slices(a: str, b: str, overlap: bool) -> None
 
 
 def test_a_router_without_listen_endpoints_is_said_to_listen_on_7447() -> None:
-    """Issue 23: ``serve --mode router --headless`` logged "listening on nothing" while zenoh
+    """``serve --mode router --headless`` once logged "listening on nothing" while zenoh
     listened on tcp/127.0.0.1:7447 (make_zenoh_config's router default)."""
     from groundstation.bus import describe_endpoints
 
@@ -131,7 +131,7 @@ def test_a_router_without_listen_endpoints_is_said_to_listen_on_7447() -> None:
 def test_losing_the_last_peer_warns_only_where_being_alone_is_wrong(
     caplog: pytest.LogCaptureFixture, alone_ok: bool, level: str
 ) -> None:
-    """Issue 23: the in-process demo warned "lost every zenoh peer and router… pass
+    """The in-process demo once warned "lost every zenoh peer and router… pass
     --connect" whenever a client (a recorder, a dashboard) disconnected."""
     import logging
 

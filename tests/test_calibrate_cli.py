@@ -379,7 +379,7 @@ def test_fit_tether_recovers_omega_and_writes_a_loadable_config(
 
 
 def test_a_corrupt_chunk_costs_its_messages_not_the_calibration(tmp_path: Path) -> None:
-    """Issue 23: 8 flipped bytes in a middle chunk of a calibration flight: the chunk is
+    """8 flipped bytes in a middle chunk of a calibration flight: the chunk is
     skipped with a warning, the fit runs on the rest (before: a zstandard traceback, rc 1)."""
     from mcap.reader import make_reader
 

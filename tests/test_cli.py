@@ -29,7 +29,7 @@ def test_every_flag_has_a_help_text(command: str) -> None:
 def test_demo_moves_off_a_busy_default_dashboard_port_loudly(
     monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
 ) -> None:
-    """Issue 23: ``demo`` with 8080 busy went to 46627 without a word. By default it still
+    """``demo`` with 8080 busy once went to 46627 without a word. By default it still
     moves (one command must work) but says so at WARNING; asked for a port, it fails."""
     import socket
 

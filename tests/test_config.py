@@ -152,7 +152,7 @@ def test_calibration_vbat_range(tmp_path: Path) -> None:
     ],
 )
 def test_units_mistakes_are_refused_in_one_line(tmp_path: Path, text: str, message: str) -> None:
-    """Issue 23: 160 (cm) for the tether ran and reported radial_m 158.3; 30 (g) for the
+    """160 (cm) for the tether once ran and reported radial_m 158.3; 30 (g) for the
     mass was accepted. The message has the value and the likely unit mistake, one line."""
     cfg = tmp_path / "units.toml"
     cfg.write_text(text)

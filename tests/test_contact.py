@@ -180,8 +180,8 @@ def test_hovering_drone_found_in_the_air_at_start() -> None:
         s = _step(s, thrust_ratio=1.0 + 0.04 / WEIGHT_N)
         if k * DT_S >= 0.1 + DT_S:
             assert not s.on_ground and s.reason in ("push_free", "air")
-    # In the air without mocap only a rest seen brings it back: a thrust dip is no rest
-    # (issue 23), the drone falls at (F - m g) / m ...
+    # In the air without mocap only a rest seen brings it back: a thrust dip is no rest;
+    # the drone falls at (F - m g) / m ...
     s = _step(s, thrust_ratio=0.9)
     assert not s.on_ground
     s = _hold(s, 1.0, thrust_ratio=0.3, accel_z=-0.7 * G)
@@ -253,7 +253,7 @@ def _ramp_then_hover(t: float) -> float:
 
 @pytest.mark.parametrize("seed", [1, 2, 3])
 def test_vibration_at_hover_thrust_on_the_floor_is_no_climb(seed: int) -> None:
-    """Issue 11: 60 s on the floor at hover thrust with 2 m/s^2 of vibration and a thrust
+    """60 s on the floor at hover thrust with 2 m/s^2 of vibration and a thrust
     map reading 15 % low (the floor's load reads 44 mN: only a climb could lift the drone).
     The climb is judged against the vibration learnt on the floor: no lift-off. With the
     fixed 0.1 m/s of before (about one standard deviation of the leaky speed) it fired."""
@@ -312,7 +312,7 @@ def test_floor_load_rule_ignores_the_vibration() -> None:
     assert all(g for _, _, g, _ in samples)
 
 
-# -- Issue 23: no ground without the evidence of a rest ------------------------------------
+# -- No ground without the evidence of a rest ---------------------------------------------
 
 
 def _fly_1d(
@@ -381,7 +381,7 @@ def _airborne() -> ContactState:
 def test_thrust_dips_and_hard_descents_in_the_air_are_no_ground(
     noise_mps2: float, height: bool, seed: int
 ) -> None:
-    """Issue 23's trigger and its kin: a height controller hovering at 1.2 m is sent to
+    """The mid-air latch's trigger and its kin: a height controller hovering at 1.2 m is sent to
     0.5 m (as the demo's jump to its fourth spot: the command saturates at 0.02 N, below
     the ratio, then catches the drop), back to 1.2 m, then told to hold 0.3 of the weight
     for 0.25 s (a hard descent) before it recovers. Before, the first low-thrust sample

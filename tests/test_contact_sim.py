@@ -1,4 +1,4 @@
-"""Issue 23, the contact latch: the simulator ⇄ pipeline closed loop, no bus, no clock.
+"""The contact latch: the simulator ⇄ pipeline closed loop, no bus, no clock.
 
 The demo's estimator latched "on the ground" in mid-air at the hover_spots scenario's jump to
 its fourth spot (t = 45 s: the simulated controller cuts the thrust to 0.02 N at 1.2 m) and

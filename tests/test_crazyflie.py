@@ -947,7 +947,7 @@ def test_the_bridge_runs_on_cflib_over_udp(firmware: Any) -> None:
     assert all(b > a for a, b in itertools.pairwise(stamps))
 
 
-# ------------------------------------------------------------------ gaps of issue 12
+# ------------------------------------------------------------------ gaps in the link
 
 
 class _TimedLink(FakeLink):
@@ -1082,7 +1082,7 @@ def test_the_bridge_on_cflib_stops_when_the_firmware_refuses_a_block(
     assert "refused log block tel1" in msg and "No more memory available" in msg
 
 
-# ------------------------------------------------------------------ issue 21: when things go wrong
+# ------------------------------------------------------------------ when things go wrong
 #
 # The fake link's firmware model (FakeLink.firmware) flies what the bridge sends: it follows
 # position setpoints at 1 m/s per axis, levels 0.5 s and cuts the motors (Locked) 2 s after the
@@ -1323,7 +1323,7 @@ def test_an_emergency_stop_cuts_the_motors_and_locks_until_a_power_cycle(harness
     assert gs.alive
 
 
-# ------------------------------------------------------------------ issue 21, items 6-8
+# ------------------------------------------------------------------ more that goes wrong
 
 
 def _counted(h: Harness, kind: str, n: int = 1) -> Callable[[], bool]:

@@ -1,4 +1,4 @@
-"""A calibration that transfers from one power-on to the next (issue 20).
+"""A calibration that transfers from one power-on to the next.
 
 Three power-ons of one airframe (thrust scale 0.93, thrust axis (0.02, −0.03) rad), each
 with its own accelerometer bias, as a Crazyflie re-levels and re-biases at every boot.

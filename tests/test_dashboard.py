@@ -1231,7 +1231,7 @@ def test_update_thread_stays_within_the_scene_rate(settings: Settings, bus: InMe
 
 
 def test_an_uncalibrated_position_says_its_error_where_it_is_shown() -> None:
-    """Issue 23: 167 cm off, on the wrong side of the base, with only a small orange badge.
+    """167 cm off, on the wrong side of the base, with only a small orange badge.
     The position row and a warning under the table say it, with the expected size."""
     text = tension_html(_estimate(calibration="none"))
     position_row = text.split("position</td>")[1].split("</tr>")[0]
@@ -1244,7 +1244,7 @@ def test_an_uncalibrated_position_says_its_error_where_it_is_shown() -> None:
 
 
 def test_follow_checkboxes_have_no_tooltip_over_the_stop_buttons(dash: Dashboard) -> None:
-    """Issue 23: the Follow mode tooltip stayed over Emergency stop / Stop all drones after a
+    """The Follow mode tooltip once stayed over Emergency stop / Stop all drones after a
     click. What the two boxes do is a note below them instead."""
     panel = _panel(dash)
     assert panel.follow.handle.hint is None and panel.land.handle.hint is None

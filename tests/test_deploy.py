@@ -364,7 +364,7 @@ def test_compose_healthcheck_script(router_endpoint: str) -> None:
 
 @pytest.mark.parametrize(("argv", "rc"), [(["nonsense"], 2), (["help"], 0), ([], 0)])
 def test_dev_script_help_is_its_usage_not_its_code(argv: list[str], rc: int) -> None:
-    """Issue 23: ``./dev nonsense`` printed script lines (``set -euo pipefail``) as help."""
+    """``./dev nonsense`` once printed script lines (``set -euo pipefail``) as help."""
     out = subprocess.run(
         [str(REPO / "dev"), *argv], capture_output=True, text=True, timeout=30, check=False
     )

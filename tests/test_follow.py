@@ -525,7 +525,7 @@ def test_with_mocap_a_pull_already_acting_at_switch_on_engages() -> None:
 @pytest.mark.parametrize("error_m", [-0.05, -0.02, 0.02, 0.03, 0.04, 0.05])
 @pytest.mark.parametrize("kind", ["position", "length"])
 def test_near_taut_with_mocap_a_model_error_is_no_pull(kind: str, error_m: float) -> None:
-    """Issue 11 audit: at 97 % of L = 1.6 m the tether's own force changes by 12-70 mN per
+    """At 97 % of L = 1.6 m the tether's own force changes by 12-70 mN per
     cm of reach, so 2-5 cm of error in the motion-capture position (a marker off the
     tether's attachment, a base measured by hand) or in the tether's length makes the
     catenary there differ from the tension by up to 0.14 N (+4 cm) with nobody pulling.

@@ -1,4 +1,4 @@
-"""The per-message localization's common case against two references (issue 22).
+"""The per-message localization's common case against two references.
 
 ``try_localize`` answers the common case (a freely hanging tether, the azimuth from the
 tension alone and certain) in ``_localize_tension_free``, which leaves out what it knows the

@@ -1,5 +1,5 @@
 """Real flights through the command line: ``calibrate --untethered`` on two power-ons of
-two days, a third day's flight served without motion capture (issue 20).
+two days, a third day's flight served without motion capture.
 
 NanoBench excerpts (tests/data/nanobench/, 25 Hz; real Crazyflie 2.1, untethered, so the
 true tension is zero). The nominal PWM map reads ~200 mN of tension that is not there;

@@ -324,7 +324,7 @@ def test_sequences_reach_their_regimes() -> None:
     converged = [e for e in plumb if e["converged"]]
     assert sum(e["azimuth_determined"] is False for e in converged) > 0.8 * len(converged)
     floor, _ = estimates("floor")
-    # Issue 23: 20 ms below half the weight is no rest seen (rest_hold_s): the filter
+    # 20 ms below half the weight is no rest seen (rest_hold_s): the filter
     # coasts, airborne; disarmed is the ground at once.
     dipped = [e for e in floor if 100 <= e["seq"] < 105]
     assert dipped and not any(e["on_ground"] for e in dipped)

@@ -254,7 +254,7 @@ def test_uncalibrated_with_mocap_hover_follow_on_and_nobody_pulling() -> None:
 def test_realistic_spool_up_with_follow_on_publishes_no_floor_push_and_no_stop(
     calibrated: bool,
 ) -> None:
-    """Issue 11 §3 on the realistic profile (2 m/s^2 vibration, drawn biases, motor lag,
+    """On the realistic profile (2 m/s^2 vibration, drawn biases, motor lag,
     thrust map 10 % off): armed on the floor, the thrust ramps to the weight over 2 s, then
     the drone climbs; follow with tug-to-land at 0.3 m is on from the start (motion capture
     present). On the floor no tension above 20 mN is published and landing is never armed;
@@ -279,7 +279,7 @@ def test_realistic_spool_up_with_follow_on_publishes_no_floor_push_and_no_stop(
 def test_realistic_take_off_without_mocap_publishes_no_floor_push_and_no_stop(
     seed: int, calibrated: bool
 ) -> None:
-    """Issue 11 §3 on the realistic profile *without* motion capture (2 m/s^2 vibration,
+    """On the realistic profile *without* motion capture (2 m/s^2 vibration,
     drawn biases, motor lag, the thrust map ~15 % low uncalibrated): spool-up over 2 s,
     ~3 s on the floor at hover thrust, then the climb; follow with tug-to-land at 0.3 m on
     from the start. While the simulator's truth says the drone is on the floor no tension
@@ -332,7 +332,7 @@ def _near_taut_scenario(
 def test_realistic_near_taut_with_follow_on_and_nobody_pulling(
     monkeypatch: pytest.MonkeyPatch, fraction: float
 ) -> None:
-    """Issue 11 §2 on the realistic profile (lumped-mass tether of its own, 2 m/s^2
+    """On the realistic profile (lumped-mass tether of its own, 2 m/s^2
     vibration, drawn biases uncorrected, motion capture): hovering at 97 % and 90 % of the
     1.6 m tether's reach (there the tether alone pulls 0.105 N and 0.066 N, against the
     0.10 N threshold) with follow and tug-to-land on and nobody pulling: following never
@@ -411,7 +411,7 @@ def test_calibration_is_applied_and_reported_per_drone() -> None:
 def test_near_taut_hover_with_follow_enabled_never_engages_until_pulled(
     monkeypatch: pytest.MonkeyPatch, length_m: float, fraction: float, mocap: bool
 ) -> None:
-    """Issue 11 §2 through the pipeline and the simulator: near taut the tether alone pulls
+    """Through the pipeline and the simulator: near taut the tether alone pulls
     with more than the 0.10 N threshold; with follow and tug-to-land enabled and nobody
     pulling nothing engages, no setpoint, landing not armed; a 0.12 N pull at 6 s engages."""
     _near_taut_scenario(monkeypatch, "near_taut_test", length_m, fraction, 0.12)
@@ -433,7 +433,7 @@ def test_near_taut_hover_with_follow_enabled_never_engages_until_pulled(
 
 @pytest.mark.parametrize("mocap", [True, False], ids=["mocap", "no-mocap"])
 def test_takeoff_ramp_publishes_no_floor_push_and_sends_no_stop(mocap: bool) -> None:
-    """Issue 11 §3 on the simulator: armed on the floor, the thrust ramps 0 → weight over
+    """On the simulator: armed on the floor, the thrust ramps 0 → weight over
     2 s; follow is on with tug-to-land at 0.3 m from the start. While the drone is on the
     floor no tension above 20 mN is published and landing is never armed; no Stop at all;
     the lift-off is seen (on_ground false) by the time the drone is 4 cm up."""

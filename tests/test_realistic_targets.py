@@ -1,4 +1,4 @@
-"""Issue 9's section-3 targets, guarded in CI with loose bounds (realistic profile).
+"""The realistic profile's targets, guarded in CI with loose bounds (realistic profile).
 
 Short versions of ``benchmarks.bench_realistic`` (docs/realistic_benchmark.md has the full
 ones): hover with calibration = the simulator's truth against the oracle Kalman filter told

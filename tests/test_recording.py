@@ -408,7 +408,7 @@ def test_figures_from_a_replayed_recording(tmp_path: Path) -> None:
         assert (figures / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
-# -- Issue 23: a corrupt recording is read where it can be; an empty one says so ------------
+# -- A corrupt recording is read where it can be; an empty one says so ---------------------
 
 
 def _chunked(bus: InMemoryBus, path: Path, n: int = 3000) -> list[Sample]:

@@ -1,5 +1,5 @@
 """Rest calibration in the pipeline: measured on the floor, applied in flight, cleared at
-disarm, reported in status (issue 10 §3)."""
+disarm, reported in status."""
 
 from __future__ import annotations
 

@@ -147,7 +147,7 @@ def test_simulator_imports_none_of_the_estimator() -> None:
 
 
 def test_takeoff_ramp_spools_up_on_the_floor_then_climbs() -> None:
-    """Issue 11 §3: thrust ramps 0 → weight over 2 s while the drone still sits on the floor."""
+    """Thrust ramps 0 → weight over 2 s while the drone still sits on the floor."""
     sim = _sim("takeoff_ramp", accel_noise_mps2=0.0, thrust_noise_n=0.0)
     sc = SCENARIOS["takeoff_ramp"]
     weight_n = 0.030 * 9.81

@@ -1,5 +1,5 @@
 """The simulator's ``attitude_levelled`` class: the reported attitude levelled on the same
-misaligned, biased accelerometer (issue 20), as a Crazyflie's estimators level it."""
+misaligned, biased accelerometer, as a Crazyflie's estimators level it."""
 
 from __future__ import annotations
 

@@ -97,7 +97,7 @@ def _near_taut(ratio: float, elevation_rad: float = 0.1) -> tuple[float, float, 
         (1.2, 0.0, 1.0),  # the paper's first spot
         (1.0, -0.3, 0.5),  # below the base
         _near_taut(0.95),
-        _near_taut(0.97),  # issue 11's near-taut case
+        _near_taut(0.97),  # the near-taut case
         (0.9, 0.0, 0.3),  # touchdown with a straight run on the floor
         (0.0, 0.0, 1.2),  # straight above the base: it hangs plumb
     ],
@@ -105,7 +105,7 @@ def _near_taut(ratio: float, elevation_rad: float = 0.1) -> tuple[float, float, 
 def test_lumped_tether_at_rest_agrees_with_the_catenary(
     drone_m: tuple[float, float, float],
 ) -> None:
-    """Issue 9: within 1 % of L in shape and 5 % in end force of catenary.solve's tether."""
+    """Within 1 % of L in shape and 5 % in end force of catenary.solve's tether."""
     drone = np.array(drone_m)
     tether = LumpedTether(TetherParams(weight_n_per_m=OMEGA), BASE, drone, L_M, 0.0)
     tether.settle(5.0, extra_damping_per_s=3.0)
@@ -191,7 +191,7 @@ def test_motion_capture_bursts_gaps_and_latency() -> None:
     arrivals = np.array(drone.mocap.arrivals_s)
     gaps = np.diff(arrivals)
     burst = np.mean(gaps < 0.001)
-    assert 0.14 <= burst <= 0.21, burst  # issue 9: 15–20 % of samples < 1 ms apart
+    assert 0.14 <= burst <= 0.21, burst  # real flights: 15–20 % of samples < 1 ms apart
     assert gaps.max() <= 0.150 + 0.0015
     assert gaps.max() > 0.05  # outages happen
     rate = len(arrivals) / 30.0

@@ -1,4 +1,4 @@
-"""Issue 14, "Shipped examples fly": every shipped config × every scenario stays in reach.
+"""Shipped examples fly: every shipped config × every scenario stays in reach.
 
 Scenario positions are relative to each drone's base (PAPER_BASE_M), so a config that moves
 a drone's base (config/sim.toml: cf2 at y = 3) flies the same flight about that base instead

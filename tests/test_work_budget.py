@@ -1,12 +1,12 @@
 """The per-message path's work, counted: a budget that a slowdown cannot slip past unseen.
 
-Issue 22 found the service at 6.3× the echo floor one week after 2.3–2.9×: nothing had
-watched the per-message cost between benchmark runs, and a timed test would flake on this
+The per-message cost can grow between benchmark runs unseen (the service once went from
+2.3–2.9× the echo floor to 6.3× in a week), and a timed test would flake on this
 shared machine (its speed moves by 2× from one minute to the next). This test counts
 instead of timing, for one converged message through :meth:`Pipeline.handle` (validation
 and the Estimate's JSON included): with ``sys.setprofile`` the calls of Python functions,
 of C functions, and among those numpy's (each ~0.3–1 µs of overhead for a handful of
-floats, what issues 13 and 22 took out of the path); with ``sys.settrace`` the bytecodes
+floats, what was taken out of the path); with ``sys.settrace`` the bytecodes
 CPython executes (what the arithmetic costs: ~17 ns each on this path here). For a given
 input the counts are the same on every run and machine with the locked dependencies
 (requirements.lock) and Python, so the budget is exact where the benchmark is not.
@@ -168,7 +168,7 @@ def test_per_message_work_stays_within_budget(name: str) -> None:
 
 def test_the_count_sees_a_slowdown() -> None:
     """The budget can fail: the same path with one ``dataclasses.replace`` per message
-    (what follow off cost before issue 22) counts over the hover budget."""
+    (what follow off once cost) counts over the hover budget."""
     from dataclasses import replace
 
     from groundstation.estimator import drone as drone_mod

@@ -1,5 +1,5 @@
 """The first view of the two-drone set-up frames every drone in the part of the 3D view the
-control panel leaves free (issue 23 item 7): config/sim.toml's bases 3 m apart, each drone
+control panel leaves free: config/sim.toml's bases 3 m apart, each drone
 with a motion-capture marker about a metre from its estimate (an uncalibrated position), so
 the motion-capture error line's far end must be in view too.
 

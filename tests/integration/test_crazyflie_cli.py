@@ -421,7 +421,7 @@ def test_the_bridge_over_cflib_udp_to_a_crtp_responder(procs: Procs, make_probe:
         firmware.close()
 
 
-# ------------------------------------------------------------------ issue 21, item 8
+# ------------------------------------------------------------------ more that goes wrong
 
 
 def test_one_bridge_process_runs_two_links_served_as_two_drones(

@@ -1,4 +1,4 @@
-"""Issue 23: the parts as separate processes on one machine, without Docker.
+"""The parts as separate processes on one machine, without Docker.
 
 ``groundstation router`` is the hub; ``sim``, ``serve``, ``record`` and ``dashboard`` are
 clients of it, each its own process, over TCP on 127.0.0.1 with multicast scouting off (the
@@ -122,7 +122,7 @@ def test_a_router_on_a_port_in_use_says_so(busy_port: int) -> None:
 def test_a_dashboard_port_in_use_fails_before_anything_starts(
     busy_port: int, command: tuple[str, ...]
 ) -> None:
-    """Issue 23: 8080 busy moved the dashboard to 8081 silently (the operator opens the
+    """8080 busy once moved the dashboard to 8081 silently (the operator opens the
     other one's page). The port is checked before zenoh opens (the router at port 1 is
     never tried)."""
     out = _run(*command, "--web-port", str(busy_port))
@@ -159,7 +159,7 @@ def test_demo_with_the_separate_process_config_runs_its_own_bus(procs: Procs) ->
 
 @pytest.mark.slow
 def test_serve_with_its_dashboard_says_stopping_once(procs: Procs) -> None:
-    """Issue 23: "signal 15: stopping" came 2-3 times (serve, then its dashboard child)."""
+    """"signal 15: stopping" once came 2-3 times (serve, then its dashboard child)."""
     port, web_port = free_port(), free_port()
     ep = f"tcp/127.0.0.1:{port}"
     procs.groundstation("router", "router", "--listen", ep)
