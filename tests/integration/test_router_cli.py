@@ -159,7 +159,7 @@ def test_demo_with_the_separate_process_config_runs_its_own_bus(procs: Procs) ->
 
 @pytest.mark.slow
 def test_serve_with_its_dashboard_says_stopping_once(procs: Procs) -> None:
-    """"signal 15: stopping" once came 2-3 times (serve, then its dashboard child)."""
+    """Serve says "signal 15: stopping" once (it came 2-3 times: serve, then its dashboard)."""
     port, web_port = free_port(), free_port()
     ep = f"tcp/127.0.0.1:{port}"
     procs.groundstation("router", "router", "--listen", ep)
