@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import ast
 import datetime
+import functools
 import hashlib
 import json
 import math
@@ -176,11 +177,12 @@ def code_hash(path: Path) -> str:
     return _text_hash(path.read_text(encoding="utf-8"), str(path))
 
 
-def _text_hash(source: str, name: str) -> str:
-    tree = _without_docstrings(ast.parse(source, name))
-    return hashlib.sha256(ast.dump(tree).encode()).hexdigest()[:16]
+@functools.cache
+def _cached_hash(path: Path, mtime_ns: int) -> str:
+    return code_hash(path)
 
 
+@functools.cache
 def config_defaults_hash() -> str:
     """SHA-256 (16 hex digits) of the configuration's default values, as JSON.
 
@@ -192,7 +194,13 @@ def config_defaults_hash() -> str:
     return hashlib.sha256(json.dumps(defaults, sort_keys=True).encode()).hexdigest()[:16]
 
 
-def _files(measures: tuple[str, ...]) -> list[str]:
+def _text_hash(source: str, name: str) -> str:
+    tree = _without_docstrings(ast.parse(source, name))
+    return hashlib.sha256(ast.dump(tree).encode()).hexdigest()[:16]
+
+
+def measured_files(measures: tuple[str, ...]) -> list[str]:
+    """The files of ``measures``, folders expanded to their ``*.py``, relative to the repo."""
     files: list[str] = []
     for entry in measures:
         path = REPO / entry
@@ -208,11 +216,12 @@ def _files(measures: tuple[str, ...]) -> list[str]:
 def measured_hashes(measures: tuple[str, ...]) -> dict[str, str]:
     """Each measured file (folders expanded) → its :func:`code_hash` ("missing" if gone)."""
     out: dict[str, str] = {}
-    for name in _files(measures):
+    for name in measured_files(measures):
         if name == CONFIG_DEFAULTS:
             out[name] = config_defaults_hash()
         elif (REPO / name).is_file():
-            out[name] = code_hash(REPO / name)
+            path = REPO / name
+            out[name] = _cached_hash(path, path.stat().st_mtime_ns)
         else:
             out[name] = "missing"
     return out
