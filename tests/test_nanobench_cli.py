@@ -79,3 +79,19 @@ def test_calibrate_untethered_refuses_a_recording_without_motion_capture(
     assert rc == 2
     assert "no motion capture" in err.getvalue()
     assert not (tmp_path / "x.toml").exists()
+
+
+@pytest.mark.parametrize("missing", ["no_such_dir", "empty_dir"])
+def test_the_benchmark_without_its_flights_says_where_they_go(
+    tmp_path: Path, missing: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    data = tmp_path / missing
+    if missing == "empty_dir":
+        data.mkdir()
+    with pytest.raises(SystemExit) as exit_info:
+        nb.main(["--data", str(data)])
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err
+    assert f"--data {data}: " in err and "not in the repository: pass --data DIR" in err
+    assert ("no such directory" in err) == (missing == "no_such_dir")
+    assert "Traceback" not in err
