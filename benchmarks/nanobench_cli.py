@@ -214,6 +214,18 @@ def variant_config(src: Path, dst: Path, extra_toml: str) -> Path:
     return dst
 
 
+def check_data(ap: argparse.ArgumentParser, data: Path) -> None:
+    """Exit with a usage error naming ``--data`` when the flights are not in ``data``."""
+    missing = [f"{n}.csv" for n in DAYS if not (data / f"{n}.csv").is_file()]
+    if missing:
+        what = "missing " + ", ".join(missing) if data.is_dir() else "no such directory"
+        ap.error(
+            f"--data {data}: {what}. The NanoBench flights are not in the repository: "
+            "pass --data DIR, the directory of their CSV files (../shared/data/nanobench "
+            "beside the repository on the project's machines)"
+        )
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", help="write the markdown page here")
@@ -225,14 +237,7 @@ def main(argv: list[str] | None = None) -> int:
         "beside the repository)",
     )
     args = ap.parse_args(argv)
-    missing = [f"{n}.csv" for n in DAYS if not (args.data / f"{n}.csv").is_file()]
-    if missing:
-        what = "missing " + ", ".join(missing) if args.data.is_dir() else "no such directory"
-        ap.error(
-            f"--data {args.data}: {what}. The NanoBench flights are not in the repository: "
-            "pass --data DIR, the directory of their CSV files (../shared/data/nanobench "
-            "beside the repository on the project's machines)"
-        )
+    check_data(ap, args.data)
     t0 = time.time()
     flights = {n: load(n, args.data) for n in DAYS}
     lines: list[str] = []

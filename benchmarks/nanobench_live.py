@@ -9,7 +9,8 @@ without motion capture, each its own process over TCP. Beside each flight, the o
 result on the same calibration: the live service must answer as the offline pipeline does
 (one Estimate per Telemetry, the same estimates up to the order messages arrive in).
 
-Run:  python -m benchmarks.nanobench_live [--speed 2] [--flights NAME,...] > docs/nanobench_live.md
+Run:  python -m benchmarks.nanobench_live [--speed 2] [--flights NAME,...] [--data DIR] \
+        > docs/nanobench_live.md
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from benchmarks.nanobench_cli import DAYS, Judged, calibrate, judge, load, score
+from benchmarks.nanobench_cli import DATA, DAYS, Judged, calibrate, check_data, judge, load, score
 from benchmarks.service_rig import free_port
 
 GS = [sys.executable, "-m", "groundstation"]
@@ -95,7 +96,15 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--speed", type=float, default=2.0, help="replay speed (2)")
     ap.add_argument("--flights", help="held-out flights, comma-separated (all six)")
+    ap.add_argument(
+        "--data",
+        type=Path,
+        default=DATA,
+        help="the directory of the NanoBench CSV files (default: ../shared/data/nanobench "
+        "beside the repository)",
+    )
     args = ap.parse_args(argv)
+    check_data(ap, args.data)
     names = list(DAYS) if args.flights is None else args.flights.split(",")
     unknown = [n for n in names if n not in DAYS]
     if unknown:
@@ -104,7 +113,7 @@ def main(argv: list[str] | None = None) -> int:
     rows: list[tuple[str, Judged, Judged]] = []
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
-        flights = {n: load(n) for n in DAYS}
+        flights = {n: load(n, args.data) for n in DAYS}
         for day in sorted({DAYS[n] for n in names}):
             train = [flights[n] for n in DAYS if DAYS[n] != day]
             cal, _ = calibrate(train, work, f"day-{day}", [])
