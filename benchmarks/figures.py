@@ -10,24 +10,29 @@ A benchmark whose figures README.md or a page in docs/ quotes writes them to
       "uncommitted": [],                    # measured files that differed from HEAD
       "generated_utc": "2026-12-04T18:30:00Z",
       "measures": {"groundstation/tension.py": "<code hash>", ...},
-      "figures": {"handle_median_us": 116.3, ...}
+      "figures": {"total_median_us": 86.4, ...}
     }
 
 A page or README.md quotes a figure with a marker right after the number (the marker is an
 HTML comment, so it does not show once rendered)::
 
-    116 µs<!-- fig pipeline_benchmark.json handle_median_us -->
+    86 µs<!-- fig pipeline_benchmark.json total_median_us -->
+    111.0 cm<!-- fig results_envelope.json classes.all.uncalibrated.median_cm -->
+    1.2 cm<!-- fig hover_exit.json windows.0.hovers.0.ours_median_m ×100 -->
 
-``tests/test_docs_numbers.py`` reads every such marker: the number just before it must equal
-the figure in the named file (``docs/`` is implied; a dotted key walks nested tables) rounded
-to the quote's decimals, and every file's ``measures`` must still match the code, or the
-test names the command to rerun.
+``tests/test_docs_numbers.py`` reads every such marker: the number just before it (at most
+a unit between) must equal the figure in the named file (``docs/`` is implied; a dotted key
+walks nested tables and lists) rounded to the quote's decimals, times the factor if the
+marker ends with one; and every file's ``measures`` must still match the code, or the test
+names the command to rerun.
 
 What a benchmark measures is listed here, in :data:`BENCHMARKS`, by hand: the estimator's
 modules, the simulator where it draws the flights, the benchmark's own modules, and for
 ``groundstation/config.py`` its default values only (a new check or flag there changes no
-figure). The command-line, the dashboard, the Zenoh adapter and the docs are not listed, so
-a change to them leaves the figures current. A file's hash is of its code: its syntax tree
+figure). The command line, the dashboard, the Zenoh adapter, the service's wiring and the
+docs are not listed, so a change to them leaves the figures current (``nanobench_cli`` runs
+``calibrate`` and ``replay --offline`` through ``groundstation.cli``: what they run counts,
+the parsing of their flags does not). A file's hash is of its code: its syntax tree
 with the docstrings left out, so a comment or a docstring edited does not make a page stale.
 """
 
