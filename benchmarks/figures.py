@@ -236,8 +236,30 @@ def figures_path(page: str) -> Path:
     return DOCS / f"{page}.json"
 
 
+@dataclass(frozen=True)
+class _Start:
+    commit: str
+    uncommitted: frozenset[str]
+    measures: dict[str, str]
+
+
+def _at_start() -> _Start:
+    measures = measured_hashes(
+        tuple(sorted({entry for bench in BENCHMARKS.values() for entry in bench.measures}))
+    )
+    real_files = [f for f in measures if f != CONFIG_DEFAULTS]
+    changed = [line[3:] for line in git("status", "--porcelain", "--", *real_files).splitlines()]
+    return _Start(
+        git_commit(), frozenset(f for f in changed if _code_differs_from_head(f)), measures
+    )
+
+
 def write_figures(page: str, figures: Mapping[str, Any], argv: list[str] | None = None) -> Path:
     """Write ``docs/<page>.json``: the figures, the command, the commit and the code measured.
+
+    The commit and the code are those when the run began (:data:`AT_START`, taken when the
+    benchmark imported this module), as the page's own provenance is: a commit made while a
+    long benchmark runs does not change what it measured.
 
     Args:
         page: a key of :data:`BENCHMARKS` (``docs/<page>.md`` is the page).
@@ -248,16 +270,14 @@ def write_figures(page: str, figures: Mapping[str, Any], argv: list[str] | None 
         The path written.
     """
     bench = BENCHMARKS[page]
-    measures = measured_hashes(bench.measures)
-    real_files = [f for f in measures if f != CONFIG_DEFAULTS]
-    changed = [line[3:] for line in git("status", "--porcelain", "--", *real_files).splitlines()]
+    files = measured_files(bench.measures)
     record = {
         "benchmark": page,
         "command": " ".join([bench.command, *(argv or [])]),
-        "commit": git_commit(),
-        "uncommitted": sorted(f for f in changed if _code_differs_from_head(f)),
+        "commit": AT_START.commit,
+        "uncommitted": sorted(AT_START.uncommitted.intersection(files)),
         "generated_utc": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
-        "measures": measures,
+        "measures": {f: AT_START.measures[f] for f in files},
         "figures": _finite(figures),
     }
     path = figures_path(page)
@@ -384,3 +404,7 @@ def check_quote(quote: Quote, docs: Path = DOCS) -> str | None:
             f"which is {value!r} ({expected} at the quote's {decimals} decimal(s))"
         )
     return None
+
+
+AT_START = _at_start()
+"""The commit and the measured code when this module was first imported: a benchmark's start."""
