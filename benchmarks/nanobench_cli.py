@@ -38,8 +38,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks import git_commit
-from benchmarks.figures import DOCS, write_figures
+from benchmarks.figures import AT_START, DOCS, write_figures
 from groundstation.cli import main as gs_main
 from groundstation.recording.reader import RecordedMessage, copy_messages, iter_messages
 
@@ -300,7 +299,7 @@ def main(argv: list[str] | None = None) -> int:
         say(
             "`python -m benchmarks.nanobench_cli --out docs/nanobench_cli.md` (this page and "
             f"its figures, docs/nanobench_cli.json; {time.time() - t0:.0f} s at commit "
-            f"{git_commit()}). The flights are not in the repository: `--data DIR` names the "
+            f"{AT_START.commit}). The flights are not in the repository: `--data DIR` names the "
             "directory of the NanoBench CSV files (default `../shared/data/nanobench`, beside "
             "the repository; its README says where they come from). "
             "Six shared flights (B6_linear_ramp_rep1 left out), "
