@@ -1,6 +1,6 @@
 """The hover test's short window (``[filter] accel_hover_exit_window_s``): tugs against hovers.
 
-Run:  python -m benchmarks.hover_exit            # writes docs/hover_exit.md (~10 min)
+Run:  python -m benchmarks.hover_exit   # writes docs/hover_exit.md and hover_exit.json (~3 min)
 
 The realistic simulator (calibration = truth, as :mod:`benchmarks.bench_realistic`), with the
 window off (the default: the 1 s mean alone decides the hover) and at 0.3 s: the 30 mN tug at
