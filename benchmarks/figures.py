@@ -20,7 +20,8 @@ HTML comment, so it does not show once rendered)::
     111.0 cm<!-- fig results_envelope.json classes.all.uncalibrated.median_cm -->
     1.2 cm<!-- fig hover_exit.json windows.0.hovers.0.ours_median_m ×100 -->
 
-``tests/test_docs_numbers.py`` reads every such marker: the number just before it (at most
+``python -m benchmarks.figures`` lists the figures files, current or stale, with the command
+to rerun. ``tests/test_docs_numbers.py`` reads every such marker: the number just before it (at most
 a unit between) must equal the figure in the named file (``docs/`` is implied; a dotted key
 walks nested tables and lists) rounded to the quote's decimals, times the factor if the
 marker ends with one; and every file's ``measures`` must still match the code, or the test
@@ -408,3 +409,30 @@ def check_quote(quote: Quote, docs: Path = DOCS) -> str | None:
 
 AT_START = _at_start()
 """The commit and the measured code when this module was first imported: a benchmark's start."""
+
+
+def main() -> int:
+    """``python -m benchmarks.figures``: each figures file, current or stale, and what to rerun.
+
+    Exit status 1 if any is stale or missing (the check ``tests/test_docs_numbers.py`` makes).
+    """
+    bad = 0
+    for name, bench in sorted(BENCHMARKS.items()):
+        path = figures_path(name)
+        if not path.is_file():
+            print(f"{name}: no {path.name} yet: `{bench.command}`")
+            bad += 1
+            continue
+        record = json.loads(path.read_text(encoding="utf-8"))
+        stale = stale_files(record)
+        if stale:
+            changed = ", ".join(stale)
+            print(f"{name}: stale since {record['commit']} ({changed}): `{record['command']}`")
+            bad += 1
+        else:
+            print(f"{name}: current (commit {record['commit']})")
+    return 1 if bad else 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
