@@ -11,7 +11,17 @@ accel_slow = true``, which trusts the attitude) or the accelerometer model ``m·
 (``accel_slow = false``, in which a tilt of the attitude enters both terms and cancels).
 Per held-out flight: the median |T| of the Estimates in the air, mN.
 
+The estimator chooses between them by the attitude's source (Telemetry ``attitude_source``,
+``onboard`` for the drone's own, ``external`` for Vicon's, as the Crazyflie bridge writes
+it) against the source the calibration's thrust axis was fitted with (``[calibration]
+attitude_source``, written by ``calibrate``): the hover model where they are the same, the
+accelerometer model where they differ. The rows force each model where it would not be chosen.
+
 Run:  python -m benchmarks.attitude_source [--out docs/attitude_source.md] [--data DIR]
+
+With ``--out docs/attitude_source.md`` the figures also go to ``docs/attitude_source.json``
+(:mod:`benchmarks.figures`); the page's text after its table (from its first ``## `` heading
+on) is kept as written by hand, and quotes the figures through markers.
 """
 
 from __future__ import annotations
@@ -25,6 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks.figures import AT_START, DOCS, write_figures
 from benchmarks.nanobench_cli import (
     AIR_MIN_Z_M,
     CONFIG,
@@ -69,6 +80,7 @@ def load(name: str, attitude: str, data_dir: Path) -> Flight:
             "thrust_n": float(thrust[i]),
             "gyro_rps": gyro[i].tolist(),
             "armed": bool(armed[i]),
+            "attitude_source": "onboard" if attitude == "onboard" else "external",
             **({"vbat_v": float(vbat[i])} if np.isfinite(vbat[i]) and vbat[i] > 0 else {}),
         }
         t_ns = round(float(t[i]) * 1e9)
@@ -98,15 +110,34 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.time()
     flights = {(n, att): load(n, att, data) for n in DAYS for att in ATTITUDES}
     days = sorted(set(DAYS.values()))
-    # (label, attitude calibrated with, attitude served with, config appended)
+    # (label, attitude calibrated with, attitude served with, change to the calibration)
     variants = [
-        ("onboard, calibrated onboard", "onboard", "onboard", ""),
+        ("onboard, calibrated onboard (hover model)", "onboard", "onboard", ""),
         ("onboard, calibrated onboard, accel_slow = false", "onboard", "onboard", "off"),
-        ("Vicon, calibrated Vicon", "vicon", "vicon", ""),
+        ("Vicon, calibrated Vicon (hover model)", "vicon", "vicon", ""),
         ("Vicon, calibrated Vicon, accel_slow = false", "vicon", "vicon", "off"),
-        ("Vicon, calibrated onboard", "onboard", "vicon", ""),
-        ("Vicon, calibrated onboard, accel_slow = false", "onboard", "vicon", "off"),
+        (
+            "Vicon, calibrated onboard (the sources differ: accelerometer model)",
+            "onboard",
+            "vicon",
+            "",
+        ),
+        (
+            "Vicon, calibrated onboard, hover model forced (the calibration relabelled "
+            '`attitude_source = "external"`)',
+            "onboard",
+            "vicon",
+            "relabel",
+        ),
     ]
+    keys = (
+        "onboard_hover",
+        "onboard_accel",
+        "vicon_hover",
+        "vicon_accel",
+        "vicon_cal_onboard",
+        "vicon_cal_onboard_hover_forced",
+    )
     per: dict[str, list[tuple[str, str, float]]] = {v[0]: [] for v in variants}
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
@@ -130,12 +161,16 @@ def main(argv: list[str] | None = None) -> int:
                 cals[att] = out
             for label, cal_att, serve_att, mode in variants:
                 cfg = cals[cal_att]
-                if mode == "off":
+                if mode:
+                    old, new = {
+                        "off": ("accel_slow = true", "accel_slow = false"),
+                        "relabel": ('attitude_source = "onboard"', 'attitude_source = "external"'),
+                    }[mode]
                     text = cfg.read_text()
-                    if "accel_slow = true" not in text:
-                        raise RuntimeError(f"{cfg}: no accel_slow = true to turn off")
-                    cfg = work / f"cal-{day}-{cal_att}-off.toml"
-                    cfg.write_text(text.replace("accel_slow = true", "accel_slow = false"))
+                    if old not in text:
+                        raise RuntimeError(f"{cfg}: no {old} to change")
+                    cfg = work / f"cal-{day}-{cal_att}-{mode}.toml"
+                    cfg.write_text(text.replace(old, new))
                 for n in held:
                     f = flights[(n, serve_att)]
                     rec = _write(f.without_mocap, work / f"{n}-{serve_att}-n.mcap")
@@ -148,18 +183,27 @@ def main(argv: list[str] | None = None) -> int:
     lines = [
         "# Where the attitude comes from: onboard or motion capture (NanoBench)",
         "",
-        "`python -m benchmarks.attitude_source --out docs/attitude_source.md` "
-        f"({time.time() - t0:.0f} s; data: ../shared/data/nanobench, six flights, "
-        "B6_linear_ramp_rep1 left out). Calibrated with `calibrate --untethered` on two days "
-        "with the attitude named, judged on the third day's flights served without "
+        "`python -m benchmarks.attitude_source --out docs/attitude_source.md` (this page and "
+        f"its figures, docs/attitude_source.json; {time.time() - t0:.0f} s at commit "
+        f"{AT_START.commit}; data: ../shared/data/nanobench, six flights, "
+        "B6_linear_ramp_rep1 left out; the configuration of docs/nanobench_cli.md, "
+        '`thrust_model = "motor_voltage"`). Calibrated with `calibrate --untethered` on two '
+        "days with the attitude named, judged on the third day's flights served without "
         "motion-capture position. Truth: zero tension; median |T| in the air per flight, mN "
         "(flights in the order of the folds: day 2026-03-02, 03-04, 03-05).",
         "",
         "| attitude served, calibration | median of flights mN | worst flight mN | flights |",
         "| --- | ---: | ---: | --- |",
     ]
-    for label, *_ in variants:
+    figures: dict[str, dict[str, object]] = {}
+    for key, (label, *_) in zip(keys, variants, strict=True):
         vals = [v for _, _, v in per[label]]
+        figures[key] = {
+            "label": label,
+            "median_mn": statistics.median(vals),
+            "worst_mn": max(vals),
+            "flights_mn": [[n, v] for _, n, v in per[label]],
+        }
         flights_txt = ", ".join(f"{v:.1f}" for _, _, v in per[label])
         lines.append(
             f"| {label} | {statistics.median(vals):.1f} | {max(vals):.1f} | {flights_txt} |"
@@ -167,7 +211,15 @@ def main(argv: list[str] | None = None) -> int:
     text = "\n".join(lines) + "\n"
     print(text)
     if args.out:
-        Path(args.out).write_text(text)
+        out = Path(args.out)
+        if out.is_file():  # the analysis below the table is written by hand: keep it
+            old = out.read_text(encoding="utf-8")
+            at = old.find("\n## ")
+            if at >= 0:
+                text += old[at:]
+        out.write_text(text, encoding="utf-8")
+        if out.resolve() == DOCS / "attitude_source.md":
+            write_figures("attitude_source", figures, ["--out", "docs/attitude_source.md"])
     return 0
 
 

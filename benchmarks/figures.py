@@ -126,6 +126,15 @@ BENCHMARKS: dict[str, Benchmark] = {
         ".venv/bin/python -m benchmarks.nanobench_cli",  # --out docs/nanobench_cli.md
         (*ESTIMATOR, *RECORDING, "benchmarks/nanobench.py", "benchmarks/nanobench_cli.py"),
     ),
+    "attitude_source": Benchmark(
+        ".venv/bin/python -m benchmarks.attitude_source",  # --out docs/attitude_source.md
+        (
+            *ESTIMATOR,
+            *RECORDING,
+            "benchmarks/nanobench_cli.py",
+            "benchmarks/attitude_source.py",
+        ),
+    ),
     "realistic_benchmark": Benchmark(
         ".venv/bin/python -m benchmarks.bench_realistic",  # --tug-seeds 8
         (*ESTIMATOR, *SIMULATOR, "groundstation/bus.py", "benchmarks/bench_realistic.py"),

@@ -60,7 +60,10 @@ mass_kg = 0.030
 
 [calibration]
 thrust_vbat_ref_v = 3.5
+thrust_model = "motor_voltage"
 """
+"""The configuration calibrated from: config/crazyflie.toml's choices for these flights (30 g,
+the battery model that holds below the calibrated voltages, docs/battery_model.md)."""
 
 
 def nominal_thrust_n(pwm: np.ndarray) -> np.ndarray:

@@ -48,6 +48,8 @@ NOMINAL_PWM_MAP: tuple[float, float, float] = (2.130295e-11, 1.032633e-6, 5.4845
 same as groundstation.thrust_model's, tested equal: the contract imports no physics)."""
 ThrustModel = Literal["vbat_linear", "motor_voltage"]
 """``[calibration] thrust_model`` (groundstation.thrust_model's, tested equal)."""
+AttitudeSource = Literal["onboard", "external"]
+"""Where Telemetry's attitude comes from (Telemetry's ``attitude_source``, tested equal)."""
 
 _log = logging.getLogger(__name__)
 _warned: set[str] = set()
@@ -197,6 +199,13 @@ class DroneSection(_Section):
     unusual_rig: bool = False
     """Accept a mass, tether length or tether weight outside a micro drone's plausible
     ranges (:data:`PLAUSIBLE`): without it such a value is taken for a unit mistake."""
+    attitude_source: AttitudeSource = "onboard"
+    """(added) Where Telemetry's attitude comes from when a message does not say
+    (``attitude_source`` of Telemetry): ``onboard``, the drone's own estimator, or
+    ``external``, motion capture's rigid body. The hover model, which trusts the attitude's
+    level, is used only when the calibration's thrust axis was fitted against the same
+    source (``[calibration] attitude_source``; uncalibrated: ``onboard``); otherwise the
+    accelerometer model, in which a tilt of the attitude cancels (docs/attitude_source.md)."""
 
 
 class TetherSection(_Section):
@@ -377,6 +386,11 @@ class CalibrationSection(_Section):
     the rest offsets: a drone that arms with no rest offset in force then flies with an x/y
     bias nobody calibrated; the service warns once and ``status`` says so
     (``rest_calibration.missing_at_arming``). Needs ``rest = true``."""
+    attitude_source: AttitudeSource | None = None
+    """(added) The attitude the thrust axis was fitted against (written by ``groundstation
+    calibrate`` from the recordings): ``onboard`` or ``external``. A drone served with
+    another source gets the accelerometer model instead of the hover model (``[drone]
+    attitude_source``); none (a calibration written before this key): whatever is served."""
     source: str = "none"
     """Where these numbers come from (file and time, written by ``groundstation calibrate``),
     reported in Estimate and ``status``; ``none`` when nothing was calibrated."""

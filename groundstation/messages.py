@@ -212,6 +212,13 @@ class Telemetry(_In):
     estimator's own); absent: motion capture's (``[localization] mocap_std_m``). A position
     whose σ exceeds ``[localization] position_max_std_m`` on any axis is no position to the
     service (a Flow deck's x/y: odometry, σ about 10 m)."""
+    attitude_source: Literal["onboard", "external"] | None = None
+    """(added) Where ``quat_wxyz`` comes from: ``onboard``, the drone's own estimator
+    (levelled on the same accelerometer ``accel_mps2`` reads), or ``external``, motion
+    capture's rigid body (its axes set by the markers, not by the IMU or the thrust);
+    absent: ``[drone] attitude_source``. The estimator trusts the attitude's level (its hover
+    model) only when the calibration's thrust axis was fitted against the same source
+    (docs/attitude_source.md)."""
 
 
 class Reel(_In):
@@ -555,6 +562,11 @@ class Status(_Out):
     ``stamp_s``. With ``[calibration] rest_required`` also ``required: true`` and
     ``missing_at_arming``: the drone armed without a rest offset in force (until the next
     disarm), so its x/y accelerometer bias is not the calibrated one."""
+    attitude: dict[str, Any] | None = None
+    """(added) The attitude of the last Telemetry: ``source`` (``onboard``/``external``),
+    ``calibrated`` (the source the thrust axis was fitted against; null: a calibration that
+    does not say) and the observation ``model`` they chose: ``hover`` (the attitude's level
+    trusted) or ``accelerometer`` (docs/attitude_source.md); null before any Telemetry."""
 
 
 class MocapPoseIn(_In):

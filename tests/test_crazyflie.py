@@ -272,6 +272,7 @@ def test_mocap_position_and_attitude() -> None:
     tel = build_telemetry(Aligned(0, _values()), plan, section, 0, {}, pose, 10.05)
     assert tel.position_m == (0.3, -0.2, 0.5)
     assert tel.quat_wxyz == pytest.approx(quat)
+    assert tel.attitude_source == "external", "the estimator must know the frame is not the IMU's"
     assert yaw_deg_from_quat(tel.quat_wxyz) == pytest.approx(math.degrees(1.0))
     zero = MocapPose((0.3, -0.2, 0.5), (0.0, 0.0, 0.0, 0.0), received_s=10.0)
     with pytest.raises(Skip, match="bad_reading"):
@@ -283,6 +284,7 @@ def test_mocap_position_and_attitude() -> None:
         Aligned(0, _values()), plan_variables(est, FAKE_TOC, "x"), est, 0, {}, pose, 10.2
     )
     assert tel.position_m is None, "a stale motion-capture position is left out"
+    assert tel.attitude_source == "onboard"
 
 
 # --------------------------------------------------------------------------- command gate

@@ -116,6 +116,18 @@ def calibration_from_config(
     return cal, section.source if section.source != "none" else "config"
 
 
+def calibrated_attitude_source(section: CalibrationSection, label: str) -> str | None:
+    """The attitude a calibration's thrust axis holds in (:class:`DroneEstimator`).
+
+    ``[calibration] attitude_source`` where ``calibrate`` wrote it; nothing calibrated
+    (``label`` ``none``): ``onboard``, the body axis of the drone's own estimator, levelled
+    on the same accelerometer; a calibration that does not say: None, any.
+    """
+    if section.attitude_source is not None:
+        return section.attitude_source
+    return "onboard" if label == "none" else None
+
+
 class Rate:
     """Messages per second over a sliding window of receive times."""
 
@@ -232,6 +244,19 @@ class DroneEstimator:
         )
         """``[calibration] accel_slow``: the accelerometer's slow content replaced (None: off)."""
         self.slow = slow_mod.SlowAccelState()
+        self.attitude_calibrated = calibrated_attitude_source(
+            params.calibration, self.calibration_source
+        )
+        """The attitude the thrust axis was fitted against (None: any, a calibration that
+        does not say)."""
+        self.attitude_served: str | None = None
+        """The last Telemetry's attitude source (its own, else ``[drone]``'s)."""
+        self.slow_active = False
+        """The hover model in use: :attr:`slow_params` set and the attitude served the one
+        calibrated (:meth:`_attitude_changed`)."""
+        self.rest_active = False
+        """A rest offset may be applied: the accelerometer model, and not as the fallback of
+        an attitude from another source (its rest offset would carry the frames' tilt)."""
         self.filter_control = FilterControl(
             TensionFilterParams(
                 mass_kg=params.drone.mass_kg,
@@ -340,9 +365,12 @@ class DroneEstimator:
         if checks.position_too_uncertain(msg, self.localization.position_max_std_m):
             self._warn_position(msg, now_s)
             msg = msg.model_copy(update={"position_m": None})
-        slow = self.slow if self.slow_params is not None else None
+        served = msg.attitude_source or self.params.drone.attitude_source
+        if served != self.attitude_served:
+            self._attitude_changed(served, now_s)
+        slow = self.slow if self.slow_active else None
         rest_offset = None
-        if self.rest is not None and slow is None and self.rest.offset is not None:
+        if self.rest_active and self.rest is not None and self.rest.offset is not None:
             ox, oy, _ = self.rest.offset.offset_body_mps2.tolist()
             rest_offset = (ox, oy)
         # Malformed content first (whatever its seq), then the stream's order.
@@ -394,7 +422,8 @@ class DroneEstimator:
         )
         self.contact = contact
         self._check_battery(msg.vbat_v, on_ground, now_s)
-        if self.slow_params is not None:
+        if self.slow_active:
+            assert self.slow_params is not None
             self.slow = learn_slow(
                 self.slow,
                 self.slow_params,
@@ -510,6 +539,37 @@ class DroneEstimator:
         if key not in self._told:
             self._told.add(key)
             self._on_warning(self.drone, now_s, text, field)
+
+    def _attitude_changed(self, served: str, now_s: float) -> None:
+        """Choose the model for the attitude served (docs/attitude_source.md).
+
+        The hover model's slow part ``m·g·e3 − R·u·F`` trusts the attitude's level: against
+        a thrust axis ``u`` fitted in another attitude's frame it reads the frames' tilt δ as
+        tension (``m·g·δ``, 5 mN per degree at 30 g). The accelerometer model ``m·R·f −
+        R·u·F`` cancels it (δ enters both terms) and carries the accelerometer's bias
+        instead, so it is the model when the attitude served is not the one calibrated.
+        """
+        self.attitude_served = served
+        calibrated = self.attitude_calibrated
+        mismatch = calibrated is not None and served != calibrated
+        self.slow_active = self.slow_params is not None and not mismatch
+        self.rest_active = not self.slow_active and not mismatch
+        if mismatch and self.slow_params is not None:
+            self._warn_once(
+                f"attitude_source_{served}",
+                now_s,
+                f"{self.drone}'s attitude is {served}, but its thrust axis was "
+                + (
+                    f"fitted against the {calibrated} one ([calibration] attitude_source)"
+                    if self.calibration_source != "none"
+                    else "not calibrated (the drone's own body axis, which fits the onboard "
+                    "attitude)"
+                )
+                + ": the accelerometer model is in use instead of the hover model (a tilt "
+                "between the two frames would read as tension); calibrate with the attitude "
+                "the drone flies with (told once)",
+                "attitude_source",
+            )
 
     def _warn_position(self, msg: Telemetry, now_s: float) -> None:
         std = msg.position_std_m
@@ -663,6 +723,17 @@ class DroneEstimator:
             ),
             "vbat_v": self.last_vbat_v,
             "rest_calibration": self._rest_status(),
+            "attitude": self._attitude_status(),
+        }
+
+    def _attitude_status(self) -> dict[str, Any] | None:
+        """The attitude served and calibrated, and the model they chose (None: no message)."""
+        if self.attitude_served is None:
+            return None
+        return {
+            "source": self.attitude_served,
+            "calibrated": self.attitude_calibrated,
+            "model": "hover" if self.slow_active else "accelerometer",
         }
 
     def _rest_status(self) -> dict[str, Any] | None:

@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 import re
 import tomllib
-from collections import defaultdict
+from collections import Counter, defaultdict
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
@@ -33,7 +33,7 @@ from groundstation.calibration import (
     fit_calibration,
     hover_mask,
 )
-from groundstation.config import ConfigError, Settings, load_settings
+from groundstation.config import AttitudeSource, ConfigError, Settings, load_settings
 from groundstation.outputs import NewFile, OutputError, check_output
 from groundstation.recording.format import RecordingError
 from groundstation.recording.reader import iter_messages
@@ -77,6 +77,8 @@ class _Columns:
     base_from_reel: bool = False
     tether_messages: int = 0
     """Reel and tether-parameter messages of this drone: a tether was attached."""
+    attitude_sources: Counter[AttitudeSource] = field(default_factory=Counter)
+    """Telemetry per attitude source (its ``attitude_source``, else ``[drone]``'s)."""
 
 
 @dataclass(frozen=True)
@@ -94,6 +96,8 @@ class DroneRecording:
     segments: tuple[int, ...] = ()
     """``data.segment`` of each of :attr:`files`, in order (the file's index on the command
     line); empty: 0, 1, 2, ..."""
+    attitude_source: AttitudeSource = "onboard"
+    """The attitude every Telemetry was recorded with (mixed sources are refused)."""
 
 
 _NAN3 = (math.nan, math.nan, math.nan)
@@ -143,6 +147,9 @@ def _read_file(path: Path, settings: Settings) -> tuple[dict[str, _Columns], int
         if drone not in weight:
             weight[drone] = settings.for_drone(drone).tether.weight_n_per_m
         length, base = tether[drone]
+        c.attitude_sources[
+            tel.attitude_source or settings.for_drone(drone).drone.attitude_source
+        ] += 1
         c.stamp_s.append(tel.stamp_s)
         c.accel.append(tel.accel_mps2)
         c.quat.append(tel.quat_wxyz)
@@ -197,6 +204,7 @@ def read_recordings(
             invalid[d] += bad
     out: dict[str, DroneRecording] = {}
     for d, parts in per_drone.items():
+        source = _one_attitude_source(d, parts)
         arrays: dict[str, list[np.ndarray]] = defaultdict(list)
         for index, _, c in parts:
             n = len(c.stamp_s)
@@ -235,8 +243,37 @@ def read_recordings(
             invalid=invalid[d],
             tether_messages=tuple(c.tether_messages for _, _, c in parts),
             segments=tuple(i for i, _, _ in parts),
+            attitude_source=source,
         )
     return out
+
+
+def _one_attitude_source(drone: str, parts: Sequence[tuple[int, str, _Columns]]) -> AttitudeSource:
+    """The one attitude source of a drone's recordings.
+
+    The thrust axis is fitted against the attitude (eq:NE_tether's ``R·u``): recordings
+    with the drone's own attitude and with motion capture's would fit an axis that is right
+    for neither, so mixed sources are refused, naming the files.
+
+    Raises:
+        CalibrateInputError: more than one source.
+    """
+    seen: Counter[AttitudeSource] = Counter()
+    for _, _, c in parts:
+        seen.update(c.attitude_sources)
+    if len(seen) > 1:
+        per_file = "; ".join(
+            f"{Path(p).name}: "
+            + ", ".join(f"{n} {src}" for src, n in sorted(c.attitude_sources.items()))
+            for _, p, c in parts
+        )
+        raise CalibrateInputError(
+            f"drone {drone!r}: Telemetry with more than one attitude source ({per_file}); "
+            "the thrust axis is fitted against one attitude: calibrate the recordings of "
+            "the source the drone will fly with (Telemetry attitude_source, else [drone] "
+            "attitude_source)"
+        )
+    return next(iter(seen)) if seen else "onboard"
 
 
 def _rest_offsets(data: CalibrationData, bias: Sequence[float]) -> np.ndarray:
@@ -476,7 +513,7 @@ def _vbat_range(fit: CalibrationFit | AirframeFit) -> list[float] | None:
     return [math.floor(lo * 1e3) / 1e3, math.ceil(hi * 1e3) / 1e3]
 
 
-def _calibration_table(cal: DroneCalibration, source: str) -> dict[str, Any]:
+def _calibration_table(cal: DroneCalibration, source: str, attitude_source: str) -> dict[str, Any]:
     fit = cal.fit
     v = fit.values
     vbat_range = _vbat_range(fit)
@@ -496,6 +533,7 @@ def _calibration_table(cal: DroneCalibration, source: str) -> dict[str, Any]:
         "rest_required": cal.rest_required,
         # The full model's bias stands for the accelerometer's mean: trust it as read.
         "accel_slow": False,
+        "attitude_source": attitude_source,
         "source": source,
     }
 
@@ -729,7 +767,9 @@ def format_airframe(
     return "\n".join(lines)
 
 
-def _airframe_table(fit: AirframeFit, cal: Any, source: str) -> dict[str, Any]:
+def _airframe_table(
+    fit: AirframeFit, cal: Any, source: str, attitude_source: str
+) -> dict[str, Any]:
     v = fit.values
     vbat = _vbat_range(fit)
     thrust: dict[str, Any]
@@ -759,6 +799,7 @@ def _airframe_table(fit: AirframeFit, cal: Any, source: str) -> dict[str, Any]:
         "rest": cal.rest,
         "rest_required": False,
         "accel_slow": True,
+        "attitude_source": attitude_source,
         "source": source,
     }
 
@@ -818,8 +859,11 @@ def run_calibrate(
             rec = recs[d]
             afit = airframe_drone(rec, settings, untethered=untethered)
             echo(format_airframe(d, afit, rec.files, rec.segments))
+            echo(_attitude_line(d, rec.attitude_source))
             source = f"groundstation calibrate {stamp} from {names}"
-            table = _airframe_table(afit, settings.for_drone(d).calibration, source)
+            table = _airframe_table(
+                afit, settings.for_drone(d).calibration, source, rec.attitude_source
+            )
             patch["drones"][d] = {"calibration": table}
             head = [
                 f"groundstation calibrate (airframe constants), {stamp}, from {names}, "
@@ -844,11 +888,14 @@ def run_calibrate(
         fit = cals[d].fit
         rec = recs[d]
         echo(format_fit(d, fit, rec.files))
+        echo(_attitude_line(d, rec.attitude_source))
         for note in cals[d].rest_note:
             echo(f"  {note}")
         params = settings.for_drone(d)
         source = f"groundstation calibrate {stamp} from {names}"
-        tables: dict[str, Any] = {"calibration": _calibration_table(cals[d], source)}
+        tables: dict[str, Any] = {
+            "calibration": _calibration_table(cals[d], source, rec.attitude_source)
+        }
         if params.calibration.thrust_model != "vbat_linear":
             # the full model fits the straight battery line only: say so in what it writes
             tables["calibration"]["thrust_model"] = "vbat_linear"
@@ -879,6 +926,16 @@ def run_calibrate(
                 tables["base"] = {"position_m": [round(float(x), 5) for x in base]}
         patch["drones"][d] = tables
     return _write_config(settings, config_path, patch, comments, out_path, echo, force)
+
+
+def _attitude_line(drone: str, source: str) -> str:
+    """What calibrate tells about the attitude the thrust axis was fitted against."""
+    other = "external" if source == "onboard" else "onboard"
+    return (
+        f"  {drone}: thrust axis fitted against the {source} attitude "
+        f'([calibration] attitude_source = "{source}"); served with the {other} one, the '
+        "service uses the accelerometer model instead of the hover model"
+    )
 
 
 def _check_untethered(recs: Mapping[str, DroneRecording]) -> None:

@@ -639,6 +639,9 @@ def build_telemetry(
         "thrust_n": thrust,
         "gyro_rps": tuple(math.radians(g) for g in gyro_dps),
         "vbat_v": vbat if vbat is not None and math.isfinite(vbat) and vbat > 0 else None,
+        # the estimator trusts the attitude's level only against a thrust axis calibrated
+        # in the same frame: say which one this is
+        "attitude_source": "external" if section.attitude_source == "mocap" else "onboard",
     }
     if fresh is not None:
         # Motion capture first: the onboard estimate fuses it (extpos) or another system.
