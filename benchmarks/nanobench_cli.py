@@ -8,7 +8,8 @@ over motor_motor_m1..m4, vbat; mass 30 g assumed), once with the Vicon position
 --untethered`` runs on some flights; ``groundstation replay --offline`` (the service's own
 pipeline) re-estimates the others without motion capture. Per held-out flight: the median
 |T| of the Estimates in the air (the truth is zero), the share of Telemetry answered by an
-Estimate and the share of airborne rows not flagged ``on_ground``.
+Estimate, the share of airborne rows not flagged ``on_ground``, and the share of airborne
+per-axis tensions within twice their published σ (``tension_std_n``).
 
 ``B6_linear_ramp_rep1`` is left out (a ground-effect hover at 0.07–0.2 m; the data README).
 
@@ -26,6 +27,7 @@ import argparse
 import contextlib
 import io
 import json
+import math
 import re
 import statistics
 import sys
@@ -138,6 +140,9 @@ class Judged:
     median_abs_t_mn: float
     answered: float
     airborne_not_on_ground: float
+    within_2_sigma: float = math.nan
+    """Share of the airborne per-axis tensions within twice their published σ (truth zero;
+    a consistent σ: about 95 %)."""
 
 
 def judge(flight: Flight, config: Path, work: Path) -> Judged:
@@ -161,7 +166,7 @@ def score(flight: Flight, out: Path) -> Judged:
         if m.key == "tether/cf1/estimate":
             est = json.loads(m.payload)
             by_stamp[round(est["stamp_s"], 6)] = est
-    norms, air_ok, air_n = [], 0, 0
+    norms, air_ok, air_n, inside, axes = [], 0, 0, 0, 0
     for t, air in zip(flight.stamp_s.tolist(), flight.airborne.tolist(), strict=True):
         est = by_stamp.get(round(t, 6))
         if not air:
@@ -172,11 +177,15 @@ def score(flight: Flight, out: Path) -> Judged:
         if not est["on_ground"]:
             air_ok += 1
             norms.append(float(np.linalg.norm(est["tension_n"])))
+            for t_n, std_n in zip(est["tension_n"], est["tension_std_n"], strict=True):
+                inside += abs(t_n) <= 2.0 * std_n
+                axes += 1
     return Judged(
         flight.name,
         1e3 * float(np.median(norms)) if norms else float("nan"),
         len(by_stamp) / flight.stamp_s.size,
         air_ok / max(air_n, 1),
+        inside / axes if axes else math.nan,
     )
 
 
@@ -311,7 +320,8 @@ def main(argv: list[str] | None = None) -> int:
             "--offline` (the service's pipeline). Truth: zero tension. Per held-out flight: "
             "median |T| of the Estimates in the air (mN); answered = share of Telemetry with an "
             "Estimate; airborne = share of airborne rows (motors on, Vicon z > 0.25 m) not "
-            "`on_ground`."
+            "`on_ground`; within 2σ = share of their per-axis tensions within twice the "
+            "published `tension_std_n` (a consistent σ: about 95 %)."
         )
         say("")
         for label, _, _ in variants:
@@ -329,17 +339,25 @@ def main(argv: list[str] | None = None) -> int:
                 )
                 say("")
                 continue
-            say("| fold | flight | median abs T mN | answered | airborne |")
-            say("| --- | --- | ---: | ---: | ---: |")
+            say("| fold | flight | median abs T mN | answered | airborne | within 2σ |")
+            say("| --- | --- | ---: | ---: | ---: | ---: |")
             loo = []
             for fold, _, _ in folds:
                 for j in results[label][fold]:
                     figures[key].setdefault("rows", []).append(
-                        [fold, j.flight, j.median_abs_t_mn, j.answered, j.airborne_not_on_ground]
+                        [
+                            fold,
+                            j.flight,
+                            j.median_abs_t_mn,
+                            j.answered,
+                            j.airborne_not_on_ground,
+                            j.within_2_sigma,
+                        ]
                     )
                     say(
                         f"| {fold} | {j.flight} | {j.median_abs_t_mn:.1f} | "
-                        f"{100 * j.answered:.1f} % | {100 * j.airborne_not_on_ground:.1f} % |"
+                        f"{100 * j.answered:.1f} % | {100 * j.airborne_not_on_ground:.1f} % | "
+                        f"{100 * j.within_2_sigma:.0f} % |"
                     )
                     if fold.endswith("held out") and not fold.startswith("day"):
                         loo.append(j.median_abs_t_mn)
@@ -349,17 +367,26 @@ def main(argv: list[str] | None = None) -> int:
                 if fold.startswith("day")
                 for j in results[label][fold]
             ]
+            cover = [
+                j.within_2_sigma
+                for fold, _, _ in folds
+                if fold.startswith("day")
+                for j in results[label][fold]
+            ]
             figures[key].update(
                 cross_day_median_mn=statistics.median(cross),
                 cross_day_worst_mn=max(cross),
                 leave_one_out_median_mn=statistics.median(loo),
                 leave_one_out_worst_mn=max(loo),
+                cross_day_within_2_sigma=statistics.median(cover),
             )
             say("")
             say(
                 f"Cross-day: median over flights {statistics.median(cross):.1f} mN, worst "
                 f"{max(cross):.1f}; leave-one-out: median {statistics.median(loo):.1f}, worst "
-                f"{max(loo):.1f}."
+                f"{max(loo):.1f}. The published σ holds the truth within 2σ per axis in "
+                f"{100 * statistics.median(cover):.0f} % of the airborne samples (median over "
+                "the cross-day flights; a consistent σ: about 95 %)."
             )
             say("")
         say("## What calibrate printed (default model, one fold per held-out day)")
