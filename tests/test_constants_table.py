@@ -1,0 +1,217 @@
+"""docs/constants.md lists every tunable of the per-message path: keep it in sync with the code.
+
+Every field of the four parameter classes is a row (``Class.field`` in the first column), every
+such row names a field that exists, every public numeric module constant of the per-message
+modules is a row, every ``module.NAME`` row resolves, and the count lines add up.
+"""
+
+from __future__ import annotations
+
+import ast
+import dataclasses
+import importlib
+import re
+from pathlib import Path
+from types import ModuleType
+from typing import Any
+
+import pytest
+
+from groundstation.calibration import RestCriteria
+from groundstation.contact import ContactParams
+from groundstation.slow_accel import SlowAccelParams
+from groundstation.tension import TensionFilterParams
+
+REPO = Path(__file__).resolve().parents[1]
+PAGE = REPO / "docs" / "constants.md"
+PACKAGE = REPO / "groundstation"
+
+CLASSES: dict[str, type[Any]] = {
+    cls.__name__: cls for cls in (TensionFilterParams, SlowAccelParams, ContactParams, RestCriteria)
+}
+SOURCES = ("physical", "derived", "fitted", "hand-set")
+
+MODULES = [
+    *sorted((PACKAGE / "estimator").glob("*.py")),
+    *sorted(PACKAGE.glob("tension*.py")),
+    PACKAGE / "slow_accel.py",
+    PACKAGE / "contact.py",
+    PACKAGE / "calibration.py",
+    PACKAGE / "localization.py",
+    PACKAGE / "follow.py",
+    PACKAGE / "catenary.py",
+]
+"""The modules a Telemetry message runs through (the page's scope)."""
+
+OFFLINE_ONLY = {"calibration.UNDETERMINED_RATIO"}
+"""Public numeric constants of those modules that no message reaches (the page says why)."""
+
+_CELL_SPLIT = re.compile(r"(?<!\\)\|")
+_COUNT = re.compile(
+    r"(\d+) tunables: (\d+) physical, (\d+) derived, (\d+) fitted, (\d+) hand-set; "
+    r"(\d+) configurable"
+)
+_CLASS_COUNT = re.compile(
+    r"^- `?([\w ]+?)`?: (\d+) \((\d+) physical, (\d+) derived, (\d+) fitted, (\d+) hand-set; "
+    r"(\d+) configurable\)",
+    re.MULTILINE,
+)
+
+
+def _rows() -> list[list[str]]:
+    """The cells of every table row (the lines that start with a pipe and a backtick)."""
+    rows = []
+    for line in PAGE.read_text(encoding="utf-8").splitlines():
+        if line.startswith("| `"):
+            cells = [c.strip() for c in _CELL_SPLIT.split(line.strip().strip("|"))]
+            rows.append(cells)
+    return rows
+
+
+ROWS = _rows()
+TEXT = PAGE.read_text(encoding="utf-8")
+
+
+def _name(row: list[str]) -> str:
+    return row[0].strip("`")
+
+
+def _source(row: list[str]) -> str:
+    return row[4]
+
+
+def _configurable(row: list[str]) -> bool:
+    return row[3] not in ("—", "-", "")
+
+
+def _group(name: str) -> str:
+    head = name.split(".", 1)[0]
+    return head if head in CLASSES else "named constants"
+
+
+def _resolve(name: str) -> object:
+    """``module.NAME`` or ``module.Class.NAME`` under groundstation, by its longest importable
+    module prefix."""
+    parts = name.split(".")
+    for cut in range(len(parts) - 1, 0, -1):
+        try:
+            obj: object = importlib.import_module("groundstation." + ".".join(parts[:cut]))
+        except ModuleNotFoundError:
+            continue
+        for attr in parts[cut:]:
+            obj = getattr(obj, attr)
+        return obj
+    raise LookupError(name)
+
+
+def _is_number(node: ast.expr) -> bool:
+    if isinstance(node, ast.Constant):
+        return isinstance(node.value, (int, float)) and not isinstance(node.value, bool)
+    if isinstance(node, ast.UnaryOp):
+        return _is_number(node.operand)
+    if isinstance(node, ast.Tuple):
+        return bool(node.elts) and all(_is_number(e) for e in node.elts)
+    return False
+
+
+def _public_numeric_constants() -> set[str]:
+    """``module.NAME`` for every module-level ``NAME = number`` (or tuple of numbers)."""
+    found = set()
+    for path in MODULES:
+        module = ".".join(path.relative_to(PACKAGE).with_suffix("").parts)
+        for node in ast.parse(path.read_text(encoding="utf-8")).body:
+            if isinstance(node, ast.Assign):
+                targets, value = node.targets, node.value
+            elif isinstance(node, ast.AnnAssign) and node.value is not None:
+                targets, value = [node.target], node.value
+            else:
+                continue
+            for target in targets:
+                if (
+                    isinstance(target, ast.Name)
+                    and re.fullmatch(r"[A-Z][A-Z0-9_]*", target.id)
+                    and _is_number(value)
+                ):
+                    found.add(f"{module}.{target.id}")
+    return found
+
+
+def test_the_table_has_rows() -> None:
+    assert ROWS, f"no table rows (lines starting with '| `') in {PAGE}"
+    assert all(len(row) >= 6 for row in ROWS), [r[0] for r in ROWS if len(r) < 6]
+
+
+@pytest.mark.parametrize("cls", CLASSES.values(), ids=list(CLASSES))
+def test_every_field_is_a_row(cls: type[Any]) -> None:
+    names = {_name(row) for row in ROWS}
+    missing = [
+        f"{cls.__name__}.{f.name}"
+        for f in dataclasses.fields(cls)
+        if f"{cls.__name__}.{f.name}" not in names
+    ]
+    assert not missing, f"docs/constants.md has no row for {missing}"
+
+
+def test_every_class_row_is_a_field() -> None:
+    stale = []
+    for row in ROWS:
+        name = _name(row)
+        head, _, field = name.partition(".")
+        if head in CLASSES and field not in {f.name for f in dataclasses.fields(CLASSES[head])}:
+            stale.append(name)
+    assert not stale, f"docs/constants.md has rows for fields that do not exist: {stale}"
+
+
+def test_every_public_numeric_constant_is_a_row() -> None:
+    names = {_name(row) for row in ROWS}
+    missing = sorted(_public_numeric_constants() - names - OFFLINE_ONLY)
+    assert not missing, f"docs/constants.md has no row for {missing}"
+
+
+def test_every_constant_row_resolves() -> None:
+    stale = []
+    for row in ROWS:
+        name = _name(row)
+        if name.split(".", 1)[0] in CLASSES:
+            continue
+        try:
+            value: Any = _resolve(name)
+        except (LookupError, AttributeError):
+            stale.append(name)
+            continue
+        if isinstance(value, ModuleType) or callable(value):
+            stale.append(name)
+    assert not stale, f"docs/constants.md has rows for names that do not exist: {stale}"
+
+
+def test_no_row_twice() -> None:
+    names = [_name(row) for row in ROWS]
+    assert len(names) == len(set(names)), sorted({n for n in names if names.count(n) > 1})
+
+
+def test_each_source_is_one_of_the_four() -> None:
+    bad = [(_name(row), _source(row)) for row in ROWS if _source(row) not in SOURCES]
+    assert not bad, f"sources must be one of {SOURCES}: {bad}"
+
+
+def test_the_count_line_adds_up() -> None:
+    match = _COUNT.search(TEXT)
+    assert match, "docs/constants.md has no count line 'N tunables: a physical, ...'"
+    total, physical, derived, fitted, hand_set, configurable = map(int, match.groups())
+    assert total == len(ROWS)
+    assert (physical, derived, fitted, hand_set) == tuple(
+        sum(_source(row) == s for row in ROWS) for s in SOURCES
+    )
+    assert configurable == sum(_configurable(row) for row in ROWS)
+
+
+def test_the_count_lines_per_class_add_up() -> None:
+    lines = {m.group(1): tuple(map(int, m.groups()[1:])) for m in _CLASS_COUNT.finditer(TEXT)}
+    assert set(lines) == {*CLASSES, "named constants"}, sorted(lines)
+    for group, (total, *per_source, configurable) in lines.items():
+        rows = [row for row in ROWS if _group(_name(row)) == group]
+        assert total == len(rows), group
+        assert per_source == [sum(_source(row) == s for row in rows) for s in SOURCES], group
+        assert configurable == sum(_configurable(row) for row in rows), group
+        if group in CLASSES:
+            assert total == len(dataclasses.fields(CLASSES[group])), group
