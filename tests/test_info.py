@@ -26,14 +26,17 @@ def _tel(seq: int, stamp_s: float, *, mocap: bool, vbat_v: float) -> bytes:
     }
     if mocap:
         tel["position_m"] = [1.0, 0.0, 1.0]
+    if seq >= 750:
+        tel["attitude_source"] = "external"
     return json.dumps(tel).encode()
 
 
 @pytest.fixture
 def flight(tmp_path: Path) -> Path:
     """cf1 at 100 Hz for 10 s of its own clock, received at twice that speed (a replay at
-    --speed 2), with one 0.5 s gap, one invalid Telemetry, mocap in the first half, a reel
-    and estimates; cf2: one reel message only."""
+    --speed 2), with one 0.5 s gap, one invalid Telemetry, mocap in the first half, the
+    attitude said to be external in the last quarter, a reel and estimates; cf2: one reel
+    message only."""
     msgs: list[RecordedMessage] = []
     t = T0_NS
     msgs.append(RecordedMessage("tether/cf2/reel", b'{"stamp_s":0,"length_m":1.5}', t, t))
@@ -64,6 +67,8 @@ def test_the_summary_says_what_the_file_holds(flight: Path) -> None:
     assert cf1.with_mocap == 500 and cf1.reel == 1 and cf1.estimates == 1000
     assert cf1.vbat_v == pytest.approx((4.1 - 999 * 0.0005, 4.1))
     assert cf1.calibrations == ["lab-cal.toml 2026-12-01", "none"]
+    assert cf1.attitude_sources == {"not said": 750, "external": 250}
+    assert cf1.position_sources == {"mocap": 500}
     assert cf1.median_period_s == pytest.approx(0.005)
     assert len(cf1.gaps) == 1
     start_s, length_s = cf1.gaps[0]
@@ -80,6 +85,7 @@ def test_the_summary_says_what_the_file_holds(flight: Path) -> None:
         "calibration applied: lab-cal.toml 2026-12-01; none",
         "gaps in telemetry (> 5 periods): 1, longest 0.505 s",
         "battery 4.10 to 3.60 V",
+        "attitude   not said 75 %, external 25 %; position   mocap 50 %",
     ):
         assert needle in text, text
 

@@ -47,6 +47,11 @@ class DroneInfo:
     stamp_s: tuple[float, float] | None = None
     """The drone's own clock (Telemetry ``stamp_s``) at its first and last message, s."""
     with_mocap: int = 0
+    attitude_sources: dict[str, int] = field(default_factory=dict)
+    """Telemetry per ``attitude_source`` (``not said``: the field absent, the service then
+    takes ``[drone] attitude_source``)."""
+    position_sources: dict[str, int] = field(default_factory=dict)
+    """Telemetry with a ``position_m`` per ``position_source`` (absent: ``mocap``)."""
     vbat_v: tuple[float, float] | None = None
     armed: int = 0
     reel: int = 0
@@ -131,6 +136,11 @@ def recording_info(path: str | Path) -> RecordingInfo:
             lo, hi = d.stamp_s or (tel.stamp_s, tel.stamp_s)
             d.stamp_s = (min(lo, tel.stamp_s), max(hi, tel.stamp_s))
             d.with_mocap += tel.position_m is not None
+            att = tel.attitude_source or "not said"
+            d.attitude_sources[att] = d.attitude_sources.get(att, 0) + 1
+            if tel.position_m is not None:
+                pos = tel.position_source or "mocap"
+                d.position_sources[pos] = d.position_sources.get(pos, 0) + 1
             d.armed += bool(tel.armed)
             if tel.vbat_v is not None and math.isfinite(tel.vbat_v):
                 vlo, vhi = d.vbat_v or (tel.vbat_v, tel.vbat_v)
@@ -168,6 +178,12 @@ def _size(n: int) -> str:
     return f"{n} B"
 
 
+def _shares(counts: dict[str, int], total: int) -> str:
+    """``onboard 100 %``-style shares of ``total``, largest first."""
+    ranked = sorted(counts.items(), key=lambda kv: -kv[1])
+    return ", ".join(f"{name} {100.0 * n / total:.0f} %" for name, n in ranked)
+
+
 def format_info(info: RecordingInfo) -> str:
     """The summary as text (one screen for a flight)."""
     lines = [
@@ -199,6 +215,16 @@ def format_info(info: RecordingInfo) -> str:
                 + (
                     f"; battery {d.vbat_v[1]:.2f} to {d.vbat_v[0]:.2f} V"
                     if d.vbat_v is not None
+                    else ""
+                )
+            )
+        if d.telemetry:
+            lines.append(
+                "    attitude   "
+                + _shares(d.attitude_sources, d.telemetry)
+                + (
+                    "; position   " + _shares(d.position_sources, d.telemetry)
+                    if d.position_sources
                     else ""
                 )
             )
