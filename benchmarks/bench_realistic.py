@@ -195,6 +195,8 @@ class Flight:
     changes: int
     settings: Settings
     change_stamps_s: list[float]  # telemetry stamps at which the filter detected a change
+    est_tension_std_n: np.ndarray  # (n, 3) the published tension_std_n
+    est_pos_std_m: np.ndarray  # (n, 3) the published position_std_m, NaN where none
 
 
 def fly(
@@ -253,7 +255,17 @@ def fly(
                 if out.key.endswith("/estimate"):
                     e = json.loads(out.payload)
                     y = obs.tension_world_n if obs.tension_world_n is not None else [math.nan] * 3
-                    rows.append((stamp, e["position_m"], e["tension_n"], list(y), dt))
+                    rows.append(
+                        (
+                            stamp,
+                            e["position_m"],
+                            e["tension_n"],
+                            list(y),
+                            dt,
+                            e["tension_std_n"],
+                            e.get("position_std_m"),
+                        )
+                    )
                 elif out.key.endswith(("/cmd/setpoint", "/cmd/stop")):
                     sim.handle_command(Sample(out.key, out.payload))
         pipe.tick(now_s)
@@ -272,6 +284,8 @@ def fly(
         changes=int(status.get("filter", {}).get("change_detections", 0)),
         settings=settings,
         change_stamps_s=change_stamps,
+        est_tension_std_n=np.array([r[5] for r in rows], dtype=float),
+        est_pos_std_m=np.array([r[6] if r[6] is not None else nan3 for r in rows], dtype=float),
     )
 
 
@@ -335,6 +349,72 @@ def _tension_err(f: Flight, ten: np.ndarray) -> np.ndarray:
     return ten[m] - f.true_tension_n[m]
 
 
+def within_2_sigma(flights: list[Flight]) -> tuple[float, float]:
+    """The share of per-axis errors within twice the published σ, tension and position,
+    pooled over the flights' steady part (a position without a σ, or none, counts as
+    outside). A consistent estimator: about 95 %."""
+    t_in, p_in, n = 0, 0, 0
+    for f in flights:
+        m = f.t_s >= STEADY_FROM_S
+        t_err = np.abs(f.est_tension_n[m] - f.true_tension_n[m])
+        t_in += int(np.sum(t_err <= 2.0 * f.est_tension_std_n[m]))
+        p_err = np.abs(f.est_pos_m[m] - f.true_pos_m[m])
+        with np.errstate(invalid="ignore"):
+            p_in += int(np.sum(p_err <= 2.0 * f.est_pos_std_m[m]))
+        n += 3 * int(np.sum(m))
+    return t_in / max(n, 1), p_in / max(n, 1)
+
+
+MOVE_FROM, MOVE_TO, MOVE_AT_S, MOVE_END_S = 0, 4, 20.0, 45.0
+"""The move: hover at the paper's spot 0, at 20 s the controller's target becomes spot 4
+(0.92 m away), the flight ends at 45 s."""
+
+
+def _arrival_s(t_s: np.ndarray, dist_m: np.ndarray, within_m: float) -> float | None:
+    """The first time after which ``dist_m`` stays within ``within_m`` for 1 s (None: never)."""
+    ok = dist_m <= within_m
+    for i in np.flatnonzero(ok).tolist():
+        j = np.searchsorted(t_s, t_s[i] + 1.0)
+        if j < len(t_s) and np.all(ok[i:j]):
+            return float(t_s[i])
+    return None
+
+
+def move(noise: float, seeds: list[int]) -> dict[str, Any]:
+    """A move between two hover spots without motion capture: when the truth and the
+    estimate reach 90 % of it (within 10 % of the distance of the new spot for 1 s), s
+    after the target changed."""
+    name = "bench_move"
+    a, b = PAPER_HOVER_SPOTS_M[MOVE_FROM], PAPER_HOVER_SPOTS_M[MOVE_TO]
+    SCENARIOS[name] = Scenario(
+        name,
+        f"hover at {a}; at {MOVE_AT_S:g} s to {b}",
+        start_m=a,
+        waypoints=(Waypoint(0.0, a), Waypoint(MOVE_AT_S, b)),
+    )
+    dist = float(np.linalg.norm(np.subtract(b, a)))
+    truth, est = [], []
+    for seed in seeds:
+        f = fly(name, MOVE_END_S, noise, seed)
+        after = f.t_s >= MOVE_AT_S
+        t = f.t_s[after] - MOVE_AT_S
+        to_b_true = np.linalg.norm(f.true_pos_m[after] - np.array(b), axis=1)
+        to_b_est = np.linalg.norm(f.est_pos_m[after] - np.array(b), axis=1)
+        to_b_est[~np.isfinite(to_b_est)] = np.inf
+        truth.append(_arrival_s(t, to_b_true, 0.1 * dist))
+        est.append(_arrival_s(t, to_b_est, 0.1 * dist))
+    lags = [e - t for e, t in zip(est, truth, strict=True) if e is not None and t is not None]
+    return {
+        "noise": noise,
+        "seeds": list(seeds),
+        "distance_m": dist,
+        "truth_arrival_s": truth,
+        "estimate_arrival_s": est,
+        "median_lag_s": float(np.median(lags)) if len(lags) > len(seeds) / 2 else None,
+        "arrived": len(lags),
+    }
+
+
 def hover(noise: float, spots: list[int], seconds: float, seeds: list[int]) -> dict[str, Any]:
     """Hover at ``spots`` for each seed (flight seed ``seed + spot``), pooled, against the oracle.
 
@@ -377,9 +457,12 @@ def hover(noise: float, spots: list[int], seconds: float, seeds: list[int]) -> d
             ]
         )
         per_spot.append((PAPER_HOVER_SPOTS_M[i], float(np.median(e)), float(np.percentile(e, 95))))
+    t_cover, p_cover = within_2_sigma(flights)
     return {
         "noise": noise,
         "seeds": list(seeds),
+        "tension_within_2_sigma": t_cover,
+        "position_within_2_sigma": p_cover,
         "ours_median_m": o_med,
         "ours_p95_m": o_p95,
         "ours_tension_rms_n": o_rms,
@@ -611,6 +694,37 @@ def _s(v: float | None) -> str:
     return "not reached" if v is None else f"{v:.2f} s"
 
 
+def _render_move(res: dict[str, Any]) -> list[str]:
+    L = [
+        "## A move between hover spots, without motion capture",
+        "",
+        f"Hover at the paper's spot {MOVE_FROM} {PAPER_HOVER_SPOTS_M[MOVE_FROM]}; at "
+        f"{MOVE_AT_S:g} s the controller's target becomes spot {MOVE_TO} "
+        f"{PAPER_HOVER_SPOTS_M[MOVE_TO]}. Arrival: s after the target changed until the "
+        "position stays within 10 % of the distance of the new spot for 1 s (90 % of the "
+        "move), for the truth and for the published estimate; lag = estimate − truth. "
+        "'never' = not within the flight's "
+        f"{MOVE_END_S - MOVE_AT_S:g} s.",
+        "",
+        "| accel noise | seeds | truth arrives, s | estimate arrives, s | median lag s |",
+        "| --- | --- | --- | --- | --- |",
+    ]
+
+    def fmt(xs: list[float | None]) -> str:
+        return ", ".join("never" if x is None else f"{x:.1f}" for x in xs)
+
+    for r in res["move"]:
+        lag = r["median_lag_s"]
+        L.append(
+            f"| {r['noise']:g} m/s^2 | {', '.join(map(str, r['seeds']))} | "
+            f"{fmt(r['truth_arrival_s'])} | {fmt(r['estimate_arrival_s'])} | "
+            + ("never (most seeds)" if lag is None else f"{lag:.1f}")
+            + " |"
+        )
+    L.append("")
+    return L
+
+
 def render(res: dict[str, Any], cmd: str, wall_s: float) -> str:
     """The page, with the sections ``res`` holds (all of them in a full run)."""
     L = [
@@ -634,6 +748,8 @@ def render(res: dict[str, Any], cmd: str, wall_s: float) -> str:
         L += _render_false(res)
     if "tug" in res:
         L += _render_tug(res)
+    if "move" in res:
+        L += _render_move(res)
     if "follow" in res:
         L += _render_follow(res)
     if "envelope" in res:
@@ -685,6 +801,18 @@ def _render_hover(res: dict[str, Any]) -> list[str]:
             f"{rm:.2f} / {rp:.2f} | {1e3 * h['ours_tension_rms_n']:.2f} / "
             f"{1e3 * h['oracle_tension_rms_n']:.2f} mN | {rt:.2f} | {spread} | {ok} |"
         )
+    L += [
+        "",
+        "Is the published σ honest? The share of per-axis errors within twice the published "
+        "σ over the same samples (`tension_std_n`, `position_std_m`; a consistent estimator: "
+        "about 95 %): "
+        + "; ".join(
+            f"{h['noise']:g} m/s^2: tension {100 * h['tension_within_2_sigma']:.0f} %, "
+            f"position {100 * h['position_within_2_sigma']:.0f} %"
+            for h in res["hover"]
+        )
+        + ".",
+    ]
     L += ["", "Oracle median position error by time constant (tension RMS):", ""]
     for h in res["hover"]:
         cells = ", ".join(
@@ -976,7 +1104,7 @@ def _render_reading(res: dict[str, Any]) -> list[str]:
     return L
 
 
-SECTIONS = ("hover", "false_tugs", "tug", "follow", "envelope")
+SECTIONS = ("hover", "false_tugs", "tug", "move", "follow", "envelope")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -1070,6 +1198,11 @@ def main(argv: list[str] | None = None) -> int:
         for n in levels:
             res["tug"].append(tug(n, seeds))
             log(f"tug: {res['tug'][-1]}")
+    if "move" in only:
+        res["move"] = []
+        for n in levels:
+            res["move"].append(move(n, [900] if quick else [900, 901, 902, 903]))
+            log(f"move: {res['move'][-1]}")
     if "follow" in only:
         follow_seeds = [500, 501, 502, 503] if not quick else [500]
         res["follow"] = []
