@@ -24,6 +24,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from benchmarks.figures import git_commit
 from benchmarks.nanobench_cli import DATA, DAYS, Judged, calibrate, check_data, judge, load, score
 from benchmarks.service_rig import free_port
 
@@ -133,9 +134,11 @@ def main(argv: list[str] | None = None) -> int:
     print("# NanoBench served live (real untethered flights, separate processes)\n")
     print(
         f"`python -m benchmarks.nanobench_live --speed {args.speed:g}` (this page, "
-        f"{time.time() - t0:.0f} s): router + serve --headless + record + replay as separate "
+        f"{time.time() - t0:.0f} s at commit {git_commit()}; data: ../shared/data/nanobench): "
+        "router + serve --headless + record + replay as separate "
         "processes over TCP on 127.0.0.1; calibration per held-out day as in "
-        "docs/nanobench_cli.md (airframe + slow accelerometer, the default).\n"
+        "docs/nanobench_cli.md (airframe + slow accelerometer, the default, with its "
+        "configuration's motor-voltage battery model).\n"
     )
     print("| held-out day | flight | live median abs T mN | answered | airborne | offline mN |")
     print("| --- | --- | ---: | ---: | ---: | ---: |")
