@@ -56,6 +56,8 @@ __all__ = [
 
 Vec3 = tuple[float, float, float]
 _ZERO3: Vec3 = (0.0, 0.0, 0.0)
+HOVER_MEAN_S = 1.0
+"""The hover test's mean acceleration window, s."""
 Phase = Literal["rest", "air", "hold"]
 """``rest``: on the floor, disarmed and still (a_ref = 0 exactly); ``air``: flying (the
 filter observes); ``hold``: anything else (spool-up, landing, armed on the floor): β kept."""
@@ -389,7 +391,7 @@ def slow_accel_step(
     ex = accel_body_mps2[0] - bias[0] - gx
     ey = accel_body_mps2[1] - bias[1] - gy
     ez = accel_body_mps2[2] - bias[2] - gz
-    k1 = min(dt_s / 1.0, 1.0)
+    k1 = min(dt_s / HOVER_MEAN_S, 1.0)
     a1x, a1y, a1z = st.accel_1s_body_mps2
     a1 = (a1x + k1 * (ex - a1x), a1y + k1 * (ey - a1y), a1z + k1 * (ez - a1z))
     leak2 = 1.0

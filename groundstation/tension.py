@@ -1164,6 +1164,20 @@ class TensionFilter:
         self._new_regime()
         self._last: TensionEstimate | None = None
 
+    def new_hover(self) -> None:
+        """A hover began after a manoeuvre: the tension is constant from here on, and what
+        the filter averaged before belongs to another one. P is raised to one sample's R
+        at least (the next samples then average from here, as after a restart, with the
+        estimate so far as their prior), and the change and drift windows start again."""
+        r = self._r_prev
+        if not self._initialized or r is None:
+            return
+        P = self._kf.P
+        self._kf.P = [max(P[0], r[0]), max(P[1], r[1]), max(P[2], r[2])]
+        self._drift.new_regime()
+        self._change.clear()
+        self._step.clear()
+
     def _new_regime(self) -> None:
         """Clears what belongs to one stretch of samples (not the noise statistics)."""
         self._noise.break_chain()

@@ -366,6 +366,42 @@ def test_coast_grows_covariance_with_elapsed_time() -> None:
     np.testing.assert_allclose(est.tension_world_n, HOVER_TENSION_N, atol=1e-15)
 
 
+def test_a_new_hover_averages_from_its_start() -> None:
+    """After ``new_hover`` the filter weighs the new hover's samples as a restart would
+    (x tends to their mean, with the old estimate as a one-sample prior), where the hover
+    filter (tau >= 6 s) would still hold most of the old tension after 1 s; the noise
+    estimate is kept, and P never shrinks."""
+    params = TensionFilterParams(change_threshold=1e300)  # no change test: the rule alone
+    rng = np.random.default_rng(5)
+    sigma_n = MASS_KG * 0.8
+    new_n = HOVER_TENSION_N + np.array([0.006, -0.004, 0.003])
+
+    def run(restart: bool) -> np.ndarray:
+        filt = TensionFilter(params)
+        for _ in range(5000):  # 20 s at the old tension: converged, long memory
+            est = filt.update(HOVER_TENSION_N + rng.normal(0.0, sigma_n, 3), DT_S)
+        p_before = np.diag(est.cov_n2).copy()
+        if restart:
+            filt.new_hover()
+            est = filt.update(new_n + rng.normal(0.0, sigma_n, 3), DT_S)
+            assert np.all(np.diag(est.cov_n2) > p_before), "P raised to about one sample's R"
+        for _ in range(250):  # 1 s at the new tension
+            est = filt.update(new_n + rng.normal(0.0, sigma_n, 3), DT_S)
+        return np.asarray(est.tension_world_n) - new_n
+
+    err_restart = run(True)
+    err_hover = run(False)
+    step = float(np.linalg.norm(new_n - HOVER_TENSION_N))
+    assert float(np.linalg.norm(err_restart)) < 0.25 * step
+    assert float(np.linalg.norm(err_hover)) > 0.5 * step
+
+
+def test_new_hover_before_the_first_sample_does_nothing() -> None:
+    filt = TensionFilter()
+    filt.new_hover()
+    assert not filt.initialized
+
+
 @pytest.mark.parametrize("dt", [-0.001, math.nan, math.inf])
 def test_invalid_dt_raises(dt: float) -> None:
     filt = TensionFilter()

@@ -244,6 +244,10 @@ class DroneEstimator:
         )
         """``[calibration] accel_slow``: the accelerometer's slow content replaced (None: off)."""
         self.slow = slow_mod.SlowAccelState()
+        self.changes_at_hover_end = 0
+        """The filter's change detections when the last hover ended: a hover that begins
+        after one more (a manoeuvre that changed the tension) restarts the filter's
+        averaging (:meth:`TensionFilter.new_hover`)."""
         self.attitude_calibrated = calibrated_attitude_source(
             params.calibration, self.calibration_source
         )
@@ -424,6 +428,7 @@ class DroneEstimator:
         self._check_battery(msg.vbat_v, on_ground, now_s)
         if self.slow_active:
             assert self.slow_params is not None
+            was_hovering = self.slow.quasi_static
             self.slow = learn_slow(
                 self.slow,
                 self.slow_params,
@@ -433,6 +438,12 @@ class DroneEstimator:
                 on_ground=on_ground,
                 calibration=self.calibration,
             )
+            if self.slow.quasi_static != was_hovering:
+                detections = self.filter_control.change_detections
+                if was_hovering:
+                    self.changes_at_hover_end = detections
+                elif detections != self.changes_at_hover_end:
+                    self.filter.new_hover()
         filtered = self.filter_control.step(
             on_ground=on_ground, contact_reason=contact.reason, observation=obs, dt_s=dt_s
         )
