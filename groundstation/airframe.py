@@ -185,6 +185,23 @@ class AirframeFit:
         return AIRFRAME_PARAMETERS
 
     @property
+    def model_std_n(self) -> FloatArray:
+        """(3,) the tension error the fitted constants leave, per world axis, N.
+
+        The residual RMS after the fit with the degrees of freedom the fit used taken back,
+        ``rms · sqrt(n_eff / (n_eff − p))`` (the unbiased residual variance of a least-squares
+        fit, on the effective sample count: the residuals are autocorrelated): what is left
+        between the thrust/attitude model and the motion-capture force, which the service
+        cannot average away (it is the model's, not the vibration's), so its published σ
+        carries it (``[calibration] tension_model_std_n``).
+        """
+        p = sum(1 for name in self.parameters if name not in self.fixed)
+        dof = max(self.n_eff - p, 1.0)
+        inflation: float = math.sqrt(max(self.n_eff, 1.0) / dof)
+        out: FloatArray = self.rms_after_n * inflation
+        return out
+
+    @property
     def flight_spread_n(self) -> FloatArray:
         """(3,) standard deviation across flights of their mean residual, N (0 for one)."""
         if len(self.flights) < 2:

@@ -368,6 +368,12 @@ class CalibrationSection(_Section):
     the air, as the zero (or motion-capture) mean acceleration over ``[filter]
     accel_slow_time_constant_s``. False: the accelerometer's mean is trusted as read (what
     ``groundstation calibrate --model full`` writes: its fitted bias stands for it)."""
+    tension_model_std_n: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """(added) The tension error the calibration leaves, per world axis, N (written by
+    ``groundstation calibrate``: its fit's residual, groundstation.airframe
+    ``AirframeFit.model_std_n``). The model's error, not the vibration's: the filter cannot
+    average it away, so the Estimate's ``tension_std_n`` carries it,
+    ``sqrt(filter variance + this²)``; zero: the filter's σ alone."""
     rotor_drag_n_s_per_m: float = Field(0.0, ge=0.0, le=1.0)
     """(added) ``D_xy``: the rotors' drag per m/s of body-horizontal speed, N·s/m; the
     observation adds ``R·D·Rᵀ·v`` back (v from motion capture, else the accelerometer's
@@ -406,6 +412,13 @@ class CalibrationSection(_Section):
             raise ValueError(
                 f"{value!r}: each angle must be finite and within ±0.35 rad (20°){hint}"
             )
+        return value
+
+    @field_validator("tension_model_std_n")
+    @classmethod
+    def _model_std(cls, value: tuple[float, float, float]) -> tuple[float, float, float]:
+        if not all(math.isfinite(v) and 0.0 <= v < 1.0 for v in value):
+            raise ValueError(f"{list(value)!r}: each must be finite, >= 0 and < 1 N")
         return value
 
     @field_validator("thrust_vbat_range_v")

@@ -244,6 +244,10 @@ class DroneEstimator:
         )
         """``[calibration] accel_slow``: the accelerometer's slow content replaced (None: off)."""
         self.slow = slow_mod.SlowAccelState()
+        mx, my, mz = params.calibration.tension_model_std_n
+        self.model_var_n2 = (mx * mx, my * my, mz * mz) if mx or my or mz else None
+        """``[calibration] tension_model_std_n`` squared, N² (None: zero): the calibration's
+        error, added to the filter's variance in the published σ."""
         self.changes_at_hover_end = 0
         """The filter's change detections when the last hover ended: a hover that begins
         after one more (a manoeuvre that changed the tension) restarts the filter's
@@ -465,11 +469,17 @@ class DroneEstimator:
                 else None,
                 msg.position_m,
             )
+        std_n = filtered.std_n
+        model_var = self.model_var_n2
+        if model_var is not None and not on_ground:
+            s0, s1, s2 = std_n
+            v0, v1, v2 = model_var
+            std_n = (math.sqrt(s0 * s0 + v0), math.sqrt(s1 * s1 + v1), math.sqrt(s2 * s2 + v2))
         return Front(
             msg,
             now_s,
             filtered.tension_world_n,
-            filtered.std_n,
+            std_n,
             filtered.converged,
             filtered.finite,
             on_ground,

@@ -795,6 +795,8 @@ def _airframe_table(
         "accel_bias_mps2": [0.0, 0.0, 0.0],
         "thrust_vbat_ref_v": fit.vbat_ref_v,
         "rotor_drag_n_s_per_m": round(v["rotor_drag_n_s_per_m"], 6),
+        # what the constants leave: the service's published σ carries it
+        "tension_model_std_n": [round(float(x), 5) for x in fit.model_std_n],
         **({} if vbat is None else {"thrust_vbat_range_v": vbat}),
         "rest": cal.rest,
         "rest_required": False,
