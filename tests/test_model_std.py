@@ -86,10 +86,13 @@ def test_calibrate_writes_it(tmp_path: Path) -> None:
     cfg = tmp_path / "in.toml"
     cfg.write_text("[drone]\nmass_kg = 0.030\n[tether]\nweight_n_per_m = 0.05\n")
     out = tmp_path / "cal.toml"
-    with contextlib.redirect_stdout(io.StringIO()):
+    printed = io.StringIO()
+    with contextlib.redirect_stdout(printed):
         assert main(["calibrate", *files, "--config", str(cfg), "--out", str(out)]) == 0
     written = load_settings(out, use_env=False).for_drone("cf1").calibration
     std = np.array(written.tension_model_std_n)
+    said = f"[{std[0] * 1e3:.1f}, {std[1] * 1e3:.1f}, {std[2] * 1e3:.1f}] mN"
+    assert f"tension_model_std_n      {said}" in printed.getvalue()
     # the generator's noise (0.2 m/s² AR(1) on 30 g: ~6 mN per sample) smoothed by the fit's
     # samples is all that is left: positive, a few mN, not more
     assert np.all(std > 0.0) and np.all(std < 0.02), std

@@ -737,6 +737,11 @@ def format_airframe(
             f"  (about thrust_vbat_ref_v = {fit.vbat_ref_v:g} V)"
         )
     lines.append(f"    rotor_drag_n_s_per_m     {_pm_airframe(fit, 'rotor_drag_n_s_per_m', '.4f')}")
+    model = fit.model_std_n * mn
+    lines.append(
+        f"    tension_model_std_n      [{model[0]:.1f}, {model[1]:.1f}, {model[2]:.1f}] mN"
+        "  (what the constants leave: the published σ carries it)"
+    )
     for name, why in fit.fixed.items():
         lines.append(f"    fixed {name}: {why}")
     lines.append(
