@@ -1133,8 +1133,9 @@ def main(argv: list[str] | None = None) -> int:
         "--hover-noise-sigmas",
         type=float,
         help="the service with [filter] accel_hover_noise_sigmas = this and "
-        "accel_hover_exit_ratio = 1.5 (the hover test that follows the vibration; default "
-        "off); with --only",
+        "accel_hover_exit_ratio = 1.5 (the hover test that follows the vibration; the "
+        "default is 4), or with 0 the fixed thresholds and no hysteresis (the default "
+        "before); with --only",
     )
     ap.add_argument(
         "--levels",
@@ -1168,7 +1169,8 @@ def main(argv: list[str] | None = None) -> int:
         sigmas = args.hover_noise_sigmas
 
         def aware(**kwargs: Any) -> Any:
-            kwargs.update(quasi_static_sigmas=sigmas, quasi_static_exit_ratio=1.5)
+            ratio = 1.5 if sigmas > 0.0 else 1.0
+            kwargs.update(quasi_static_sigmas=sigmas, quasi_static_exit_ratio=ratio)
             return default_slow(**kwargs)
 
         slow_mod.SlowAccelParams = aware  # type: ignore[misc,assignment]

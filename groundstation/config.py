@@ -268,16 +268,17 @@ class FilterSection(_Section):
     acceleration's mean over this window exceeds 4 of its own σ (tugs end it in ~0.1 s instead
     of the 1 s mean's ~0.5 s: tug t90 about halved on the realistic simulator, hover error
     ~15 % larger; docs/estimator_design.md), s; 0: off."""
-    accel_hover_noise_sigmas: float = Field(0.0, ge=0.0)
+    accel_hover_noise_sigmas: float = Field(4.0, ge=0.0)
     """(added) The hover test's thresholds follow the vibration: the 1 s mean acceleration
     must stay below ``max(0.2 m/s², this × its own σ)`` and the accelerometer's speed below
     ``max(0.3 m/s, this × its σ)`` (σ from the vibration measured in flight); 0: the fixed
-    thresholds alone (the default until the pages that quote the estimator are rerun with it).
-    4 with ``accel_hover_exit_ratio = 1.5`` holds the hover through 1–2 m/s² of vibration
+    thresholds alone. 4 (with ``accel_hover_exit_ratio = 1.5``) holds the hover through
+    1–2 m/s² of vibration and leaves real manoeuvres (NanoBench) to the accelerometer
     (docs/estimator_design.md, *A hover test that follows the vibration*)."""
-    accel_hover_exit_ratio: float = Field(1.0, ge=1.0)
+    accel_hover_exit_ratio: float = Field(1.5, ge=1.0)
     """(added) Hysteresis of the hover test: in the hover it ends only above this many times
-    the thresholds for entering it; 1: none."""
+    the thresholds for entering it; 1: none (a noise-aware test then flickers on its own
+    noise near the threshold)."""
     drag_velocity_time_constant_s: float = Field(8.0, gt=0.0)
     """(added) Without motion capture the rotor-drag term's velocity is the accelerometer's
     leaky integral with this time constant, s (groundstation.slow_accel)."""

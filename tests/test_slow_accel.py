@@ -313,18 +313,19 @@ def test_the_noise_aware_hover_test_holds_through_strong_vibration() -> None:
 
 def test_the_hover_test_settings_reach_the_estimator(tmp_path: Path) -> None:
     """``[filter] accel_hover_noise_sigmas`` and ``accel_hover_exit_ratio`` are the slow
-    stage's; off (0, 1) by default; an exit ratio below 1 is refused."""
+    stage's; (4, 1.5) by default, (0, 1) the fixed thresholds; an exit ratio below 1 is
+    refused."""
     from groundstation.config import ConfigError, load_settings
     from groundstation.estimator.drone import DroneEstimator
 
     default = DroneEstimator("cf1", load_settings(None, {}, use_env=False)).slow_params
     assert default is not None
-    assert (default.quasi_static_sigmas, default.quasi_static_exit_ratio) == (0.0, 1.0)
+    assert (default.quasi_static_sigmas, default.quasi_static_exit_ratio) == (4.0, 1.5)
     cfg = tmp_path / "gs.toml"
-    cfg.write_text("[filter]\naccel_hover_noise_sigmas = 4.0\naccel_hover_exit_ratio = 1.5\n")
+    cfg.write_text("[filter]\naccel_hover_noise_sigmas = 0.0\naccel_hover_exit_ratio = 1.0\n")
     slow = DroneEstimator("cf1", load_settings(cfg, {}, use_env=False)).slow_params
     assert slow is not None
-    assert (slow.quasi_static_sigmas, slow.quasi_static_exit_ratio) == (4.0, 1.5)
+    assert (slow.quasi_static_sigmas, slow.quasi_static_exit_ratio) == (0.0, 1.0)
     cfg.write_text("[filter]\naccel_hover_exit_ratio = 0.5\n")
     with pytest.raises(ConfigError, match="accel_hover_exit_ratio"):
         load_settings(cfg, {}, use_env=False)
