@@ -985,9 +985,10 @@ def _render_slow_stage(res: dict[str, Any]) -> list[str]:
     ]
     if t90s:
         parts.append(
-            f"the tug's t90 {', '.join(t90s)}: the hover test's short window (`[filter] "
-            "accel_hover_exit_window_s`, 0.3 s) ends the hover within about 0.1 s of the tug, "
-            "the change test's detection sets the rest (docs/hover_exit.md)"
+            f"the tug's t90 {', '.join(t90s)}: the slow stage holds the hover's slow content "
+            "for about its 1 s window before the tug reaches the estimate; `[filter] "
+            "accel_hover_exit_window_s` trades hover accuracy for a faster exit "
+            "(docs/hover_exit.md)"
         )
     env = {e["class"]: e for e in res.get("envelope", [])}
     gone = [
