@@ -125,6 +125,17 @@ def test_a_calibration_that_does_not_say_is_served_as_before() -> None:
     assert not told
 
 
+def test_the_configurations_sources_are_the_telemetrys() -> None:
+    """``config.AttitudeSource`` is written beside Telemetry's field, not imported: equal."""
+    from typing import get_args
+
+    from groundstation import config as config_mod
+
+    literal, none = get_args(Telemetry.model_fields["attitude_source"].annotation)
+    assert none is type(None)
+    assert get_args(config_mod.AttitudeSource) == get_args(literal) == ("onboard", "external")
+
+
 def test_telemetry_accepts_only_the_two_sources() -> None:
     body = hover_body(0, TENSION_N, np.random.default_rng(0), mass_kg=MASS_KG, dt_s=DT_S)
     assert Telemetry.parse(json.dumps(body).encode()).attitude_source is None
