@@ -60,6 +60,7 @@ CONFIG_DEFAULTS = "groundstation/config.py:defaults"
 
 ESTIMATOR: tuple[str, ...] = (
     "groundstation/airframe.py",
+    "groundstation/attitude.py",
     "groundstation/calibration.py",
     "groundstation/catenary.py",
     "groundstation/contact.py",
@@ -75,6 +76,7 @@ ESTIMATOR: tuple[str, ...] = (
     "groundstation/tension_drift.py",
     "groundstation/tension_kalman.py",
     "groundstation/tension_noise.py",
+    "groundstation/thrust_model.py",
     CONFIG_DEFAULTS,
 )
 """One drone's estimator and the pipeline that routes messages to it."""

@@ -42,15 +42,14 @@ from numpy.typing import NDArray
 from scipy.optimize import least_squares
 from scipy.signal import savgol_filter
 
+from groundstation.attitude import GRAVITY_MPS2, rotations_world_body
 from groundstation.calibration import (
-    GRAVITY_MPS2,
     CalibrationData,
     CalibrationError,
     HoverCriteria,
     _index_runs,
     _integrated_autocorr_time,
     _robust_scale,
-    _rotations,
     _unit_tension,
     hover_mask,
 )
@@ -322,7 +321,7 @@ def fit_airframe(
             f"too short: {idx.size * dt_med:.1f} s of usable flight under motion capture "
             f"(need at least {min_samples_s:.1f} s)"
         )
-    R = _rotations(data.quat_wxyz[idx])
+    R = rotations_world_body(data.quat_wxyz[idx])
     thr = data.thrust_n[idx]
     vb = data.vbat_v[idx]
     have_v = np.isfinite(vb)

@@ -41,6 +41,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import least_squares
 
+from groundstation.attitude import GRAVITY_MPS2, rotations_world_body, rows_from_quat_wxyz
 from groundstation.catenary import CatenaryError, locate_with_floor, tether_force
 from groundstation.tension import thrust_axis_body
 
@@ -61,9 +62,6 @@ __all__ = [
     "hover_mask",
     "rest_mask",
 ]
-
-GRAVITY_MPS2 = 9.81
-"""Standard gravity, m/s² (as groundstation.tension)."""
 
 FloatArray = NDArray[np.float64]
 
@@ -134,20 +132,6 @@ _CONVENTION_VALUE = MappingProxyType(
 
 class CalibrationError(ValueError):
     """The samples cannot be calibrated from (too few, no motion capture, ...)."""
-
-
-def _rotations(quat_wxyz: FloatArray) -> FloatArray:
-    """``R_world_body`` of each quaternion (normalised), shape (n, 3, 3)."""
-    q = quat_wxyz / np.linalg.norm(quat_wxyz, axis=1, keepdims=True)
-    w, x, y, z = q.T
-    return np.stack(
-        [
-            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
-            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
-            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
-        ],
-        axis=1,
-    )
 
 
 # ------------------------------------------------------------------------------- the data
@@ -515,8 +499,8 @@ class RestCalibrator:
         if moving:
             self._clear_window()
             return self._offset
-        R = _rotations(q[None, :] / qn)[0]
-        d = a - self._bias - R[2, :] * self._g  # a − b − Rᵀ (0, 0, g)
+        down_body = np.array(rows_from_quat_wxyz(q.tolist())[2])  # Rᵀ·e3
+        d = a - self._bias - down_body * self._g  # a − b − Rᵀ (0, 0, g)
         if self._n == 0:
             self._t0 = stamp_s
             self._first_accel = a.copy()
@@ -531,7 +515,7 @@ class RestCalibrator:
         if self.window_duration_s >= c.min_still_s:
             mean = self._sum / self._n
             gravity_dev = abs(
-                float(np.linalg.norm(mean + self._bias + R[2, :] * self._g)) - self._g
+                float(np.linalg.norm(mean + self._bias + down_body * self._g)) - self._g
             )
             if gravity_dev <= c.max_gravity_dev_mps2:
                 var = np.maximum(self._sum2 / self._n - mean * mean, 0.0)
@@ -758,8 +742,8 @@ def fit_calibration(
         )
 
     r_idx = np.flatnonzero(rst)
-    R_h = _rotations(data.quat_wxyz[h_idx])
-    R_r = _rotations(data.quat_wxyz[r_idx])
+    R_h = rotations_world_body(data.quat_wxyz[h_idx])
+    R_r = rotations_world_body(data.quat_wxyz[r_idx])
     acc_h = data.accel_body_mps2[h_idx] - offsets[h_idx]
     acc_r = data.accel_body_mps2[r_idx] - offsets[r_idx]
     thr_h = data.thrust_n[h_idx]

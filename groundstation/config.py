@@ -41,15 +41,13 @@ from pydantic_settings import (
     SettingsConfigDict,
 )
 
-from groundstation.messages import DRONE_ID_RE
+from groundstation.messages import DRONE_ID_RE, AttitudeSource
 
 NOMINAL_PWM_MAP: tuple[float, float, float] = (2.130295e-11, 1.032633e-6, 5.484560e-4)
 """The widely used Crazyflie 2.x PWM→thrust map, per motor ``a·pwm² + b·pwm + c`` N (the
 same as groundstation.thrust_model's, tested equal: the contract imports no physics)."""
 ThrustModel = Literal["vbat_linear", "motor_voltage"]
 """``[calibration] thrust_model`` (groundstation.thrust_model's, tested equal)."""
-AttitudeSource = Literal["onboard", "external"]
-"""Where Telemetry's attitude comes from (Telemetry's ``attitude_source``, tested equal)."""
 
 _log = logging.getLogger(__name__)
 _warned: set[str] = set()

@@ -122,17 +122,17 @@ import math
 from dataclasses import dataclass
 from typing import Literal
 
+from groundstation.attitude import GRAVITY_MPS2, Rows, rows_from_quat_wxyz
 from groundstation.frozen import evolve
 
 __all__ = [
     "ContactParams",
     "ContactState",
     "contact_step",
+    "vertical_accel_from_rows_mps2",
     "vertical_accel_mps2",
 ]
 
-GRAVITY_MPS2 = 9.81
-"""Standard gravity, m/s^2 (the value of :data:`groundstation.tension.GRAVITY_MPS2`)."""
 
 Reason = Literal[
     "start",
@@ -300,10 +300,21 @@ def vertical_accel_mps2(
     n2 = w * w + x * x + y * y + z * z
     if not (math.isfinite(n2) and n2 > 1e-12):
         return math.nan
+    return vertical_accel_from_rows_mps2(
+        accel_body_mps2, rows_from_quat_wxyz(quat_wxyz), gravity_mps2
+    )
+
+
+def vertical_accel_from_rows_mps2(
+    accel_body_mps2: tuple[float, float, float] | list[float],
+    rotation_rows_world_body: Rows,
+    gravity_mps2: float = GRAVITY_MPS2,
+) -> float:
+    """:func:`vertical_accel_mps2` on an attitude already turned into ``R_world_body`` rows
+    (:func:`groundstation.attitude.rows_from_quat_wxyz`): ``(R f)_z − g``, m/s^2."""
     fx, fy, fz = accel_body_mps2
-    # Third row of R_world_body for a unit quaternion, over |q|^2 for an unnormalised one.
-    r20, r21, r22 = 2.0 * (x * z - w * y), 2.0 * (y * z + w * x), n2 - 2.0 * (x * x + y * y)
-    return (r20 * fx + r21 * fy + r22 * fz) / n2 - gravity_mps2
+    r20, r21, r22 = rotation_rows_world_body[2]
+    return r20 * fx + r21 * fy + r22 * fz - gravity_mps2
 
 
 def contact_step(

@@ -23,6 +23,7 @@ __all__ = [
     "DRONE_ID_RE",
     "EVENT_KINDS",
     "KEY_KINDS",
+    "AttitudeSource",
     "Estimate",
     "EstimateSmoothed",
     "Event",
@@ -183,6 +184,12 @@ class _Out(BaseModel):
             raise _invalid(cls.__name__, exc) from None
 
 
+AttitudeSource = Literal["onboard", "external"]
+"""Where an attitude comes from: ``onboard``, the drone's own estimator, or ``external``,
+motion capture's rigid body (Telemetry's ``attitude_source``; ``[drone]`` and
+``[calibration] attitude_source``)."""
+
+
 class Telemetry(_In):
     """Drone → ground station, ``tether/{drone}/telemetry``."""
 
@@ -212,7 +219,7 @@ class Telemetry(_In):
     estimator's own); absent: motion capture's (``[localization] mocap_std_m``). A position
     whose σ exceeds ``[localization] position_max_std_m`` on any axis is no position to the
     service (a Flow deck's x/y: odometry, σ about 10 m)."""
-    attitude_source: Literal["onboard", "external"] | None = None
+    attitude_source: AttitudeSource | None = None
     """(added) Where ``quat_wxyz`` comes from: ``onboard``, the drone's own estimator
     (levelled on the same accelerometer ``accel_mps2`` reads), or ``external``, motion
     capture's rigid body (its axes set by the markers, not by the IMU or the thrust);

@@ -42,6 +42,7 @@ import math
 from dataclasses import dataclass
 from typing import Literal
 
+from groundstation.attitude import GRAVITY_MPS2
 from groundstation.frozen import evolve
 
 __all__ = [
@@ -50,7 +51,6 @@ __all__ = [
     "correct_accel_body_mps2",
     "drag_velocity_world_mps",
     "is_still",
-    "rows_from_quat_wxyz",
     "slow_accel_step",
 ]
 
@@ -276,7 +276,7 @@ def slow_accel_step(
     R_world_body: tuple[Vec3, Vec3, Vec3],
     phase: Phase,
     mocap_world_m: Vec3 | None,
-    gravity_mps2: float = 9.81,
+    gravity_mps2: float = GRAVITY_MPS2,
 ) -> SlowAccelState:
     """Learn β and the drag velocity from one sample (module doc for the equations).
 
@@ -462,23 +462,10 @@ def slow_accel_step(
     )
 
 
-def rows_from_quat_wxyz(quat_wxyz: tuple[float, ...]) -> tuple[Vec3, Vec3, Vec3]:
-    """``R_world_body`` as three rows from a body→world ``[w, x, y, z]`` quaternion
-    (normalised here; the caller has refused degenerate ones)."""
-    w, x, y, z = quat_wxyz
-    n = math.sqrt(w * w + x * x + y * y + z * z)
-    w, x, y, z = w / n, x / n, y / n, z / n
-    return (
-        (1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - w * z), 2.0 * (x * z + w * y)),
-        (2.0 * (x * y + w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - w * x)),
-        (2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y)),
-    )
-
-
 def is_still(
     accel_body_mps2: Vec3,
     gyro_rps: Vec3 | None,
-    gravity_mps2: float = 9.81,
+    gravity_mps2: float = GRAVITY_MPS2,
     *,
     max_gyro_rps: float = 0.1,
     max_accel_dev_mps2: float = 0.5,

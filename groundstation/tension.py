@@ -29,6 +29,7 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from groundstation.attitude import GRAVITY_MPS2, Rows, rows_from_unit_quat
 from groundstation.tension_change import (
     ChangeTest,
     LazyChangeStatistic,
@@ -65,13 +66,11 @@ __all__ = [
     "TensionObservation",
     "observation_cov_n2",
     "observe_tension",
+    "rotation_rows",
     "rotation_world_body",
     "scan_threshold",
     "thrust_axis_body",
 ]
-
-GRAVITY_MPS2 = 9.81
-"""Standard gravity used throughout the project, m/s^2 (world -z)."""
 
 _QUAT_MIN_NORM = 1e-6
 _EYE3 = np.eye(3)
@@ -199,14 +198,18 @@ def rotation_world_body(quat_wxyz: ArrayLike) -> FloatArray:
         DegenerateQuaternionError: If the quaternion has the wrong shape, a non-finite
             entry or a norm below 1e-6.
     """
-    w, x, y, z = _unit_quaternion(quat_wxyz)
-    return np.array(
-        [
-            [1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - w * z), 2.0 * (x * z + w * y)],
-            [2.0 * (x * y + w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - w * x)],
-            [2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y)],
-        ]
-    )
+    return np.array(rows_from_unit_quat(*_unit_quaternion(quat_wxyz)))
+
+
+def rotation_rows(quat_wxyz: ArrayLike) -> Rows:
+    """``R_world_body`` as three rows of floats
+    (:func:`groundstation.attitude.rows_from_unit_quat`), the quaternion normalised and
+    checked as in :func:`rotation_world_body`.
+
+    Raises:
+        DegenerateQuaternionError: As :func:`rotation_world_body`.
+    """
+    return rows_from_unit_quat(*_unit_quaternion(quat_wxyz))
 
 
 def thrust_axis_body(about_x_rad: float, about_y_rad: float) -> tuple[float, float, float]:
@@ -428,6 +431,7 @@ def observe_tension(
     vbat_v: float | None = None,
     ground_thrust_ratio: float = 0.5,
     velocity_world_mps: tuple[float, float, float] | None = None,
+    rotation_rows_world_body: Rows | None = None,
 ) -> TensionObservation:
     """Raw tension observation from one IMU + thrust sample (``eq:NE_tether``).
 
@@ -464,6 +468,9 @@ def observe_tension(
             drone, in (0, 1).
         velocity_world_mps: The drone's velocity, world frame, m/s, for the calibration's
             rotor drag (None: no drag term).
+        rotation_rows_world_body: ``quat_wxyz``'s rotation already computed by
+            :func:`rotation_rows` (the per-message path computes it once for every
+            stage), or None to compute it here.
 
     Returns:
         The observation (tension in the world frame, N) or the ground-contact reason.
@@ -473,7 +480,8 @@ def observe_tension(
         InvalidObservationError: If the acceleration is not a finite 3-vector, or the
             thrust, mass, gravity or battery voltage is not finite or out of range.
     """
-    w, x, y, z = _unit_quaternion(quat_wxyz)  # raises first, as rotation_world_body did
+    if rotation_rows_world_body is None:
+        rotation_rows_world_body = rotation_rows(quat_wxyz)  # raises first
     accel = _floats(accel_body_mps2, 3)
     if accel is None or not all(map(math.isfinite, accel)):
         accel = _vector3(accel_body_mps2, "accel_body_mps2").tolist()  # raises
@@ -493,13 +501,9 @@ def observe_tension(
         ax, ay, az = calibration.accel_bias_mps2
         accel = [accel[0] - ax, accel[1] - ay, accel[2] - az]
         bx, by, bz = calibration.thrust_axis_body
-    xx, yy, zz = x * x, y * y, z * z
-    xy, xz, yz, wx, wy, wz = x * y, x * z, y * z, w * x, w * y, w * z
-    # R as in rotation_world_body, multiplied out in scalars (numpy's per-call overhead is
-    # most of the cost for a 3-vector; docs/pipeline_benchmark.md).
-    r00, r01, r02 = 1.0 - 2.0 * (yy + zz), 2.0 * (xy - wz), 2.0 * (xz + wy)
-    r10, r11, r12 = 2.0 * (xy + wz), 1.0 - 2.0 * (xx + zz), 2.0 * (yz - wx)
-    r20, r21, r22 = 2.0 * (xz - wy), 2.0 * (yz + wx), 1.0 - 2.0 * (xx + yy)
+    # R in scalars (numpy's per-call overhead is most of the cost for a 3-vector;
+    # docs/pipeline_benchmark.md).
+    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = rotation_rows_world_body
     if bx == 0.0 and by == 0.0:
         axis_world = (r02, r12, r22)
     else:
@@ -1174,13 +1178,16 @@ class TensionFilter:
             return
         P = self._kf.P
         self._kf.P = [max(P[0], r[0]), max(P[1], r[1]), max(P[2], r[2])]
-        self._drift.new_regime()
-        self._change.clear()
-        self._step.clear()
+        self._clear_windows()
 
     def _new_regime(self) -> None:
         """Clears what belongs to one stretch of samples (not the noise statistics)."""
         self._noise.break_chain()
+        self._clear_windows()
+
+    def _clear_windows(self) -> None:
+        """Starts the drift, change and step windows again (what they averaged belongs
+        to another tension)."""
         self._drift.new_regime()
         self._change.clear()
         self._step.clear()

@@ -126,14 +126,21 @@ def test_a_calibration_that_does_not_say_is_served_as_before() -> None:
 
 
 def test_the_configurations_sources_are_the_telemetrys() -> None:
-    """``config.AttitudeSource`` is written beside Telemetry's field, not imported: equal."""
+    """One definition: the configuration's and the calibration's attitude sources are
+    Telemetry's (``messages.AttitudeSource``)."""
     from typing import get_args
 
     from groundstation import config as config_mod
+    from groundstation import messages as messages_mod
 
     literal, none = get_args(Telemetry.model_fields["attitude_source"].annotation)
     assert none is type(None)
-    assert get_args(config_mod.AttitudeSource) == get_args(literal) == ("onboard", "external")
+    assert get_args(literal) == ("onboard", "external")
+    assert config_mod.AttitudeSource is messages_mod.AttitudeSource
+    assert get_args(config_mod.DroneSection.model_fields["attitude_source"].annotation) == (
+        "onboard",
+        "external",
+    )
 
 
 def test_telemetry_accepts_only_the_two_sources() -> None:

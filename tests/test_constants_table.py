@@ -40,6 +40,7 @@ MODULES = [
     PACKAGE / "localization.py",
     PACKAGE / "follow.py",
     PACKAGE / "catenary.py",
+    PACKAGE / "attitude.py",
 ]
 """The modules a Telemetry message runs through (the page's scope)."""
 
@@ -182,6 +183,38 @@ def test_every_constant_row_resolves() -> None:
         if isinstance(value, ModuleType) or callable(value):
             stale.append(name)
     assert not stale, f"docs/constants.md has rows for names that do not exist: {stale}"
+
+
+def _assigned_at_module_level(module: str, name: str) -> bool:
+    path = PACKAGE.joinpath(*module.split(".")).with_suffix(".py")
+    for node in ast.parse(path.read_text(encoding="utf-8")).body:
+        targets = (
+            node.targets
+            if isinstance(node, ast.Assign)
+            else [node.target]
+            if isinstance(node, ast.AnnAssign)
+            else []
+        )
+        if any(isinstance(t, ast.Name) and t.id == name for t in targets):
+            return True
+    return False
+
+
+def test_a_module_constant_row_names_where_it_is_defined() -> None:
+    """``module.NAME`` is assigned in that module, not imported into it (one definition,
+    one row: g is attitude.GRAVITY_MPS2, wherever it is used)."""
+    elsewhere = []
+    for name in (_name(row) for row in ROWS):
+        if name.split(".", 1)[0] in CLASSES:
+            continue
+        module, _, attr = name.rpartition(".")
+        try:
+            importlib.import_module("groundstation." + module)
+        except ModuleNotFoundError:
+            continue  # module.Class.NAME: a class-level constant, resolved above
+        if not _assigned_at_module_level(module, attr):
+            elsewhere.append(name)
+    assert not elsewhere, f"rows for names imported, not defined, there: {elsewhere}"
 
 
 def test_no_row_twice() -> None:

@@ -16,6 +16,7 @@ import pytest
 
 from groundstation import contact as contact_mod
 from groundstation import follow as follow_mod
+from groundstation.attitude import Rows, rows_from_quat_wxyz
 from groundstation.config import LocalizationSection
 from groundstation.estimator import checks, output
 from groundstation.estimator.contact_control import contact_decide
@@ -202,6 +203,11 @@ def test_rest_missing_is_set_at_arming_without_offset_and_cleared_at_disarm() ->
 # ---------------------------------------------------------------- contact
 
 
+def _rows(msg: Telemetry) -> Rows:
+    """The attitude's rows, as the observation stage hands them on."""
+    return rows_from_quat_wxyz(msg.quat_wxyz)
+
+
 def test_contact_stage_hands_contact_step_this_messages_evidence() -> None:
     """The calibrated thrust, the IMU's world vertical acceleration and motion capture's
     height go to contact_step as they are; the state it returns is the stage's."""
@@ -211,7 +217,7 @@ def test_contact_stage_hands_contact_step_this_messages_evidence() -> None:
         accel_mps2=(0.1, 0.0, G + 0.4), quat_wxyz=(0.99, 0.1, 0.0, 0.0), position_m=(0.2, 0.0, 0.7)
     )
     got = contact_decide(state, params, msg, thrust_n=0.31, mass_kg=MASS_KG, dt_s=0.004,
-                         floor_z_m=0.0)  # fmt: skip
+                         floor_z_m=0.0, rotation_rows_world_body=_rows(msg))  # fmt: skip
     want = contact_mod.contact_step(
         state,
         params,
@@ -233,20 +239,34 @@ def test_contact_stage_a_disarmed_drone_is_on_the_ground_and_a_dip_is_not() -> N
     for k in range(50):
         msg = _telemetry(seq=k, stamp_s=0.004 * k, position_m=(0.0, 0.0, 1.0))
         state, on_ground = contact_decide(
-            state, params, msg, thrust_n=MASS_KG * G, mass_kg=MASS_KG, dt_s=0.004, floor_z_m=0.0
+            state,
+            params,
+            msg,
+            thrust_n=MASS_KG * G,
+            mass_kg=MASS_KG,
+            dt_s=0.004,
+            floor_z_m=0.0,
+            rotation_rows_world_body=_rows(msg),
         )
     assert not on_ground
     # A thrust dip in the air (the specific force is thrust / m, far below g): still air.
     for k in range(50, 150):
         msg = _telemetry(seq=k, stamp_s=0.004 * k, accel_mps2=(0.0, 0.0, 0.7), thrust_n=0.02)
         state, on_ground = contact_decide(
-            state, params, msg, thrust_n=0.02, mass_kg=MASS_KG, dt_s=0.004, floor_z_m=0.0
+            state,
+            params,
+            msg,
+            thrust_n=0.02,
+            mass_kg=MASS_KG,
+            dt_s=0.004,
+            floor_z_m=0.0,
+            rotation_rows_world_body=_rows(msg),
         )
         assert not on_ground, k
     # Disarmed: the rest of the step takes it as ground, whatever the state says.
     msg = _telemetry(seq=150, stamp_s=0.6, armed=False, position_m=(0.0, 0.0, 1.0))
     out = contact_decide(state, params, msg, thrust_n=0.0, mass_kg=MASS_KG, dt_s=0.004,
-                         floor_z_m=0.0)  # fmt: skip
+                         floor_z_m=0.0, rotation_rows_world_body=_rows(msg))  # fmt: skip
     assert out.on_ground
 
 

@@ -8,13 +8,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from groundstation.attitude import rows_from_quat_wxyz
 from groundstation.slow_accel import (
     SlowAccelParams,
     SlowAccelState,
     correct_accel_body_mps2,
     drag_velocity_world_mps,
     is_still,
-    rows_from_quat_wxyz,
     slow_accel_step,
 )
 from groundstation.tension import ObservationCalibration, observe_tension, rotation_world_body

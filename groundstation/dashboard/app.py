@@ -41,6 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 import viser
 
+from groundstation.attitude import GRAVITY_MPS2
 from groundstation.bus import Bus, Sample, Subscription
 from groundstation.config import Settings
 from groundstation.dashboard.commands import (
@@ -51,7 +52,6 @@ from groundstation.dashboard.commands import (
     stop_command,
 )
 from groundstation.dashboard.model import (
-    GRAVITY_MPS2,
     HISTORY_S,
     STATUS_STALE_S,
     DroneState,

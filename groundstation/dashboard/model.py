@@ -61,7 +61,6 @@ STATUS_STALE_S = 3.0
 THRUST_GONE_RATIO = 0.05
 """After a Stop, telemetry confirms it when the drone is disarmed or its thrust is below this
 fraction of its weight (motors off; a hovering drone reports about 1.0)."""
-GRAVITY_MPS2 = 9.81
 EVENTS_KEPT = 16
 """Events (``tether/{drone}/events``) kept per drone between two update passes: the service
 sends at most 20 per drone and second, and an operator's answer is among the last few."""

@@ -4,7 +4,8 @@ Control around :func:`groundstation.contact.contact_step` (the state machine and
 evidence: the vertical specific force, the thrust against the weight, motion capture's
 height, with hysteresis). The stage gives it this message's evidence — the calibrated
 thrust of the observation stage, the world vertical acceleration of the IMU reading
-(:func:`contact.vertical_accel_mps2`), the motion-capture height if the message carries
+(:func:`contact.vertical_accel_from_rows_mps2`, on the attitude's rotation that the
+observation stage computed), the motion-capture height if the message carries
 one — and says what the rest of the step takes as "on the ground": the contact state's
 decision, or a disarmed drone.
 
@@ -17,6 +18,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 from groundstation import contact as contact_mod
+from groundstation.attitude import Rows
 from groundstation.messages import Telemetry
 
 __all__ = ["ContactOut", "contact_decide"]
@@ -44,6 +46,7 @@ def contact_decide(
     mass_kg: float,
     dt_s: float,
     floor_z_m: float,
+    rotation_rows_world_body: Rows,
 ) -> ContactOut:
     """One message's evidence into the contact state (module doc).
 
@@ -55,6 +58,7 @@ def contact_decide(
         mass_kg: the drone's mass, kg.
         dt_s: time since the previous accepted message, s.
         floor_z_m: the floor's height, m.
+        rotation_rows_world_body: the message's attitude as ``R_world_body`` rows.
     """
     position = msg.position_m
     new = contact_mod.contact_step(
@@ -64,7 +68,9 @@ def contact_decide(
         armed=msg.armed,
         thrust_n=thrust_n,
         mass_kg=mass_kg,
-        vertical_accel_mps2=contact_mod.vertical_accel_mps2(msg.accel_mps2, msg.quat_wxyz),
+        vertical_accel_mps2=contact_mod.vertical_accel_from_rows_mps2(
+            msg.accel_mps2, rotation_rows_world_body
+        ),
         height_m=position[2] if position is not None else None,
         floor_z_m=floor_z_m,
     )

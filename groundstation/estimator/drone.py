@@ -427,6 +427,7 @@ class DroneEstimator:
             mass_kg=self.params.drone.mass_kg,
             dt_s=dt_s,
             floor_z_m=self.params.base.floor_z_m,
+            rotation_rows_world_body=observed.rotation_rows_world_body,
         )
         self.contact = contact
         self._check_battery(msg.vbat_v, on_ground, now_s)

@@ -23,8 +23,14 @@ from __future__ import annotations
 from typing import NamedTuple
 
 from groundstation import slow_accel as slow_mod
+from groundstation.attitude import Rows
 from groundstation.messages import Telemetry
-from groundstation.tension import ObservationCalibration, TensionObservation, observe_tension
+from groundstation.tension import (
+    ObservationCalibration,
+    TensionObservation,
+    observe_tension,
+    rotation_rows,
+)
 
 __all__ = ["Observed", "learn_slow", "observe"]
 
@@ -38,10 +44,13 @@ class Observed(NamedTuple):
         observation: the tension observation (None tension below the thrust ratio).
         accel_read_body_mps2: the accelerometer as read, less a rest offset in force and
             before the slow correction (what the slow stage learns from), body, m/s².
+        rotation_rows_world_body: the message's attitude as ``R_world_body`` rows, computed
+            once here for every stage (observation, contact, slow stage).
     """
 
     observation: TensionObservation
     accel_read_body_mps2: Vec3
+    rotation_rows_world_body: Rows
 
 
 def observe(
@@ -67,6 +76,7 @@ def observe(
     Raises:
         TensionError: a degenerate quaternion or a non-finite reading.
     """
+    rows = rotation_rows(msg.quat_wxyz)  # raises DegenerateQuaternionError first
     accel = msg.accel_mps2
     if rest_offset_xy_mps2 is not None:
         ox, oy = rest_offset_xy_mps2
@@ -86,8 +96,9 @@ def observe(
         vbat_v=msg.vbat_v,
         ground_thrust_ratio=ground_thrust_ratio,
         velocity_world_mps=velocity,
+        rotation_rows_world_body=rows,
     )
-    return Observed(obs, accel_read)
+    return Observed(obs, accel_read, rows)
 
 
 def learn_slow(
@@ -120,7 +131,7 @@ def learn_slow(
         dt_s=dt_s,
         stamp_s=msg.stamp_s,
         accel_body_mps2=accel_read,
-        R_world_body=slow_mod.rows_from_quat_wxyz(msg.quat_wxyz),
+        R_world_body=observed.rotation_rows_world_body,
         phase=phase,
         mocap_world_m=msg.position_m,
     )

@@ -33,7 +33,7 @@ from groundstation.calibration import (
     fit_calibration,
     hover_mask,
 )
-from groundstation.config import AttitudeSource, ConfigError, Settings, load_settings
+from groundstation.config import ConfigError, Settings, load_settings
 from groundstation.outputs import NewFile, OutputError, check_output
 from groundstation.recording.format import RecordingError
 from groundstation.recording.reader import iter_messages
@@ -77,7 +77,7 @@ class _Columns:
     base_from_reel: bool = False
     tether_messages: int = 0
     """Reel and tether-parameter messages of this drone: a tether was attached."""
-    attitude_sources: Counter[AttitudeSource] = field(default_factory=Counter)
+    attitude_sources: Counter[messages.AttitudeSource] = field(default_factory=Counter)
     """Telemetry per attitude source (its ``attitude_source``, else ``[drone]``'s)."""
 
 
@@ -96,7 +96,7 @@ class DroneRecording:
     segments: tuple[int, ...] = ()
     """``data.segment`` of each of :attr:`files`, in order (the file's index on the command
     line); empty: 0, 1, 2, ..."""
-    attitude_source: AttitudeSource = "onboard"
+    attitude_source: messages.AttitudeSource = "onboard"
     """The attitude every Telemetry was recorded with (mixed sources are refused)."""
 
 
@@ -248,7 +248,9 @@ def read_recordings(
     return out
 
 
-def _one_attitude_source(drone: str, parts: Sequence[tuple[int, str, _Columns]]) -> AttitudeSource:
+def _one_attitude_source(
+    drone: str, parts: Sequence[tuple[int, str, _Columns]]
+) -> messages.AttitudeSource:
     """The one attitude source of a drone's recordings.
 
     The thrust axis is fitted against the attitude (eq:NE_tether's ``R·u``): recordings
@@ -258,7 +260,7 @@ def _one_attitude_source(drone: str, parts: Sequence[tuple[int, str, _Columns]])
     Raises:
         CalibrateInputError: more than one source.
     """
-    seen: Counter[AttitudeSource] = Counter()
+    seen: Counter[messages.AttitudeSource] = Counter()
     for _, _, c in parts:
         seen.update(c.attitude_sources)
     if len(seen) > 1:
