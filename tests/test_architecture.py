@@ -35,6 +35,7 @@ PHYSICS = (
     "thrust_model",
     "smoother",
     "frozen",
+    "attitude",
 )
 CONTRACT = ("messages", "config", "bus")
 
@@ -50,7 +51,7 @@ ROOMS: dict[str, tuple[tuple[str, ...], tuple[str, ...], tuple[str, ...]]] = {
     "sim": (("sim",), ("sim", "catenary", *CONTRACT), ("numpy",)),
     "dashboard": (
         ("dashboard",),
-        ("dashboard", "catenary", *CONTRACT),
+        ("dashboard", "catenary", "attitude", *CONTRACT),
         ("numpy", "viser", "trimesh"),
     ),
     "foxglove": (
