@@ -37,7 +37,6 @@ import argparse
 import json
 import re
 import statistics
-import subprocess
 import sys
 import tempfile
 import time
@@ -51,6 +50,7 @@ from unittest import mock
 import numpy as np
 
 import groundstation.recording.calibrate as calibrate_mod
+from benchmarks.figures import AT_START, DOCS, write_figures
 from benchmarks.nanobench_cli import DATA, DAYS, Flight, _run, load
 from groundstation.airframe import fit_airframe
 from groundstation.bridges.crazyflie.bridge import VMOTOR2THRUST
@@ -73,14 +73,38 @@ class Variant:
     """Exponent bounds for ``motor_voltage`` (None: calibrate's own)."""
     telemetry: str = "pwm_map"
     """What made Telemetry's thrust: the bridge's ``[crazyflie] thrust_model``."""
+    key: str = ""
+    """Its name in docs/battery_model.json's figures."""
 
 
 VARIANTS = (
-    Variant("vbat_linear (the straight line, before)", "vbat_linear", "vbat_linear", None),
-    Variant("motor_voltage, exponent within 1–2 (default)", "motor n 1–2", "motor_voltage", None),
-    Variant("motor_voltage, exponent free (0.2–5)", "motor n free", "motor_voltage", (0.2, 5.0)),
     Variant(
-        "motor_voltage, exponent 2: thrust ∝ (duty·V)²", "motor n = 2", "motor_voltage", (2.0, 2.0)
+        "vbat_linear (the straight line, before)",
+        "vbat_linear",
+        "vbat_linear",
+        None,
+        key="vbat_linear",
+    ),
+    Variant(
+        "motor_voltage, exponent within 1–2 (default)",
+        "motor n 1–2",
+        "motor_voltage",
+        None,
+        key="motor_voltage",
+    ),
+    Variant(
+        "motor_voltage, exponent free (0.2–5)",
+        "motor n free",
+        "motor_voltage",
+        (0.2, 5.0),
+        key="motor_voltage_free",
+    ),
+    Variant(
+        "motor_voltage, exponent 2: thrust ∝ (duty·V)²",
+        "motor n = 2",
+        "motor_voltage",
+        (2.0, 2.0),
+        key="motor_voltage_n2",
     ),
     Variant(
         "the firmware's cubic (bridge thrust_model cubic_21plus), vbat_linear on top",
@@ -88,6 +112,7 @@ VARIANTS = (
         "vbat_linear",
         None,
         "cubic_21plus",
+        key="firmware_cubic",
     ),
 )
 
@@ -299,13 +324,8 @@ def main(argv: list[str] | None = None) -> int:
                         judge(flights[n], vbat[n], cal, work, split_v)
                     )
                 print(f"{variant.label}: {kind} {fold} done", file=sys.stderr, flush=True)
-        commit = subprocess.run(
-            ["git", "rev-parse", "--short", "HEAD"],
-            capture_output=True,
-            text=True,
-            check=False,
-            cwd=Path(__file__).resolve().parent,
-        ).stdout.strip()
+        commit = AT_START.commit
+        figures: dict[str, dict[str, float]] = {v.key: {} for v in VARIANTS}
         say("# The thrust and battery model below the calibration's battery range (NanoBench)")
         say("")
         say(
@@ -334,6 +354,17 @@ def main(argv: list[str] | None = None) -> int:
             for kind, name in (("voltage", "voltage"), ("voltage+day", "voltage + day")):
                 b_med, b_max, _ = _summary([p.below for p in r[kind]])
                 a_med, a_max, _ = _summary([p.above for p in r[kind]])
+                split = kind.replace("+", "_")
+                figures[variant.key].update(
+                    {
+                        f"{split}_below_median_mn": b_med,
+                        f"{split}_below_worst_mn": b_max,
+                        f"{split}_in_range_median_mn": a_med,
+                        f"{split}_in_range_worst_mn": a_max,
+                        f"{split}_ratio_median": b_med / a_med,
+                        f"{split}_ratio_worst": b_max / a_max,
+                    }
+                )
                 say(
                     f"| {variant.label} | {name} | {b_med:.1f} / {b_max:.1f} | "
                     f"{a_med:.1f} / {a_max:.1f} | {b_med / a_med:.2f} | {b_max / a_max:.2f} |"
@@ -349,6 +380,7 @@ def main(argv: list[str] | None = None) -> int:
         say("| --- | ---: |")
         for variant in VARIANTS:
             w_med, w_max, _ = _summary([p.whole for p in results[variant.label]["day"]])
+            figures[variant.key].update({"day_median_mn": w_med, "day_worst_mn": w_max})
             say(f"| {variant.label} | {w_med:.1f} / {w_max:.1f} |")
         say("")
         for kind, title in (
@@ -402,6 +434,8 @@ def main(argv: list[str] | None = None) -> int:
         page += "\n"
     if args.out:
         Path(args.out).write_text(page, encoding="utf-8")
+        if Path(args.out).resolve() == DOCS / "battery_model.md":
+            write_figures("battery_model", figures, ["--out", "docs/battery_model.md"])
     sys.stdout.write(page)
     return 0
 

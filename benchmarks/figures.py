@@ -137,6 +137,17 @@ BENCHMARKS: dict[str, Benchmark] = {
             "benchmarks/attitude_source.py",
         ),
     ),
+    "battery_model": Benchmark(
+        ".venv/bin/python -m benchmarks.battery_model",  # --out docs/battery_model.md
+        (
+            *ESTIMATOR,
+            *RECORDING,
+            "groundstation/bridges/crazyflie/bridge.py",
+            "benchmarks/nanobench.py",
+            "benchmarks/nanobench_cli.py",
+            "benchmarks/battery_model.py",
+        ),
+    ),
     "realistic_benchmark": Benchmark(
         ".venv/bin/python -m benchmarks.bench_realistic",  # --tug-seeds 8
         (*ESTIMATOR, *SIMULATOR, "groundstation/bus.py", "benchmarks/bench_realistic.py"),
