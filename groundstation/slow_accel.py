@@ -50,6 +50,7 @@ __all__ = [
     "SlowAccelState",
     "correct_accel_body_mps2",
     "drag_velocity_world_mps",
+    "end_hover",
     "is_still",
     "slow_accel_step",
 ]
@@ -183,6 +184,8 @@ class SlowAccelState:
         regime_velocity_world_mps: the velocity the hover test uses: motion capture's, or a
             leaky integral with a 2 s leak (a bias not yet learnt drifts it 2 s × less than
             the drag's 8 s one), world frame, m/s.
+        hover_hold_s: time left before a hover may begin again after a change of the
+            tension ended one (:func:`end_hover`), s.
     """
 
     bias_body_mps2: Vec3 = _ZERO3
@@ -205,6 +208,15 @@ class SlowAccelState:
     vibration_var_mps4: float = 0.0
     quasi_static: bool = False
     regime_velocity_world_mps: Vec3 = _ZERO3
+    hover_hold_s: float = 0.0
+
+
+def end_hover(state: SlowAccelState) -> SlowAccelState:
+    """The tension changed under a hover (a tug found on the accelerometer model): the
+    accelerometer carries the low band again at once (L = 0, no release), and no hover
+    begins before the 1 s mean holds only samples after the change (``HOVER_MEAN_S``):
+    until then it cannot vouch that the controller has answered the new tension."""
+    return evolve(state, fast_body_mps2=_ZERO3, quasi_static=False, hover_hold_s=HOVER_MEAN_S)
 
 
 def correct_accel_body_mps2(state: SlowAccelState, accel_body_mps2: Vec3) -> Vec3:
@@ -307,6 +319,7 @@ def slow_accel_step(
             accel_fast_body_mps2=_ZERO3,
             quasi_static=False,
             regime_velocity_world_mps=_ZERO3,
+            hover_hold_s=0.0,
         )
     if phase == "rest":
         # Still on the floor: a_ref = 0 exactly. A running mean of this rest's samples
@@ -361,6 +374,7 @@ def slow_accel_step(
             accel_fast_body_mps2=_ZERO3,
             quasi_static=False,
             regime_velocity_world_mps=_ZERO3,
+            hover_hold_s=0.0,
         )
     source: Literal["accel", "mocap"]
     if mocap_ok:
@@ -428,8 +442,12 @@ def slow_accel_step(
         ratio2 = params.quasi_static_exit_ratio**2
         limit1 *= ratio2
         limit_v *= ratio2
+    hold = st.hover_hold_s
+    if hold > 0.0:
+        hold = hold - dt_s if hold > dt_s else 0.0
     quasi = (
         params.hover_crossover_s > 0.0
+        and hold == 0.0
         and a1[0] * a1[0] + a1[1] * a1[1] + a1[2] * a1[2] < limit1
         and vx * vx + vy * vy + vz * vz < limit_v
     )
@@ -459,6 +477,7 @@ def slow_accel_step(
         vibration_var_mps4=var,
         quasi_static=quasi,
         regime_velocity_world_mps=(rv[0], rv[1], rv[2]),
+        hover_hold_s=hold,
     )
 
 

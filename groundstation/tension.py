@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import math
 import struct
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -32,6 +32,7 @@ from numpy.typing import ArrayLike, NDArray
 from groundstation.attitude import GRAVITY_MPS2, Rows, rows_from_unit_quat
 from groundstation.tension_change import (
     ChangeTest,
+    HoverChangeTest,
     LazyChangeStatistic,
     StepTest,
     scan_threshold,
@@ -1180,6 +1181,53 @@ class TensionFilter:
         self._kf.P = [max(P[0], r[0]), max(P[1], r[1]), max(P[2], r[2])]
         self._clear_windows()
 
+    def restart_from(
+        self,
+        mean_n: Sequence[float],
+        var_n2: Sequence[float],
+        noise_var_n2: tuple[float, float, float],
+    ) -> None:
+        """x = ``mean_n``, P = ``var_n2`` per axis: a change found outside the filter
+        (:class:`~groundstation.tension_change.HoverChangeTest`, the samples since a tug),
+        whose observations have the long-run variance ``noise_var_n2`` (N^2; P is held as
+        a share of it, so the next step does not rescale it); the change, step and drift
+        windows start again."""
+        if not self._initialized:
+            return
+        self._kf.set(list(mean_n), list(var_n2))
+        self._r_prev = noise_var_n2
+        self._clear_windows()
+
+    @property
+    def state(self) -> tuple[list[float] | None, list[float]]:
+        """``(x, diag P)`` now, N and N^2, as the filter's own lists (read, do not change;
+        x None before the first observation)."""
+        kf = self._kf
+        if not self._initialized or self._prior is not None:
+            return None, kf.P
+        return kf.x, kf.P
+
+    @property
+    def dt_mean_s(self) -> float:
+        """The mean sample spacing, s (NaN before two samples)."""
+        return self._dt_mean
+
+    def hover_change_test(self) -> HoverChangeTest:
+        """A :class:`~groundstation.tension_change.HoverChangeTest` with this filter's fast
+        test (windows, threshold) and noise estimate (prior, memory, warm-up, gap)."""
+        p = self.params
+        return HoverChangeTest(
+            p.change_min_window,
+            p.change_max_window_s,
+            p.ring_size,
+            p.change_threshold,
+            self._prior_var,
+            p.noise_prior_samples,
+            p.noise_time_constant_s,
+            p.noise_warmup_samples,
+            p.gap_s,
+        )
+
     def _new_regime(self) -> None:
         """Clears what belongs to one stretch of samples (not the noise statistics)."""
         self._noise.break_chain()
@@ -1267,6 +1315,7 @@ class TensionFilter:
         dt_s: float,
         quat_wxyz: ArrayLike | None = None,
         thrust_axis_world: tuple[float, float, float] | None = None,
+        noise_var_n2: tuple[float, float, float] | None = None,
     ) -> TensionEstimate:
         """One filter step with an observation (``eq:sysk1``, ``eq:sysk2``).
 
@@ -1286,6 +1335,10 @@ class TensionFilter:
             quat_wxyz: Unused; kept for callers of the earlier signature (the noise is
                 now measured per world axis, not derived from the thrust axis).
             thrust_axis_world: Unused, as ``quat_wxyz``.
+            noise_var_n2: This observation's long-run variance per axis, N^2, where the
+                caller knows it better than the filter's estimate (the accelerometer
+                model after a tug under a hover, whose noise the filter's estimate, made
+                on the hover model's observations, does not hold); None: the estimate.
 
         Returns:
             The estimate after this step.
@@ -1318,6 +1371,8 @@ class TensionFilter:
             r = noise.push(z, dt, p.noise_time_constant_s, p.noise_warmup_samples)
         else:
             r = self._prior_var
+        if noise_var_n2 is not None:
+            r = noise_var_n2
         # R = the long-run variance r, not the per-sample s2: what the filter averages.
         r0, r1, r2 = r
 

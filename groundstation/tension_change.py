@@ -21,6 +21,7 @@ Both divide their statistic by a *youth factor* (:func:`youth_factor`,
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -29,6 +30,7 @@ from groundstation.tension_noise import NoiseEstimate
 
 __all__ = [
     "ChangeTest",
+    "HoverChangeTest",
     "LazyChangeStatistic",
     "StepTest",
     "scan_threshold",
@@ -617,3 +619,117 @@ class StepTest:
         stats = np.einsum("ij,ij->i", d, d / var) / youth
         best = int(stats.argmax())
         return float(stats[best]), int(n_int[best]), post[best].tolist(), threshold
+
+
+class HoverChangeTest:
+    """The fast test on the accelerometer model while the filter fuses the hover model.
+
+    While the drone hovers, the filter's observation takes its low band from the hover
+    model (:mod:`groundstation.slow_accel`, ``m·g·e3 − R·u·F``), which sees a tug only as
+    the drone's controller answers it, over 0.3–1 s; until then the filter's own tests see
+    nothing. The accelerometer model ``m·R·(f − β) − R·u·F`` (``eq:NE_tether``) sees it at
+    once, under the vibration. This is the fast test (:class:`ChangeTest`: the same windows,
+    shortest window and threshold as the filter's) on that observation's innovation
+    against the filter's estimate before the step, whitened by ``sqrt(P⁻ + r)``, r the
+    accelerometer model's long-run variance measured on line by its own
+    :class:`~groundstation.tension_noise.NoiseEstimate` (the filter's measures the blended
+    observation, whose low band is the hover model's). It runs only while the hover model
+    is fused; out of the hover the filter observes the accelerometer model itself.
+
+    A detection says where the step began (the window) and what the tension is since: the
+    mean of the accelerometer model over the window, with variance ``r / n``.
+
+    Args:
+        min_window: Shortest window, samples.
+        max_window_s: Longest window, s.
+        size: Capacity of the history, samples.
+        threshold: The detection threshold, dimensionless.
+        prior_var_n2: Prior per-sample variance of the accelerometer model per world axis,
+            N^2.
+        prior_samples: Weight of the prior, samples.
+        noise_time_constant_s: Memory of the noise level, s.
+        warmup_samples: Differences of the noise estimate before the test runs.
+        gap_s: A time step longer than this breaks the windows, s.
+    """
+
+    __slots__ = ("_gap_s", "_hovering", "_noise", "_tau_s", "_test", "_warm", "noise_var_n2")
+
+    def __init__(
+        self,
+        min_window: int,
+        max_window_s: float,
+        size: int,
+        threshold: float,
+        prior_var_n2: tuple[float, float, float],
+        prior_samples: float,
+        noise_time_constant_s: float,
+        warmup_samples: int,
+        gap_s: float,
+    ) -> None:
+        self._test = ChangeTest(min_window, max_window_s, size, threshold)
+        self._noise = NoiseEstimate(prior_var_n2, prior_samples)
+        self._tau_s = noise_time_constant_s
+        self._warm = warmup_samples
+        self._gap_s = gap_s
+        self._hovering = False
+        self.noise_var_n2 = prior_var_n2
+        """The accelerometer model's long-run variance per world axis after the last
+        sample, N^2 (the filter's R while it observes that model after a detection)."""
+
+    def break_chain(self) -> None:
+        """A gap or a restart of the stream: the windows and the noise's sample chain."""
+        self._noise.break_chain()
+        self._test.clear()
+
+    def push(
+        self,
+        y_n: tuple[float, float, float],
+        dt_s: float,
+        dt_mean_s: float,
+        hovering: bool,
+        prior_n: Sequence[float] | None,
+        prior_var_n2: Sequence[float],
+    ) -> tuple[list[float], tuple[float, float, float], int] | None:
+        """Takes one accelerometer-model observation in the air.
+
+        Args:
+            y_n: The accelerometer model's tension, world frame, N.
+            dt_s: Time since the previous one, s.
+            dt_mean_s: The mean sample spacing, s (NaN: unknown).
+            hovering: The filter's observation of this sample was the hover model's.
+            prior_n: The filter's estimate before this sample, N (None: none yet).
+            prior_var_n2: Its variance per axis, N^2.
+
+        Returns:
+            None, or at a detection ``(mean, variance, window)``: the accelerometer model's
+            mean over the window since the step (N), its variance (N^2), its length
+            (samples).
+        """
+        if dt_s > self._gap_s:
+            self.break_chain()
+        noise = self._noise
+        r0, r1, r2 = self.noise_var_n2 = noise.push(y_n, dt_s, self._tau_s, self._warm)
+        test = self._test
+        if not hovering or prior_n is None or noise.samples < self._warm:
+            if self._hovering:
+                test.clear()
+                self._hovering = False
+            return None
+        self._hovering = True
+        x0, x1, x2 = prior_n
+        p0, p1, p2 = prior_var_n2
+        y0, y1, y2 = y_n
+        w = (
+            (y0 - x0) / math.sqrt(p0 + r0),
+            (y1 - x1) / math.sqrt(p1 + r1),
+            (y2 - x2) / math.sqrt(p2 + r2),
+        )
+        if test.push(y_n, w):
+            return None
+        k = noise.samples
+        stat, window = test.evaluate(dt_mean_s, youth_factor(k) if k < 1000 else 1.0)
+        if stat <= test.threshold:
+            return None
+        mean = test.mean_of_window(window)
+        test.clear()
+        return mean, (r0 / window, r1 / window, r2 / window), window

@@ -431,6 +431,7 @@ class DroneEstimator:
         )
         self.contact = contact
         self._check_battery(msg.vbat_v, on_ground, now_s)
+        was_hovering = False
         if self.slow_active:
             assert self.slow_params is not None
             was_hovering = self.slow.quasi_static
@@ -450,8 +451,19 @@ class DroneEstimator:
                 elif detections != self.changes_at_hover_end:
                     self.filter.new_hover()
         filtered = self.filter_control.step(
-            on_ground=on_ground, contact_reason=contact.reason, observation=obs, dt_s=dt_s
+            on_ground=on_ground,
+            contact_reason=contact.reason,
+            observation=obs,
+            dt_s=dt_s,
+            accel_model_world_n=observed.accel_model_world_n if self.slow_active else None,
+            hovering=was_hovering,
+            after_hover_change=self.slow_active and self.slow.hover_hold_s > 0.0,
         )
+        if filtered.hover_change:
+            # A tug under the hover: the accelerometer model carries the low band again,
+            # and the next hover averages afresh (new_hover: a change ended this one).
+            self.slow = slow_mod.end_hover(self.slow)
+            self.changes_at_hover_end = self.filter_control.change_detections - 1
         if not filtered.finite:
             self._drop("non_finite_estimate", "filter produced NaN/inf")
         est = filtered.estimate

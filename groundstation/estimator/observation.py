@@ -46,11 +46,16 @@ class Observed(NamedTuple):
             before the slow correction (what the slow stage learns from), body, m/s².
         rotation_rows_world_body: the message's attitude as ``R_world_body`` rows, computed
             once here for every stage (observation, contact, slow stage).
+        accel_model_world_n: the accelerometer model's tension ``m·R·(f − β) − R·u·F``
+            (``eq:NE_tether``), world frame, N: the observation before the hover model
+            replaced its low band (``+ m·R·L``; the observation itself when L is zero or the
+            slow stage is off); None when no tension is observed.
     """
 
     observation: TensionObservation
     accel_read_body_mps2: Vec3
     rotation_rows_world_body: Rows
+    accel_model_world_n: Vec3 | None = None
 
 
 def observe(
@@ -98,7 +103,22 @@ def observe(
         velocity_world_mps=velocity,
         rotation_rows_world_body=rows,
     )
-    return Observed(obs, accel_read, rows)
+    accel_model: Vec3 | None = None
+    tension = obs.tension_world_n
+    if tension is not None:
+        t0, t1, t2 = tension
+        accel_model = (t0, t1, t2)
+        if slow is not None:
+            lx, ly, lz = slow.fast_body_mps2
+            if lx != 0.0 or ly != 0.0 or lz != 0.0:
+                # + m·R·L: the low band the hover model replaced, back in.
+                (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = rows
+                accel_model = (
+                    t0 + mass_kg * (r00 * lx + r01 * ly + r02 * lz),
+                    t1 + mass_kg * (r10 * lx + r11 * ly + r12 * lz),
+                    t2 + mass_kg * (r20 * lx + r21 * ly + r22 * lz),
+                )
+    return Observed(obs, accel_read, rows, accel_model)
 
 
 def learn_slow(
