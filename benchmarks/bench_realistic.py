@@ -985,10 +985,10 @@ def _render_slow_stage(res: dict[str, Any]) -> list[str]:
     ]
     if t90s:
         parts.append(
-            f"the tug's t90 {', '.join(t90s)}: the slow stage holds the hover's slow content "
-            "for about its 1 s window before the tug reaches the estimate; `[filter] "
-            "accel_hover_exit_window_s` trades hover accuracy for a faster exit "
-            "(docs/hover_exit.md)"
+            f"the tug's t90 {', '.join(t90s)}: while the drone hovers the filter fuses the "
+            "hover model, which sees a tug only as the controller tilts; the fast test also "
+            "runs on the accelerometer model then (tension_change.HoverChangeTest) and a "
+            "detection ends the hover (docs/estimator_design.md, *A tug under a hover*)"
         )
     env = {e["class"]: e for e in res.get("envelope", [])}
     gone = [
@@ -1032,7 +1032,8 @@ def _render_reading(res: dict[str, Any]) -> list[str]:
             "known step is unbiased from the first one); its settle time is the information "
             "limit the per-seed settle times compare with.",
             "- Tug detection: the fast test (innovation sums, windows up to 1 s, threshold "
-            "50) finds a 30 mN step within a few samples at 0.3-0.5 m/s^2; at 1-2 m/s^2 a "
+            "50), on the accelerometer model while the drone hovers, finds a 30 mN step at "
+            "0.5 m/s^2 near the information limit in the table; at 1-2 m/s^2 a "
             "30 mN step adds only (30 mN)^2 / r = 0.5 and 0.125 per sample (r = 2 s2 for "
             "this noise), and the hover filter absorbs part of it before 50 is reached, so "
             "the long-window step test takes it (groundstation/tension.py, TensionFilter "
