@@ -1199,22 +1199,14 @@ class TensionFilter:
         self._clear_windows()
 
     @property
-    def state(self) -> tuple[list[float] | None, list[float]]:
-        """``(x, diag P)`` now, N and N^2, as the filter's own lists (read, do not change;
-        x None before the first observation)."""
-        kf = self._kf
-        if not self._initialized or self._prior is not None:
-            return None, kf.P
-        return kf.x, kf.P
-
-    @property
     def dt_mean_s(self) -> float:
         """The mean sample spacing, s (NaN before two samples)."""
         return self._dt_mean
 
     def hover_change_test(self) -> HoverChangeTest:
         """A :class:`~groundstation.tension_change.HoverChangeTest` with this filter's fast
-        test (windows, threshold) and noise estimate (prior, memory, warm-up, gap)."""
+        test (windows, threshold) and noise estimate (prior, memory, warm-up, gap); the
+        level's memory is the filter's shortest at hover (``hover_time_constant_s``)."""
         p = self.params
         return HoverChangeTest(
             p.change_min_window,
@@ -1226,6 +1218,7 @@ class TensionFilter:
             p.noise_time_constant_s,
             p.noise_warmup_samples,
             p.gap_s,
+            p.hover_time_constant_s,
         )
 
     def _new_regime(self) -> None:

@@ -21,7 +21,6 @@ Both divide their statistic by a *youth factor* (:func:`youth_factor`,
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -629,12 +628,18 @@ class HoverChangeTest:
     the drone's controller answers it, over 0.3–1 s; until then the filter's own tests see
     nothing. The accelerometer model ``m·R·(f − β) − R·u·F`` (``eq:NE_tether``) sees it at
     once, under the vibration. This is the fast test (:class:`ChangeTest`: the same windows,
-    shortest window and threshold as the filter's) on that observation's innovation
-    against the filter's estimate before the step, whitened by ``sqrt(P⁻ + r)``, r the
-    accelerometer model's long-run variance measured on line by its own
+    shortest window and threshold as the filter's) on that observation against its own
+    level before the step, whitened by ``sqrt(v + r)``: r the accelerometer model's
+    long-run variance measured on line by its own
     :class:`~groundstation.tension_noise.NoiseEstimate` (the filter's measures the blended
-    observation, whose low band is the hover model's). It runs only while the hover model
-    is fused; out of the hover the filter observes the accelerometer model itself.
+    observation, whose low band is the hover model's), the level μ the mean of the
+    hover's samples so far, exponential over ``level_time_constant_s`` once it holds that
+    long, v the level's variance (r/n, then r·k/(2 − k) for the gain k). Its own level, not
+    the filter's estimate: when the drone starts to move from a hover, the hover model (and
+    the filter with it) reads its acceleration ``−m·a`` as tension while the accelerometer
+    model, which is the tension whatever the acceleration, stays; only a change of the
+    tension moves it. It runs only while the hover model is fused; out of the hover the
+    filter observes the accelerometer model itself.
 
     A detection says where the step began (the window) and what the tension is since: the
     mean of the accelerometer model over the window, with variance ``r / n``.
@@ -650,9 +655,21 @@ class HoverChangeTest:
         noise_time_constant_s: Memory of the noise level, s.
         warmup_samples: Differences of the noise estimate before the test runs.
         gap_s: A time step longer than this breaks the windows, s.
+        level_time_constant_s: Memory of the level μ, s (long against the longest window,
+            so that a step is not taken into μ before it is found).
     """
 
-    __slots__ = ("_gap_s", "_hovering", "_noise", "_tau_s", "_test", "_warm", "noise_var_n2")
+    __slots__ = (
+        "_gap_s",
+        "_level",
+        "_level_n",
+        "_level_tau_s",
+        "_noise",
+        "_tau_s",
+        "_test",
+        "_warm",
+        "noise_var_n2",
+    )
 
     def __init__(
         self,
@@ -665,13 +682,16 @@ class HoverChangeTest:
         noise_time_constant_s: float,
         warmup_samples: int,
         gap_s: float,
+        level_time_constant_s: float,
     ) -> None:
         self._test = ChangeTest(min_window, max_window_s, size, threshold)
         self._noise = NoiseEstimate(prior_var_n2, prior_samples)
         self._tau_s = noise_time_constant_s
         self._warm = warmup_samples
         self._gap_s = gap_s
-        self._hovering = False
+        self._level_tau_s = level_time_constant_s
+        self._level: tuple[float, float, float] | None = None  # μ; None: not hovering
+        self._level_n = 0  # samples in μ
         self.noise_var_n2 = prior_var_n2
         """The accelerometer model's long-run variance per world axis after the last
         sample, N^2 (the filter's R while it observes that model after a detection)."""
@@ -687,8 +707,6 @@ class HoverChangeTest:
         dt_s: float,
         dt_mean_s: float,
         hovering: bool,
-        prior_n: Sequence[float] | None,
-        prior_var_n2: Sequence[float],
     ) -> tuple[list[float], tuple[float, float, float], int] | None:
         """Takes one accelerometer-model observation in the air.
 
@@ -697,8 +715,6 @@ class HoverChangeTest:
             dt_s: Time since the previous one, s.
             dt_mean_s: The mean sample spacing, s (NaN: unknown).
             hovering: The filter's observation of this sample was the hover model's.
-            prior_n: The filter's estimate before this sample, N (None: none yet).
-            prior_var_n2: Its variance per axis, N^2.
 
         Returns:
             None, or at a detection ``(mean, variance, window)``: the accelerometer model's
@@ -710,26 +726,44 @@ class HoverChangeTest:
         noise = self._noise
         r0, r1, r2 = self.noise_var_n2 = noise.push(y_n, dt_s, self._tau_s, self._warm)
         test = self._test
-        if not hovering or prior_n is None or noise.samples < self._warm:
-            if self._hovering:
+        if not hovering or noise.samples < self._warm:
+            if self._level is not None:
                 test.clear()
-                self._hovering = False
+                self._level = None
             return None
-        self._hovering = True
-        x0, x1, x2 = prior_n
-        p0, p1, p2 = prior_var_n2
         y0, y1, y2 = y_n
+        level = self._level
+        if level is None:
+            # The hover begins: its level starts from this sample.
+            self._level = (y0, y1, y2)
+            self._level_n = 1
+            return None
+        m0, m1, m2 = level
+        # μ's variance: r/n while a running mean, r·k/(2 − k) once an exponential one.
+        n = self._level_n
+        k = dt_s / self._level_tau_s
+        g = k if k * n > 1.0 else 1.0 / n
+        f = g / (2.0 - g) if g == k else g
+        d0, d1, d2 = y0 - m0, y1 - m1, y2 - m2
         w = (
-            (y0 - x0) / math.sqrt(p0 + r0),
-            (y1 - x1) / math.sqrt(p1 + r1),
-            (y2 - x2) / math.sqrt(p2 + r2),
+            d0 / math.sqrt(r0 * (1.0 + f)),
+            d1 / math.sqrt(r1 * (1.0 + f)),
+            d2 / math.sqrt(r2 * (1.0 + f)),
         )
+        # μ ← μ + g (y − μ): the running mean of the hover's samples, then their
+        # exponential mean over the level's time constant.
+        g = k if k * (n + 1) > 1.0 else 1.0 / (n + 1)
+        if g > 1.0:
+            g = 1.0
+        self._level = (m0 + g * d0, m1 + g * d1, m2 + g * d2)
+        self._level_n = n + 1
         if test.push(y_n, w):
             return None
-        k = noise.samples
-        stat, window = test.evaluate(dt_mean_s, youth_factor(k) if k < 1000 else 1.0)
+        n = noise.samples
+        stat, window = test.evaluate(dt_mean_s, youth_factor(n) if n < 1000 else 1.0)
         if stat <= test.threshold:
             return None
         mean = test.mean_of_window(window)
         test.clear()
+        self._level = None  # the next hover starts its own level again
         return mean, (r0 / window, r1 / window, r2 / window), window

@@ -24,21 +24,12 @@ LEVEL = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
 
 
 def _run(
-    test: object,
-    ys: np.ndarray,
-    prior: tuple[float, float, float],
-    hovering: bool = True,
-    prior_var: float = 1e-6,
+    test: object, ys: np.ndarray, hovering: bool = True
 ) -> list[tuple[int, tuple[list[float], tuple[float, ...], int]]]:
     found = []
     for i, y in enumerate(ys):
         out = test.push(  # type: ignore[attr-defined]
-            (float(y[0]), float(y[1]), float(y[2])),
-            DT_S,
-            DT_S,
-            hovering,
-            prior,
-            (prior_var, prior_var, prior_var),
+            (float(y[0]), float(y[1]), float(y[2])), DT_S, DT_S, hovering
         )
         if out is not None:
             found.append((i, out))
@@ -50,12 +41,12 @@ def _test() -> object:
 
 
 def test_white_noise_at_a_constant_tension_is_no_tug() -> None:
-    """Ten minutes of hover at 100 Hz, the prior the true level: no detection (the test's
-    threshold is the filter's fast test's, 50 on a chi-square with 3 dof per window)."""
+    """Ten minutes of hover at 100 Hz: no detection (the test's threshold is the filter's
+    fast test's, 50 on a chi-square with 3 dof per window)."""
     rng = np.random.default_rng(7)
     level = np.array([-0.015, 0.0, -0.01])
     ys = level + rng.normal(0.0, SIGMA_N, (60_000, 3))
-    assert _run(_test(), ys, tuple(level)) == []
+    assert _run(_test(), ys) == []
 
 
 def test_a_step_is_found_within_its_information_limit_and_its_level_measured() -> None:
@@ -67,7 +58,7 @@ def test_a_step_is_found_within_its_information_limit_and_its_level_measured() -
     step = np.array([-0.030, 0.0, 0.0])
     ys = level + rng.normal(0.0, SIGMA_N, (1000, 3))
     ys[500:] += step
-    found = _run(_test(), ys, tuple(level))
+    found = _run(_test(), ys)
     assert len(found) >= 1
     i, (mean, var, window) = found[0]
     limit = math.ceil(50.0 * 1.5 * SIGMA_N**2 / 0.030**2)
@@ -85,7 +76,7 @@ def test_out_of_the_hover_it_does_not_run() -> None:
     level = np.array([-0.015, 0.0, -0.01])
     ys = level + rng.normal(0.0, SIGMA_N, (1000, 3))
     ys[500:] += (-0.030, 0.0, 0.0)
-    assert _run(_test(), ys, tuple(level), hovering=False) == []
+    assert _run(_test(), ys, hovering=False) == []
 
 
 def test_a_gap_breaks_the_windows() -> None:
@@ -94,9 +85,8 @@ def test_a_gap_breaks_the_windows() -> None:
     test = _test()
     level = (-0.015, 0.0, -0.01)
     for _ in range(200):
-        assert test.push(level, DT_S, DT_S, True, level, (1e-6,) * 3) is None  # type: ignore[attr-defined]
-    jumped = (-0.2, 0.0, -0.01)
-    assert test.push(jumped, 1.0, DT_S, True, level, (1e-6,) * 3) is None  # type: ignore[attr-defined]
+        assert test.push(level, DT_S, DT_S, True) is None  # type: ignore[attr-defined]
+    assert test.push((-0.2, 0.0, -0.01), 1.0, DT_S, True) is None  # type: ignore[attr-defined]
 
 
 def test_end_hover_hands_the_band_back_and_holds_the_hover_off_for_one_mean_window() -> None:
@@ -141,8 +131,11 @@ def test_the_filter_restarts_where_the_hover_test_says() -> None:
     filt = TensionFilter(TensionFilterParams())
     filt.update((0.0, 0.0, 0.0), DT_S)
     filt.restart_from([-0.04, 0.0, -0.01], [1e-5, 2e-5, 3e-5], (1e-4, 1e-4, 1e-4))
-    x, p = filt.state
-    assert x == [-0.04, 0.0, -0.01] and p == [1e-5, 2e-5, 3e-5]
+    est = filt.coast(0.0)
+    assert est is not None
+    assert est.tension_world_n.tolist() == [-0.04, 0.0, -0.01]
+    assert np.allclose(est.std_n**2, [1e-5, 2e-5, 3e-5])
     fresh = TensionFilter(TensionFilterParams())
     fresh.restart_from([1.0, 1.0, 1.0], [1.0, 1.0, 1.0], (1.0, 1.0, 1.0))  # nothing to restart
-    assert fresh.state[0] is None
+    assert fresh.estimate is None
+

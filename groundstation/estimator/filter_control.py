@@ -145,8 +145,7 @@ class FilterControl:
             z = tension_obs
             if accel_model_world_n is not None:
                 test = self.hover_test
-                x, p = filt.state
-                found = test.push(accel_model_world_n, dt_s, filt.dt_mean_s, hovering, x, p)
+                found = test.push(accel_model_world_n, dt_s, filt.dt_mean_s, hovering)
                 if found is not None:
                     filt.restart_from(found[0], found[1], test.noise_var_n2)
                     hover_change = True
