@@ -1,0 +1,83 @@
+"""Why the published tension σ is wider than the error on a hover (a diagnosis, no page).
+
+``python -m benchmarks.sigma_consistency [--noise 1.0] [--spots 0,2,4] [--seed 500]``
+
+Realistic simulator, calibration = truth (``benchmarks.bench_realistic.fly``), 20 s hovers,
+judged from 8 s. Per flight and world axis: the error's RMS against the median published
+``tension_std_n`` (their ratio: about 1 for a consistent σ), and the tension filter's noise
+model at the end of the flight: ``s_d`` (half the mean squared first difference of its
+observation), ``κ`` (the long-run variance over ``s_d``, from 0.25 s block means) and
+``r = s_d·κ``, the filter's R (tension_noise.NoiseEstimate). While the drone hovers, the
+observation's band below the hover crossover (~0.5 Hz) is the hover model's; the blocks see
+the band above it, the accelerometer's. Takes ~10 s per flight.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from typing import Any
+
+import numpy as np
+
+from benchmarks import bench_realistic as br
+from groundstation.pipeline import Pipeline
+
+
+def flight(noise: float, spot: int, seed: int) -> dict[str, Any]:
+    """One hover: the error against σ per axis, and the filter's noise model at its end."""
+    made: list[Pipeline] = []
+
+    class Kept(Pipeline):
+        def __init__(self, *args: Any, **kwargs: Any) -> None:
+            super().__init__(*args, **kwargs)
+            made.append(self)
+
+    original = br.Pipeline
+    br.Pipeline = Kept  # type: ignore[misc]
+    try:
+        f = br.fly(br._scenario_for_spot(spot), 20.0, noise, seed)
+    finally:
+        br.Pipeline = original  # type: ignore[misc]
+    noise_model = made[-1].drones[br.DRONE].filter._noise
+    w = f.t_s >= br.STEADY_FROM_S
+    err = f.est_tension_n[w] - f.true_tension_n[w]
+    std = f.est_tension_std_n[w]
+    s_d = [0.5 * d for d in noise_model.d1]
+    return {
+        "err_rms_mn": (1e3 * np.sqrt((err**2).mean(axis=0))).tolist(),
+        "sigma_median_mn": (1e3 * np.median(std, axis=0)).tolist(),
+        "within_2_sigma": (np.abs(err) <= 2.0 * std).mean(axis=0).tolist(),
+        "kappa": float(noise_model.kappa),
+        "s_d_mn": [1e3 * math.sqrt(v) for v in s_d],
+        "r_mn": [1e3 * math.sqrt(v) for v in noise_model.long_run()],
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--noise", type=float, default=1.0, help="vibration, m/s^2 (1.0)")
+    ap.add_argument("--spots", default="0,2,4", help="paper hover spots (0,2,4)")
+    ap.add_argument("--seed", type=int, default=500)
+    args = ap.parse_args(argv)
+    print(
+        "| spot | error RMS x/y/z mN | median σ x/y/z mN | within 2σ x/y/z | κ | "
+        "sqrt(s_d) x/y/z mN | sqrt(r) x/y/z mN |"
+    )
+    print("| --- | --- | --- | --- | ---: | --- | --- |")
+    for spot in (int(s) for s in args.spots.split(",")):
+        r = flight(args.noise, spot, args.seed)
+
+        def three(v: list[float], fmt: str = "{:.2f}") -> str:
+            return "/".join(fmt.format(x) for x in v)
+
+        print(
+            f"| {spot} | {three(r['err_rms_mn'])} | {three(r['sigma_median_mn'])} | "
+            f"{three(r['within_2_sigma'], '{:.0%}')} | {r['kappa']:.2f} | "
+            f"{three(r['s_d_mn'], '{:.1f}')} | {three(r['r_mn'], '{:.1f}')} |"
+        )
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
