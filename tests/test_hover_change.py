@@ -138,4 +138,3 @@ def test_the_filter_restarts_where_the_hover_test_says() -> None:
     fresh = TensionFilter(TensionFilterParams())
     fresh.restart_from([1.0, 1.0, 1.0], [1.0, 1.0, 1.0], (1.0, 1.0, 1.0))  # nothing to restart
     assert fresh.estimate is None
-
