@@ -263,9 +263,11 @@ class FilterSection(_Section):
     leaves the tension filter's band (groundstation.slow_accel), s; 0: off."""
     accel_hover_exit_window_s: float = Field(0.0, ge=0.0)
     """(added) A second, shorter mean for the hover test: the hover also ends when the
-    acceleration's mean over this window exceeds 4 of its own σ (tugs end it in ~0.1 s instead
-    of the 1 s mean's ~0.5 s: tug t90 about halved on the realistic simulator, hover error
-    ~15 % larger; docs/estimator_design.md), s; 0: off."""
+    acceleration's mean over this window exceeds 4 of its own σ, s; 0: off. Since the hover's
+    change test on the accelerometer model ends a hover at a tug (always on), the short
+    window no longer speeds a tug up (it ends the hover on the acceleration before that test
+    can measure the step) and costs hover accuracy: docs/hover_exit.md measures both. Kept
+    for labs that set it."""
     accel_hover_noise_sigmas: float = Field(4.0, ge=0.0)
     """(added) The hover test's thresholds follow the vibration: the 1 s mean acceleration
     must stay below ``max(0.2 m/s², this × its own σ)`` and the accelerometer's speed below
