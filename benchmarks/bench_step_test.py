@@ -92,19 +92,28 @@ def hover(level: float, colour: str, minutes: float, flights: int) -> dict[str, 
     }
 
 
+def step_trial(
+    level: float, colour: str, trial: int, seed_base: int = 900
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, int]:
+    """One step trial: its noise (n, 3) N, spacing (n,) s, step (3,) N (30 mN in a random
+    direction), and the samples before the step and in all (40 s of hover, then 9.5 s)."""
+    rng = np.random.default_rng(seed_base + trial + int(10 * level) + (7 if colour == "ar1" else 0))
+    n_hover, n = 4000, 4900
+    v = noise(rng, n, MASS_KG * level, colour)
+    dts = spacing(rng, n)
+    d = rng.normal(0.0, 1.0, 3)
+    step: np.ndarray = 0.030 * d / np.linalg.norm(d)
+    return v, dts, step, n_hover, n
+
+
 def steps(level: float, colour: str, trials: int) -> dict[str, Any]:
     sigma_n = MASS_KG * level
     r = sigma_n**2 * LONG_RUN[colour]
     delays: list[float | None] = []
     spacings = []
     for s in range(trials):
-        rng = np.random.default_rng(900 + s + int(10 * level) + (7 if colour == "ar1" else 0))
-        n_hover, n = 4000, 4900
-        v = noise(rng, n, sigma_n, colour)
-        dts = spacing(rng, n)
+        v, dts, step, n_hover, n = step_trial(level, colour, s)
         spacings.append(float(np.mean(dts)))
-        d = rng.normal(0.0, 1.0, 3)
-        step = 0.030 * d / np.linalg.norm(d)
         filt = TensionFilter()
         found = None
         for k in range(n):
