@@ -697,9 +697,11 @@ class HoverChangeTest:
         sample, N^2 (the filter's R while it observes that model after a detection)."""
 
     def break_chain(self) -> None:
-        """A gap or a restart of the stream: the windows and the noise's sample chain."""
+        """A gap or a restart of the stream: the windows, the level and the noise's sample
+        chain (samples either side of a gap are not one hover)."""
         self._noise.break_chain()
         self._test.clear()
+        self._level = None
 
     def push(
         self,
@@ -739,11 +741,12 @@ class HoverChangeTest:
             self._level_n = 1
             return None
         m0, m1, m2 = level
-        # μ's variance: r/n while a running mean, r·k/(2 − k) once an exponential one.
         n = self._level_n
-        k = dt_s / self._level_tau_s
-        g = k if k * n > 1.0 else 1.0 / n
-        f = g / (2.0 - g) if g == k else g
+        k = dt_s / self._level_tau_s  # the exponential mean's gain, at most 1
+        if k > 1.0:
+            k = 1.0
+        # μ's variance over r: 1/n while a running mean, k/(2 − k) once an exponential one.
+        f = k / (2.0 - k) if k * n > 1.0 else 1.0 / n
         d0, d1, d2 = y0 - m0, y1 - m1, y2 - m2
         w = (
             d0 / math.sqrt(r0 * (1.0 + f)),
@@ -753,8 +756,6 @@ class HoverChangeTest:
         # μ ← μ + g (y − μ): the running mean of the hover's samples, then their
         # exponential mean over the level's time constant.
         g = k if k * (n + 1) > 1.0 else 1.0 / (n + 1)
-        if g > 1.0:
-            g = 1.0
         self._level = (m0 + g * d0, m1 + g * d1, m2 + g * d2)
         self._level_n = n + 1
         if test.push(y_n, w):

@@ -138,3 +138,37 @@ def test_the_filter_restarts_where_the_hover_test_says() -> None:
     fresh = TensionFilter(TensionFilterParams())
     fresh.restart_from([1.0, 1.0, 1.0], [1.0, 1.0, 1.0], (1.0, 1.0, 1.0))  # nothing to restart
     assert fresh.estimate is None
+
+
+def test_a_stamp_jump_under_a_hover_is_no_error_and_no_tug() -> None:
+    """Telemetry whose stamp jumps forward (a clock glitch) while the drone hovers: the
+    test starts its level again after the gap instead of failing on it (a 12 s jump once
+    divided by zero)."""
+    test = _test()
+    rng = np.random.default_rng(9)
+    level = np.array([-0.015, 0.0, -0.01])
+    for y in level + rng.normal(0.0, SIGMA_N, (300, 3)):
+        test.push((float(y[0]), float(y[1]), float(y[2])), DT_S, DT_S, True)  # type: ignore[attr-defined]
+    for jump_s in (12.0, 15.0, 1e6):
+        y = (float(level[0]), float(level[1]), float(level[2]))
+        assert test.push(y, jump_s, DT_S, True) is None  # type: ignore[attr-defined]
+        assert test.push(y, DT_S, DT_S, True) is None  # type: ignore[attr-defined]
+
+
+def test_the_pipeline_answers_a_stamp_jump_under_a_hover() -> None:
+    import json
+
+    from groundstation.bus import Sample
+    from groundstation.pipeline import Pipeline
+    from tests.test_perf_equivalence import HOVER_N, _telemetry, pinned_settings
+
+    rng = np.random.default_rng(3)
+    pipe = Pipeline(pinned_settings())
+    for k in range(600):
+        pipe.handle(_telemetry(k, HOVER_N, rng), k * 0.004)
+    assert pipe.drones["cf1"].slow.quasi_static
+    sample = _telemetry(600, HOVER_N, rng)
+    body = json.loads(sample.payload)
+    body["stamp_s"] += 15.0
+    out = pipe.handle(Sample(sample.key, json.dumps(body).encode()), 600 * 0.004)
+    assert [o.key for o in out] == ["tether/cf1/estimate"]
