@@ -460,10 +460,10 @@ class DroneEstimator:
             after_hover_change=self.slow_active and self.slow.hover_hold_s > 0.0,
         )
         if filtered.hover_change:
-            # A tug under the hover: the accelerometer model carries the low band again,
-            # and the next hover averages afresh (new_hover: a change ended this one).
+            # A tug under the hover: the accelerometer model carries the low band again.
+            # The next hover averages afresh (new_hover above): the detection counted
+            # makes change_detections differ from changes_at_hover_end.
             self.slow = slow_mod.end_hover(self.slow)
-            self.changes_at_hover_end = self.filter_control.change_detections - 1
         if not filtered.finite:
             self._drop("non_finite_estimate", "filter produced NaN/inf")
         est = filtered.estimate
