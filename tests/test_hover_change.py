@@ -89,39 +89,36 @@ def test_a_gap_breaks_the_windows() -> None:
     assert test.push((-0.2, 0.0, -0.01), 1.0, DT_S, True) is None  # type: ignore[attr-defined]
 
 
-def test_end_hover_hands_the_band_back_and_holds_the_hover_off_for_one_mean_window() -> None:
+def _hovering(
+    state: SlowAccelState, rng: np.random.Generator, n: int, t0_s: float = 0.0
+) -> list[SlowAccelState]:
+    """The slow stage's states over n samples of a level hover with 0.2 m/s² of vibration
+    (and a 0.05 m/s² slow error along x)."""
     params = SlowAccelParams()
-    rng = np.random.default_rng(4)
-    state = SlowAccelState()
-    for i in range(600):
-        n = rng.normal(0.0, 0.2, 3)
+    states = []
+    for i in range(n):
+        v = rng.normal(0.0, 0.2, 3)
         state = slow_accel_step(
             state,
             params,
             dt_s=DT_S,
-            stamp_s=i * DT_S,
-            accel_body_mps2=(0.05 + n[0], n[1], 9.81 + n[2]),
+            stamp_s=t0_s + i * DT_S,
+            accel_body_mps2=(0.05 + v[0], v[1], 9.81 + v[2]),
             R_world_body=LEVEL,
             phase="air",
             mocap_world_m=None,
         )
+        states.append(state)
+    return states
+
+
+def test_end_hover_hands_the_band_back_and_holds_the_hover_off_for_one_mean_window() -> None:
+    rng = np.random.default_rng(4)
+    state = _hovering(SlowAccelState(), rng, 600)[-1]
     assert state.quasi_static and state.fast_body_mps2 != (0.0, 0.0, 0.0)
     state = end_hover(state)
     assert not state.quasi_static and state.fast_body_mps2 == (0.0, 0.0, 0.0)
-    flags = []
-    for i in range(200):
-        n = rng.normal(0.0, 0.2, 3)
-        state = slow_accel_step(
-            state,
-            params,
-            dt_s=DT_S,
-            stamp_s=6.0 + i * DT_S,
-            accel_body_mps2=(0.05 + n[0], n[1], 9.81 + n[2]),
-            R_world_body=LEVEL,
-            phase="air",
-            mocap_world_m=None,
-        )
-        flags.append(state.quasi_static)
+    flags = [s.quasi_static for s in _hovering(state, rng, 200, t0_s=6.0)]
     first = flags.index(True)
     assert first == pytest.approx(HOVER_MEAN_S / DT_S, abs=1)
     assert all(flags[first:])
