@@ -32,15 +32,15 @@ from numpy.typing import ArrayLike, NDArray
 from groundstation.attitude import GRAVITY_MPS2, Rows, rows_from_unit_quat
 from groundstation.tension_change import (
     ChangeTest,
-    HoverChangeTest,
     LazyChangeStatistic,
     StepTest,
+    level_scatter_factor,
     scan_threshold,
     youth_factor,
 )
 from groundstation.tension_change import _Ring as _Ring
 from groundstation.tension_drift import DriftAdaptation
-from groundstation.tension_kalman import DiagonalKalman
+from groundstation.tension_kalman import DiagonalKalman, HoverVelocity
 from groundstation.tension_noise import NoiseEstimate, NoiseStatus
 from groundstation.thrust_model import (
     MOTORS,
@@ -651,6 +651,12 @@ class TensionFilterParams:
             the change test's windows, s.
         converged_min_samples: Samples after start or reset before an estimate is
             reported as converged.
+        hover_velocity_std_mps: σ_v, the hovering drone's velocity scatter per world
+            axis, m/s: the thrust balance enters the filter through the velocity
+            (:class:`~groundstation.tension_kalman.HoverVelocity`) while the caller says
+            the drone hovers (``update(hover_model_world_n=...)``).
+        hover_velocity_time_s: T_c, that velocity's correlation time, s: ``v = 0`` is
+            observed with variance ``σ_v²·T_c/dt`` per sample.
     """
 
     mass_kg: float = 0.030
@@ -680,6 +686,8 @@ class TensionFilterParams:
     drift_memory_s: float = 1.0
     gap_s: float = 0.25
     converged_min_samples: int = 25
+    hover_velocity_std_mps: float = 0.05
+    hover_velocity_time_s: float = 0.5
 
     def __post_init__(self) -> None:
         positive = {
@@ -699,6 +707,8 @@ class TensionFilterParams:
             "drift_threshold": self.drift_threshold,
             "drift_min_time_constant_s": self.drift_min_time_constant_s,
             "gap_s": self.gap_s,
+            "hover_velocity_std_mps": self.hover_velocity_std_mps,
+            "hover_velocity_time_s": self.hover_velocity_time_s,
         }
         for name, value in positive.items():
             if not (math.isfinite(value) and value > 0.0):
@@ -1099,6 +1109,7 @@ class TensionFilter:
     def __init__(self, params: TensionFilterParams | None = None) -> None:
         self.params = params if params is not None else TensionFilterParams()
         self._kf = DiagonalKalman()  # A = C = I, Q and R diagonal (eq:Kalman_vars)
+        self._hover_v = HoverVelocity()  # v beside T while the drone hovers
         p = self.params
         self._change = ChangeTest(
             p.change_min_window, p.change_max_window_s, p.ring_size, p.change_threshold
@@ -1126,6 +1137,7 @@ class TensionFilter:
         self._prior_std = (math.sqrt(v0), math.sqrt(v1), math.sqrt(v2))
         self._noise = NoiseEstimate(self._prior_var, p.noise_prior_samples)
         self._dt_mean = math.nan
+        self._youth_floor = (math.nan, 1.0)  # (dt_mean, the tests' youth floor at it)
         self.trace: list[FilterStep] | None = None
         """Every step from :meth:`start_trace` on (None: not recorded, the default)."""
         self.reset()
@@ -1181,45 +1193,10 @@ class TensionFilter:
         self._kf.P = [max(P[0], r[0]), max(P[1], r[1]), max(P[2], r[2])]
         self._clear_windows()
 
-    def restart_from(
-        self,
-        mean_n: Sequence[float],
-        var_n2: Sequence[float],
-        noise_var_n2: tuple[float, float, float],
-    ) -> None:
-        """x = ``mean_n``, P = ``var_n2`` per axis: a change found outside the filter
-        (:class:`~groundstation.tension_change.HoverChangeTest`, the samples since a tug),
-        whose observations have the long-run variance ``noise_var_n2`` (N^2; P is held as
-        a share of it, so the next step does not rescale it); the change, step and drift
-        windows start again."""
-        if not self._initialized:
-            return
-        self._kf.set(list(mean_n), list(var_n2))
-        self._r_prev = noise_var_n2
-        self._clear_windows()
-
     @property
     def dt_mean_s(self) -> float:
         """The mean sample spacing, s (NaN before two samples)."""
         return self._dt_mean
-
-    def hover_change_test(self) -> HoverChangeTest:
-        """A :class:`~groundstation.tension_change.HoverChangeTest` with this filter's fast
-        test (windows, threshold) and noise estimate (prior, memory, warm-up, gap); the
-        level's memory is the filter's shortest at hover (``hover_time_constant_s``)."""
-        p = self.params
-        return HoverChangeTest(
-            p.change_min_window,
-            p.change_max_window_s,
-            p.ring_size,
-            p.change_threshold,
-            self._prior_var,
-            p.noise_prior_samples,
-            p.noise_time_constant_s,
-            p.noise_warmup_samples,
-            p.gap_s,
-            p.hover_time_constant_s,
-        )
 
     def _new_regime(self) -> None:
         """Clears what belongs to one stretch of samples (not the noise statistics)."""
@@ -1232,6 +1209,7 @@ class TensionFilter:
         self._drift.new_regime()
         self._change.clear()
         self._step.clear()
+        self._hover_v.active = False
 
     def learn_noise(self, tension_obs_world_n: ArrayLike, dt_s: float) -> None:
         """Learns the observation noise from a sample whose mean is no tension.
@@ -1309,6 +1287,7 @@ class TensionFilter:
         quat_wxyz: ArrayLike | None = None,
         thrust_axis_world: tuple[float, float, float] | None = None,
         noise_var_n2: tuple[float, float, float] | None = None,
+        hover_model_world_n: Sequence[float] | None = None,
     ) -> TensionEstimate:
         """One filter step with an observation (``eq:sysk1``, ``eq:sysk2``).
 
@@ -1332,6 +1311,10 @@ class TensionFilter:
                 caller knows it better than the filter's estimate (the accelerometer
                 model after a tug under a hover, whose noise the filter's estimate, made
                 on the hover model's observations, does not hold); None: the estimate.
+            hover_model_world_n: The thrust balance ``m·g·e3 − R·u·F`` of this sample,
+                world frame, N, while the drone hovers (None: it does not): the velocity
+                joins the state (:class:`~groundstation.tension_kalman.HoverVelocity`) and
+                ``v = 0`` is observed beside the tension.
 
         Returns:
             The estimate after this step.
@@ -1395,12 +1378,26 @@ class TensionFilter:
             d0, d1, d2 = r0 / r_prev[0], r1 / r_prev[1], r2 / r_prev[2]
             if abs(d0 - 1.0) > 0.01 or abs(d1 - 1.0) > 0.01 or abs(d2 - 1.0) > 0.01:
                 kf.rescale([d0, d1, d2])
+                if self._hover_v.active:
+                    self._hover_v.rescale([d0, d1, d2])
                 self._r_prev = r
         else:
             self._r_prev = r
-        # The youth factor of the change tests (and of the drift statistic), >= 1.
+        # The youth factor of the drift statistic, >= 1; the change tests' never falls
+        # below the noise level's own scatter at its memory (class docstring, *Tug
+        # detection*): youth_factor of the samples the level remembers.
         k = noise.samples
         youth = youth_factor(k) if estimate_noise and k < 1000 else 1.0
+        test_youth = youth
+        if estimate_noise and dt_mean == dt_mean and dt_mean > 0.0:
+            floor = self._youth_floor
+            if floor[0] != dt_mean:
+                floor = self._youth_floor = (
+                    dt_mean,
+                    level_scatter_factor(p.noise_time_constant_s / dt_mean),
+                )
+            if floor[1] > youth:
+                test_youth = floor[1]
         # This step's time constant: the hover one (hover_time_constant, written out),
         # shortened by the drift adaptation.
         tau_hover = p.hover_time_constant_s
@@ -1417,9 +1414,26 @@ class TensionFilter:
             dt_mean = dt
         # Q = q dt I per axis, q = r dt_mean / tau^2 (tau: hover, restart or drift).
         c = dt_mean / (tau * tau) * dt
-        kf.predict([r0 * c, r1 * c, r2 * c])  # x- = x,  P- = P + Q
+        q = (r0 * c, r1 * c, r2 * c)
+        x_prev = kf.x
+        kf.predict(q)  # x- = x,  P- = P + Q
+        a_pred = kf.P
         # K = P- / (P- + R), x = x- + K (y - x-), Joseph P; w = (y - x-) / sqrt(S)
-        w = kf.update(z, [r0, r1, r2])
+        w = kf.update(z, r)
+        hv = self._hover_v
+        if hover_model_world_n is None or dt <= 0.0:
+            hv.active = False
+        else:
+            # The velocity beside the tension (HoverVelocity): m dv/dt = T - h, and v = 0
+            # observed with variance sigma_v^2 T_c / dt.
+            vv = p.hover_velocity_std_mps * p.hover_velocity_std_mps
+            if not hv.active:
+                hv.start(vv)
+            a_noise = p.thrust_noise_n / p.mass_kg  # q_v: the thrust's noise as accel.
+            hv.step(
+                kf, x_prev, a_pred, q, hover_model_world_n, r, w, dt, p.mass_kg,
+                a_noise * a_noise * dt_mean, vv * p.hover_velocity_time_s / dt,
+            )  # fmt: skip
         self._samples += 1
         warming = estimate_noise and noise.samples < p.noise_warmup_samples
         lazy: LazyChangeStatistic | None = None
@@ -1433,17 +1447,17 @@ class TensionFilter:
             self._drift.push(w, dt)
             if self._change.push(z, w):
                 # No window can be above the threshold: the statistic is computed if read.
-                lazy = self._change.lazy_statistic(self._dt_mean, youth)
+                lazy = self._change.lazy_statistic(self._dt_mean, test_youth)
                 stat, window = 0.0, 0
             else:
-                stat, window = self._change.evaluate(self._dt_mean, youth)
+                stat, window = self._change.evaluate(self._dt_mean, test_youth)
         change = stat > p.change_threshold
         if change:
             # Restart from the observations since the change (x = their mean, P = R / n).
             self._restart(self._change.mean_of_window(window), window, r)
         else:
             step_stat, window, mean, h_step = self._step.statistic(
-                z, r, self._dt_mean, youth, noise if estimate_noise else None
+                z, r, self._dt_mean, test_youth, noise if estimate_noise else None
             )
             change = step_stat > h_step
             if change:
@@ -1456,7 +1470,7 @@ class TensionFilter:
         if not warming:
             self._step.push(z)
         if self.trace is not None:
-            self._record("update", z, (r0 * c, r1 * c, r2 * c), r, window if change else 0)
+            self._record("update", z, q, r, window if change else 0)
         return self._publish(change, stat if lazy is None else lazy, scale, tau)
 
     def coast(self, dt_s: float) -> TensionEstimate | None:
@@ -1487,6 +1501,7 @@ class TensionFilter:
             r[2] * dt_mean / (tau * tau) * dt,
         )
         self._kf.predict(q)  # P = P + Q
+        self._hover_v.active = False  # no observation: the hover's velocity is not followed
         if self.trace is not None:
             self._record("coast", None, q, None, 0)
         return self._publish(False, 0.0, 1.0, tau)
@@ -1535,6 +1550,7 @@ class TensionFilter:
         sums (and the one before them, its baseline) as the start of its next reference.
         """
         self._kf.set(mean_n, [r[0] / window, r[1] / window, r[2] / window])  # P = R / n
+        self._hover_v.active = False
         self._change.clear()
         self._step.restart(window)
         self._drift.clear()
@@ -1620,6 +1636,17 @@ def _finite3(value: ArrayLike, name: str) -> tuple[float, float, float]:
     if type(value) is np.ndarray and value.dtype is _F64 and value.shape == _SHAPE3:
         a, b, c = value.tolist()
         if _isfinite(a) and _isfinite(b) and _isfinite(c):
+            return a, b, c
+    elif type(value) is tuple and len(value) == 3:
+        a, b, c = value
+        if (
+            type(a) is float
+            and type(b) is float
+            and type(c) is float
+            and _isfinite(a)
+            and _isfinite(b)
+            and _isfinite(c)
+        ):
             return a, b, c
     a, b, c = _vector3(value, name).tolist()
     return a, b, c

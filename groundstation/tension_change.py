@@ -29,9 +29,9 @@ from groundstation.tension_noise import NoiseEstimate
 
 __all__ = [
     "ChangeTest",
-    "HoverChangeTest",
     "LazyChangeStatistic",
     "StepTest",
+    "level_scatter_factor",
     "scan_threshold",
     "step_youth_factor",
     "youth_factor",
@@ -102,6 +102,19 @@ def youth_factor(noise_samples: int) -> float:
     if k < 1000:
         return 1.0 + 3.0 * math.sqrt(2.0 / max(k, 1)) * (1.0 - k / 1000.0)
     return 1.0
+
+
+def level_scatter_factor(memory_samples: float) -> float:
+    """The change tests' floor of the youth factor, >= 1: ``1 + 3 sqrt(2 / k)`` unfaded,
+    k the samples the noise level remembers (``noise_time_constant_s / dt_mean``).
+
+    The level is an exponential mean, so its scatter never falls below that of a
+    k-sample mean square (:func:`youth_factor`'s bound without its fade-out): a level 6 %
+    low reads a window's statistic 6 % high, and over hours the level is low often enough
+    that a threshold set for a known variance (50, ~0.005 false detections per hour by
+    :func:`scan_threshold`) fired 4 times in 90 hours of simulated hover at 1 and 2 m/s^2
+    (benchmarks/bench_step_test.py)."""
+    return 1.0 + 3.0 * math.sqrt(2.0 / max(memory_samples, 1.0))
 
 
 def step_youth_factor(youth: float, blocks: int) -> float:
@@ -618,153 +631,3 @@ class StepTest:
         stats = np.einsum("ij,ij->i", d, d / var) / youth
         best = int(stats.argmax())
         return float(stats[best]), int(n_int[best]), post[best].tolist(), threshold
-
-
-class HoverChangeTest:
-    """The fast test on the accelerometer model while the filter fuses the hover model.
-
-    While the drone hovers, the filter's observation takes its low band from the hover
-    model (:mod:`groundstation.slow_accel`, ``m·g·e3 − R·u·F``), which sees a tug only as
-    the drone's controller answers it, over 0.3–1 s; until then the filter's own tests see
-    nothing. The accelerometer model ``m·R·(f − β) − R·u·F`` (``eq:NE_tether``) sees it at
-    once, under the vibration. This is the fast test (:class:`ChangeTest`: the same windows,
-    shortest window and threshold as the filter's) on that observation against its own
-    level before the step, whitened by ``sqrt(v + r)``: r the accelerometer model's
-    long-run variance measured on line by its own
-    :class:`~groundstation.tension_noise.NoiseEstimate` (the filter's measures the blended
-    observation, whose low band is the hover model's), the level μ the mean of the
-    hover's samples so far, exponential over ``level_time_constant_s`` once it holds that
-    long, v the level's variance (r/n, then r·k/(2 − k) for the gain k). Its own level, not
-    the filter's estimate: when the drone starts to move from a hover, the hover model (and
-    the filter with it) reads its acceleration ``−m·a`` as tension while the accelerometer
-    model, which is the tension whatever the acceleration, stays; only a change of the
-    tension moves it. It runs only while the hover model is fused; out of the hover the
-    filter observes the accelerometer model itself.
-
-    A detection says where the step began (the window) and what the tension is since: the
-    mean of the accelerometer model over the window, with variance ``r / n``.
-
-    Args:
-        min_window: Shortest window, samples.
-        max_window_s: Longest window, s.
-        size: Capacity of the history, samples.
-        threshold: The detection threshold, dimensionless.
-        prior_var_n2: Prior per-sample variance of the accelerometer model per world axis,
-            N^2.
-        prior_samples: Weight of the prior, samples.
-        noise_time_constant_s: Memory of the noise level, s.
-        warmup_samples: Differences of the noise estimate before the test runs.
-        gap_s: A time step longer than this breaks the windows, s.
-        level_time_constant_s: Memory of the level μ, s (long against the longest window,
-            so that a step is not taken into μ before it is found).
-    """
-
-    __slots__ = (
-        "_gap_s",
-        "_level",
-        "_level_n",
-        "_level_tau_s",
-        "_noise",
-        "_tau_s",
-        "_test",
-        "_warm",
-        "noise_var_n2",
-    )
-
-    def __init__(
-        self,
-        min_window: int,
-        max_window_s: float,
-        size: int,
-        threshold: float,
-        prior_var_n2: tuple[float, float, float],
-        prior_samples: float,
-        noise_time_constant_s: float,
-        warmup_samples: int,
-        gap_s: float,
-        level_time_constant_s: float,
-    ) -> None:
-        self._test = ChangeTest(min_window, max_window_s, size, threshold)
-        self._noise = NoiseEstimate(prior_var_n2, prior_samples)
-        self._tau_s = noise_time_constant_s
-        self._warm = warmup_samples
-        self._gap_s = gap_s
-        self._level_tau_s = level_time_constant_s
-        self._level: tuple[float, float, float] | None = None  # μ; None: not hovering
-        self._level_n = 0  # samples in μ
-        self.noise_var_n2 = prior_var_n2
-        """The accelerometer model's long-run variance per world axis after the last
-        sample, N^2 (the filter's R while it observes that model after a detection)."""
-
-    def break_chain(self) -> None:
-        """A gap or a restart of the stream: the windows, the level and the noise's sample
-        chain (samples either side of a gap are not one hover)."""
-        self._noise.break_chain()
-        self._test.clear()
-        self._level = None
-
-    def push(
-        self,
-        y_n: tuple[float, float, float],
-        dt_s: float,
-        dt_mean_s: float,
-        hovering: bool,
-    ) -> tuple[list[float], tuple[float, float, float], int] | None:
-        """Takes one accelerometer-model observation in the air.
-
-        Args:
-            y_n: The accelerometer model's tension, world frame, N.
-            dt_s: Time since the previous one, s.
-            dt_mean_s: The mean sample spacing, s (NaN: unknown).
-            hovering: The filter's observation of this sample was the hover model's.
-
-        Returns:
-            None, or at a detection ``(mean, variance, window)``: the accelerometer model's
-            mean over the window since the step (N), its variance (N^2), its length
-            (samples).
-        """
-        if dt_s > self._gap_s:
-            self.break_chain()
-        noise = self._noise
-        r0, r1, r2 = self.noise_var_n2 = noise.push(y_n, dt_s, self._tau_s, self._warm)
-        test = self._test
-        if not hovering or noise.samples < self._warm:
-            if self._level is not None:
-                test.clear()
-                self._level = None
-            return None
-        y0, y1, y2 = y_n
-        level = self._level
-        if level is None:
-            # The hover begins: its level starts from this sample.
-            self._level = (y0, y1, y2)
-            self._level_n = 1
-            return None
-        m0, m1, m2 = level
-        n = self._level_n
-        k = dt_s / self._level_tau_s  # the exponential mean's gain, at most 1
-        if k > 1.0:
-            k = 1.0
-        # μ's variance over r: 1/n while a running mean, k/(2 − k) once an exponential one.
-        f = k / (2.0 - k) if k * n > 1.0 else 1.0 / n
-        d0, d1, d2 = y0 - m0, y1 - m1, y2 - m2
-        w = (
-            d0 / math.sqrt(r0 * (1.0 + f)),
-            d1 / math.sqrt(r1 * (1.0 + f)),
-            d2 / math.sqrt(r2 * (1.0 + f)),
-        )
-        # μ ← μ + g (y − μ): the running mean of the hover's samples, then their
-        # exponential mean over the level's time constant.
-        g = k if k * (n + 1) > 1.0 else 1.0 / (n + 1)
-        self._level = (m0 + g * d0, m1 + g * d1, m2 + g * d2)
-        self._level_n = n + 1
-        if test.push(y_n, w):
-            return None
-        n = noise.samples
-        stat, window = test.evaluate(dt_mean_s, youth_factor(n) if n < 1000 else 1.0)
-        if stat <= test.threshold:
-            return None
-        mean = test.mean_of_window(window)
-        test.clear()
-        self._level = None  # the next hover starts its own level again
-        return mean, (r0 / window, r1 / window, r2 / window), window

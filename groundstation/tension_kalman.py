@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-__all__ = ["DiagonalKalman"]
+__all__ = ["DiagonalKalman", "HoverVelocity"]
 
 
 class DiagonalKalman:
@@ -92,3 +92,135 @@ class DiagonalKalman:
         for i in range(3):
             sd = math.sqrt(d[i])
             P[i] = P[i] * (sd * sd)  # P = D P D
+
+
+class HoverVelocity:
+    """The drone's velocity beside the tension while it hovers: a second state per axis.
+
+    Newton along each world axis is ``m·dv/dt = T − h`` with h the thrust balance
+    ``m·g·e3 − R·u·F`` (the observation stage's hover model: what the tension is when the
+    drone does not accelerate). A hovering drone's velocity stays small: ``v = 0`` with
+    variance ``σ_v²·T_c/dt`` per sample is an observation (σ_v the hover's velocity
+    scatter, T_c its correlation time: over T_c it counts as one look at v). With the
+    tension T a random walk, the filter on (T, v) weighs the accelerometer model
+    (``z = T + noise``, :meth:`DiagonalKalman.update`) against the thrust balance by what
+    each can be off: the accelerometer model by its vibration, the thrust balance's mean
+    over t by ``m·Δv/t`` (``eq:NE_tether`` with the velocity as a state), Δv bounded by σ_v.
+    A settling drone whose velocity changes by more than σ_v biases the estimate as a mean
+    of h would (m·Δv/t), and its σ does not show it. The tension part is
+    :class:`DiagonalKalman`'s x and P; this
+    class holds per axis v, ``b = cov(T, v)`` and ``c = var(v)``, and the equations,
+    written out. Active from :meth:`start` (the hover begins: v = 0, var σ_v², no
+    correlation) until :meth:`stop`. Tested against filterpy's ``KalmanFilter`` on the
+    2-state model (tests/test_hover_velocity.py).
+    """
+
+    __slots__ = ("active", "b", "c", "v")
+
+    def __init__(self) -> None:
+        self.active = False
+        self.v = [0.0, 0.0, 0.0]
+        self.b = [0.0, 0.0, 0.0]
+        self.c = [0.0, 0.0, 0.0]
+
+    def start(self, velocity_var_m2ps2: float) -> None:
+        """The hover begins: v = 0 with variance ``velocity_var_m2ps2``, uncorrelated."""
+        self.active = True
+        self.v = [0.0, 0.0, 0.0]
+        self.b = [0.0, 0.0, 0.0]
+        self.c = [velocity_var_m2ps2] * 3
+
+    def stop(self) -> None:
+        """The hover ends (or the tension restarts): v is no longer followed."""
+        self.active = False
+
+    def step(
+        self,
+        kf: DiagonalKalman,
+        x_prev: Sequence[float],
+        a_pred: Sequence[float],
+        q_n2: Sequence[float],
+        hover_model_n: Sequence[float],
+        r_n2: Sequence[float],
+        w: Sequence[float],
+        dt_s: float,
+        mass_kg: float,
+        accel_noise_m2ps3: float,
+        rest_var_m2ps2: float,
+    ) -> None:
+        """The velocity's part of one step, after ``kf.predict(q_n2)`` and ``kf.update``
+        (whose T part is the same in the 2-state filter: T does not depend on v in F, and
+        the accelerometer model observes T alone). ``x_prev``: T before the step, N;
+        ``a_pred``: var(T) after the prediction, N^2; ``w``: the update's whitened
+        innovation (:func:`_hover_axis` has the equations)."""
+        d = dt_s / mass_kg
+        qv = accel_noise_m2ps3 * dt_s
+        x, P, v, b, c = kf.x, kf.P, self.v, self.b, self.c
+        x0, p0, v0, b0, c0 = _hover_axis(
+            x[0], P[0], x_prev[0], a_pred[0], q_n2[0], hover_model_n[0], r_n2[0], w[0],
+            v[0], b[0], c[0], d, qv, rest_var_m2ps2,
+        )  # fmt: skip
+        x1, p1, v1, b1, c1 = _hover_axis(
+            x[1], P[1], x_prev[1], a_pred[1], q_n2[1], hover_model_n[1], r_n2[1], w[1],
+            v[1], b[1], c[1], d, qv, rest_var_m2ps2,
+        )  # fmt: skip
+        x2, p2, v2, b2, c2 = _hover_axis(
+            x[2], P[2], x_prev[2], a_pred[2], q_n2[2], hover_model_n[2], r_n2[2], w[2],
+            v[2], b[2], c[2], d, qv, rest_var_m2ps2,
+        )  # fmt: skip
+        kf.x = [x0, x1, x2]
+        kf.P = [p0, p1, p2]
+        self.v = [v0, v1, v2]
+        self.b = [b0, b1, b2]
+        self.c = [c0, c1, c2]
+
+    def rescale(self, d: list[float]) -> None:
+        """P's tension part scaled by d (:meth:`DiagonalKalman.rescale`): cov(T, v) by √d."""
+        b = self.b
+        for i in range(3):
+            b[i] *= math.sqrt(d[i])
+
+
+def _hover_axis(
+    x: float,
+    P: float,
+    x_prev: float,
+    a_pred: float,
+    q: float,
+    h: float,
+    r: float,
+    w: float,
+    v: float,
+    b: float,
+    c: float,
+    d: float,
+    qv: float,
+    rest_var: float,
+) -> tuple[float, float, float, float, float]:
+    """One axis of :meth:`HoverVelocity.step`: state (T, v), covariance [[a, b], [b, c]].
+
+    Prediction with F = [[1, 0], [d, 1]] (d = dt/m) and Q = diag(q, qv):
+    ``v- = v + d·(T − h)``, ``b- = b + d·a``, ``c- = c + 2·d·b + d²·a + qv``, ``a- = a + q``
+    (a = a- − q: var(T) before the tension's Q). The accelerometer model's update
+    (H = [1, 0], S = a- + r, innovation ``nu = w·sqrt(S)``) moves v by ``(b-/S)·nu``,
+    ``c = c- − b-²/S``, ``b = (1 − a-/S)·b-`` (x and a are ``kf.update``'s). Then the
+    hover's observation ``0 = v + noise`` (H = [0, 1], variance ``rest_var``):
+    ``K = (b, c)/(c + rest_var)``, ``nu = −v``, P = P − K·(b, c). Returns x, a, v, b, c."""
+    a = a_pred - q
+    v += d * (x_prev - h)
+    c += 2.0 * d * b + d * d * a + qv
+    b += d * a
+    s = a_pred + r
+    kv = b / s
+    v += kv * w * math.sqrt(s)
+    c -= kv * b
+    b -= a_pred / s * b
+    s = c + rest_var
+    kt = b / s
+    kv = c / s
+    x -= kt * v  # nu = 0 − v
+    P -= kt * b
+    b_new = b - kt * c
+    c -= kv * c
+    v -= kv * v
+    return x, P, v, b_new, c

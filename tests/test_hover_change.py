@@ -1,13 +1,16 @@
-"""A tug under a hover, found on the accelerometer model (tension_change.HoverChangeTest),
-and what the estimator does with it (the filter restarts, the hover ends)."""
+"""A tug under a hover: found in the filter's own innovations (the hover's thrust balance
+enters through the velocity state, tension_kalman.HoverVelocity, so the accelerometer
+model is the filter's observation throughout), and the hover ends (slow_accel.end_hover)."""
 
 from __future__ import annotations
 
-import math
+import json
 
 import numpy as np
 import pytest
 
+from groundstation.bus import Sample
+from groundstation.pipeline import Pipeline
 from groundstation.slow_accel import (
     HOVER_MEAN_S,
     SlowAccelParams,
@@ -15,78 +18,10 @@ from groundstation.slow_accel import (
     end_hover,
     slow_accel_step,
 )
-from groundstation.tension import TensionFilter, TensionFilterParams
+from tests.test_perf_equivalence import HOVER_N, _telemetry, pinned_settings
 
 DT_S = 0.01
-SIGMA_N = 0.015
-"""Per-sample noise of the accelerometer model, N: 0.5 m/s² of vibration on 30 g."""
 LEVEL = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
-
-
-def _run(
-    test: object, ys: np.ndarray, hovering: bool = True
-) -> list[tuple[int, tuple[list[float], tuple[float, ...], int]]]:
-    found = []
-    for i, y in enumerate(ys):
-        out = test.push(  # type: ignore[attr-defined]
-            (float(y[0]), float(y[1]), float(y[2])), DT_S, DT_S, hovering
-        )
-        if out is not None:
-            found.append((i, out))
-    return found
-
-
-def _test() -> object:
-    return TensionFilter(TensionFilterParams()).hover_change_test()
-
-
-def test_white_noise_at_a_constant_tension_is_no_tug() -> None:
-    """Ten minutes of hover at 100 Hz: no detection (the test's threshold is the filter's
-    fast test's, 50 on a chi-square with 3 dof per window)."""
-    rng = np.random.default_rng(7)
-    level = np.array([-0.015, 0.0, -0.01])
-    ys = level + rng.normal(0.0, SIGMA_N, (60_000, 3))
-    assert _run(_test(), ys) == []
-
-
-def test_a_step_is_found_within_its_information_limit_and_its_level_measured() -> None:
-    """A 30 mN step along x, 2 σ per sample: found within the samples whose non-centrality
-    n·(step/σ)² reaches the threshold times the noise shape's prior (κ = 1.5, so that n is
-    about 19), and restarted at the level since the step."""
-    rng = np.random.default_rng(3)
-    level = np.array([-0.015, 0.0, -0.01])
-    step = np.array([-0.030, 0.0, 0.0])
-    ys = level + rng.normal(0.0, SIGMA_N, (1000, 3))
-    ys[500:] += step
-    found = _run(_test(), ys)
-    assert len(found) >= 1
-    i, (mean, var, window) = found[0]
-    limit = math.ceil(50.0 * 1.5 * SIGMA_N**2 / 0.030**2)
-    assert 500 <= i < 500 + 2 * limit
-    assert abs(window - (i - 499)) <= 3 + 0.3 * (i - 499)
-    truth = level + step
-    assert np.all(np.abs(np.array(mean) - truth) < 4.0 * np.sqrt(var))
-    assert np.all(np.array(var) > 0.0)
-
-
-def test_out_of_the_hover_it_does_not_run() -> None:
-    """Out of the hover the filter observes the accelerometer model itself and its own
-    tests see a step: this one stays silent."""
-    rng = np.random.default_rng(3)
-    level = np.array([-0.015, 0.0, -0.01])
-    ys = level + rng.normal(0.0, SIGMA_N, (1000, 3))
-    ys[500:] += (-0.030, 0.0, 0.0)
-    assert _run(_test(), ys, hovering=False) == []
-
-
-def test_a_gap_breaks_the_windows() -> None:
-    """A step across a gap longer than the filter's gap_s is no evidence: the windows start
-    again after it (and fill before they can detect)."""
-    test = _test()
-    level = (-0.015, 0.0, -0.01)
-    for _ in range(200):
-        assert test.push(level, DT_S, DT_S, True) is None  # type: ignore[attr-defined]
-    assert test.push((-0.2, 0.0, -0.01), 1.0, DT_S, True) is None  # type: ignore[attr-defined]
 
 
 def _hovering(
@@ -124,41 +59,7 @@ def test_end_hover_hands_the_band_back_and_holds_the_hover_off_for_one_mean_wind
     assert all(flags[first:])
 
 
-def test_the_filter_restarts_where_the_hover_test_says() -> None:
-    filt = TensionFilter(TensionFilterParams())
-    filt.update((0.0, 0.0, 0.0), DT_S)
-    filt.restart_from([-0.04, 0.0, -0.01], [1e-5, 2e-5, 3e-5], (1e-4, 1e-4, 1e-4))
-    est = filt.coast(0.0)
-    assert est is not None
-    assert est.tension_world_n.tolist() == [-0.04, 0.0, -0.01]
-    assert np.allclose(est.std_n**2, [1e-5, 2e-5, 3e-5])
-    fresh = TensionFilter(TensionFilterParams())
-    fresh.restart_from([1.0, 1.0, 1.0], [1.0, 1.0, 1.0], (1.0, 1.0, 1.0))  # nothing to restart
-    assert fresh.estimate is None
-
-
-def test_a_stamp_jump_under_a_hover_is_no_error_and_no_tug() -> None:
-    """Telemetry whose stamp jumps forward (a clock glitch) while the drone hovers: the
-    test starts its level again after the gap instead of failing on it (a 12 s jump once
-    divided by zero)."""
-    test = _test()
-    rng = np.random.default_rng(9)
-    level = np.array([-0.015, 0.0, -0.01])
-    for y in level + rng.normal(0.0, SIGMA_N, (300, 3)):
-        test.push((float(y[0]), float(y[1]), float(y[2])), DT_S, DT_S, True)  # type: ignore[attr-defined]
-    for jump_s in (12.0, 15.0, 1e6):
-        y = (float(level[0]), float(level[1]), float(level[2]))
-        assert test.push(y, jump_s, DT_S, True) is None  # type: ignore[attr-defined]
-        assert test.push(y, DT_S, DT_S, True) is None  # type: ignore[attr-defined]
-
-
 def test_the_pipeline_answers_a_stamp_jump_under_a_hover() -> None:
-    import json
-
-    from groundstation.bus import Sample
-    from groundstation.pipeline import Pipeline
-    from tests.test_perf_equivalence import HOVER_N, _telemetry, pinned_settings
-
     rng = np.random.default_rng(3)
     pipe = Pipeline(pinned_settings())
     for k in range(600):
@@ -169,3 +70,32 @@ def test_the_pipeline_answers_a_stamp_jump_under_a_hover() -> None:
     body["stamp_s"] += 15.0
     out = pipe.handle(Sample(sample.key, json.dumps(body).encode()), 600 * 0.004)
     assert [o.key for o in out] == ["tether/cf1/estimate"]
+
+
+def test_a_tug_under_a_hover_restarts_the_filter_and_ends_the_hover() -> None:
+    """The pipeline hovers (the thrust balance fused through the velocity), then the
+    tether pulls 40 mN more along x; the telemetry's thrust does not answer (the controller
+    has not yet): the filter finds it in the accelerometer model and the hover ends."""
+    rng = np.random.default_rng(5)
+    pipe = Pipeline(pinned_settings())
+    for k in range(600):
+        pipe.handle(_telemetry(k, HOVER_N, rng), k * 0.004)
+    drone = pipe.drones["cf1"]
+    assert drone.slow.quasi_static
+    before = drone.filter_control.change_detections
+    pulled = HOVER_N + np.array([0.040, 0.0, 0.0])
+    ended_at = None
+    for k in range(600, 900):
+        msg = _telemetry(k, HOVER_N, rng)
+        body = json.loads(msg.payload)
+        # The accelerometer feels the pull (f = (thrust + T) / m); the thrust is unchanged.
+        body["accel_mps2"][0] += 0.040 / drone.params.drone.mass_kg
+        pipe.handle(Sample(msg.key, json.dumps(body).encode()), k * 0.004)
+        if drone.filter_control.change_detections > before:
+            ended_at = k
+            break
+    assert ended_at is not None, "no detection within 1.2 s of the pull"
+    assert not drone.slow.quasi_static and drone.slow.hover_hold_s > 0.0
+    est = drone.filter.estimate
+    assert est is not None
+    assert abs(est.tension_world_n[0] - pulled[0]) < 0.015

@@ -456,8 +456,8 @@ class DroneEstimator:
             observation=obs,
             dt_s=dt_s,
             accel_model_world_n=observed.accel_model_world_n if self.slow_active else None,
+            hover_model_world_n=observed.hover_model_world_n,
             hovering=was_hovering,
-            after_hover_change=self.slow_active and self.slow.hover_hold_s > 0.0,
         )
         if filtered.hover_change:
             # A tug under the hover: the accelerometer model carries the low band again.

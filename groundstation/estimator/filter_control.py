@@ -13,11 +13,13 @@ given the contact stage's ground/air decision and the observation:
   with the flight's noise.
 - **In the air** an observation updates the filter; none (thrust below the ratio: a dip, a
   hard descent, a touch-down not yet confirmed) coasts it on its last estimate.
-- **In a hover** (the filter's observation took its low band from the hover model) the
-  accelerometer model runs the fast change test beside it
-  (:class:`~groundstation.tension_change.HoverChangeTest`): a tug restarts the filter from
-  the accelerometer model's mean since the step, this sample is observed by the
-  accelerometer model, and the output says so (``hover_change``: the caller ends the hover).
+- **With the slow stage** the filter observes the accelerometer model
+  (``m·R·(f − β) − R·u·F``); **in a hover** it also takes the thrust balance (the hover
+  model) through the drone's velocity (:class:`~groundstation.tension_kalman.HoverVelocity`):
+  the hover's information enters as an equation of the filter, not as a replaced band of
+  the observation, so a tug shows in the filter's own innovations at once. A change found
+  while hovering ends the hover (``hover_change``: the caller ends it; the velocity no
+  longer stays small once the tension has changed).
 - A non-finite estimate restarts the filter before the drone's next message.
 
 :class:`FilterControl` owns the drone's TensionFilter (a mutable object, stepped in place:
@@ -81,11 +83,10 @@ def _floats3(v: object) -> list[float]:
 class FilterControl:
     """One drone's tension filter and when it runs (module doc)."""
 
-    __slots__ = ("change_detections", "filter", "hover_test", "prior", "rested")
+    __slots__ = ("change_detections", "filter", "prior", "rested")
 
     def __init__(self, params: TensionFilterParams) -> None:
         self.filter = TensionFilter(params)
-        self.hover_test = self.filter.hover_change_test()
         self.rested = False
         """Seen certainly on the ground (disarmed, low thrust) since the last lift-off: the
         filter then restarts from the lift-off prior."""
@@ -98,7 +99,6 @@ class FilterControl:
     def restart(self) -> None:
         """Forget the tension (a resumed stream, a non-finite estimate)."""
         self.filter.reset()
-        self.hover_test.break_chain()
         self.prior = None
 
     def step(
@@ -109,14 +109,13 @@ class FilterControl:
         observation: TensionObservation,
         dt_s: float,
         accel_model_world_n: tuple[float, float, float] | None = None,
+        hover_model_world_n: tuple[float, float, float] | None = None,
         hovering: bool = False,
-        after_hover_change: bool = False,
     ) -> FilterOutput:
         """One accepted message (module doc). ``accel_model_world_n``: the accelerometer
-        model's tension (None: the hover test does not run); ``hovering``: the
-        observation's low band is the hover model's; ``after_hover_change``: the hover
-        ended by a tug is held off (the observation is the accelerometer model, R its
-        variance from the hover test)."""
+        model's tension, which the filter observes in place of ``observation`` (None: the
+        slow stage is off); ``hover_model_world_n``: the thrust balance, used while
+        ``hovering``."""
         filt = self.filter
         tension_obs = observation.tension_world_n
         if on_ground:
@@ -128,10 +127,11 @@ class FilterControl:
                     filt.reset(prior_world_n=_ZEROS3, prior_std_n=LIFTOFF_PRIOR_STD_N)
                 else:
                     filt.reset()
-                self.hover_test.break_chain()
                 self.prior = self.rested
             if tension_obs is not None:
-                filt.learn_noise(tension_obs, dt_s)
+                filt.learn_noise(
+                    tension_obs if accel_model_world_n is None else accel_model_world_n, dt_s
+                )
             return _GROUND
         self.rested = False
         self.prior = None
@@ -141,22 +141,14 @@ class FilterControl:
             if est is None:  # nothing to coast before the first observation
                 return _GROUND
         else:
-            noise_var = None
-            z = tension_obs
-            if accel_model_world_n is not None:
-                test = self.hover_test
-                found = test.push(accel_model_world_n, dt_s, filt.dt_mean_s, hovering)
-                if found is not None:
-                    filt.restart_from(found[0], found[1], test.noise_var_n2)
-                    hover_change = True
-                    self.change_detections += 1
-                    # This sample observed by the accelerometer model too.
-                    z = accel_model_world_n  # type: ignore[assignment]
-                if hover_change or after_hover_change:
-                    noise_var = test.noise_var_n2
-            est = filt.update(z, dt_s, noise_var_n2=noise_var)
-            if est.change_detected and not hover_change:
+            est = filt.update(
+                tension_obs if accel_model_world_n is None else accel_model_world_n,
+                dt_s,
+                hover_model_world_n=hover_model_world_n if hovering else None,
+            )
+            if est.change_detected:
                 self.change_detections += 1
+                hover_change = hovering
         # Python floats from here on: a handful of numbers per message, for which numpy's
         # per-call overhead would cost more than the arithmetic.
         tension = _floats3(est.tension_world_n)

@@ -23,7 +23,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 from groundstation import slow_accel as slow_mod
-from groundstation.attitude import Rows
+from groundstation.attitude import GRAVITY_MPS2, Rows
 from groundstation.messages import Telemetry
 from groundstation.tension import (
     ObservationCalibration,
@@ -50,12 +50,18 @@ class Observed(NamedTuple):
             (``eq:NE_tether``), world frame, N: the observation before the hover model
             replaced its low band (``+ m·R·L``; the observation itself when L is zero or the
             slow stage is off); None when no tension is observed.
+        hover_model_world_n: the thrust balance ``m·g·e3 − R·u·F`` (+ the rotor drag),
+            world frame, N: the accelerometer model less ``m·a``, the acceleration the
+            accelerometer reads (``accel_model − m·(R·(f − β) − g·e3)``); what the tension
+            is when the drone does not accelerate. None as ``accel_model_world_n``, and
+            without the slow stage.
     """
 
     observation: TensionObservation
     accel_read_body_mps2: Vec3
     rotation_rows_world_body: Rows
     accel_model_world_n: Vec3 | None = None
+    hover_model_world_n: Vec3 | None = None
 
 
 def observe(
@@ -104,21 +110,34 @@ def observe(
         rotation_rows_world_body=rows,
     )
     accel_model: Vec3 | None = None
+    hover_model: Vec3 | None = None
     tension = obs.tension_world_n
     if tension is not None:
-        t0, t1, t2 = tension
+        t0, t1, t2 = tension.tolist()
         accel_model = (t0, t1, t2)
         if slow is not None:
+            (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = rows
             lx, ly, lz = slow.fast_body_mps2
             if lx != 0.0 or ly != 0.0 or lz != 0.0:
                 # + m·R·L: the low band the hover model replaced, back in.
-                (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = rows
                 accel_model = (
                     t0 + mass_kg * (r00 * lx + r01 * ly + r02 * lz),
                     t1 + mass_kg * (r10 * lx + r11 * ly + r12 * lz),
                     t2 + mass_kg * (r20 * lx + r21 * ly + r22 * lz),
                 )
-    return Observed(obs, accel_read, rows, accel_model)
+            # − m·(R·(f − β) − g·e3): f − β as observe_tension read it (its own bias
+            # subtracted), L not subtracted.
+            bx, by, bz = slow.bias_body_mps2
+            ax, ay, az = accel_read[0] - bx, accel_read[1] - by, accel_read[2] - bz
+            if calibration is not None:
+                bx, by, bz = calibration.accel_bias_mps2
+                ax, ay, az = ax - bx, ay - by, az - bz
+            hover_model = (
+                accel_model[0] - mass_kg * (r00 * ax + r01 * ay + r02 * az),
+                accel_model[1] - mass_kg * (r10 * ax + r11 * ay + r12 * az),
+                accel_model[2] - mass_kg * (r20 * ax + r21 * ay + r22 * az - GRAVITY_MPS2),
+            )
+    return Observed(obs, accel_read, rows, accel_model, hover_model)
 
 
 def learn_slow(
