@@ -1384,17 +1384,17 @@ class TensionFilter:
         else:
             self._r_prev = r
         # The youth factor of the drift statistic, >= 1; the change tests' never falls
-        # below the noise level's own scatter at its memory (class docstring, *Tug
-        # detection*): youth_factor of the samples the level remembers.
+        # below the noise estimate's own scatter once warm (level_scatter_factor).
         k = noise.samples
         youth = youth_factor(k) if estimate_noise and k < 1000 else 1.0
         test_youth = youth
-        if estimate_noise and dt_mean == dt_mean and dt_mean > 0.0:
+        spacing = self._dt_mean
+        if estimate_noise and spacing == spacing and spacing > 0.0:
             floor = self._youth_floor
-            if floor[0] != dt_mean:
+            if floor[0] != spacing:
                 floor = self._youth_floor = (
-                    dt_mean,
-                    level_scatter_factor(p.noise_time_constant_s / dt_mean),
+                    spacing,
+                    level_scatter_factor(p.noise_time_constant_s / spacing),
                 )
             if floor[1] > youth:
                 test_youth = floor[1]

@@ -105,16 +105,22 @@ def youth_factor(noise_samples: int) -> float:
 
 
 def level_scatter_factor(memory_samples: float) -> float:
-    """The change tests' floor of the youth factor, >= 1: ``1 + 3 sqrt(2 / k)`` unfaded,
-    k the samples the noise level remembers (``noise_time_constant_s / dt_mean``).
+    """The change tests' floor of the youth factor, >= 1: the noise estimate's own scatter
+    once it is warm, ``1 + 2 sqrt(2 / k + 1.3 / 239)``.
 
-    The level is an exponential mean, so its scatter never falls below that of a
-    k-sample mean square (:func:`youth_factor`'s bound without its fade-out): a level 6 %
-    low reads a window's statistic 6 % high, and over hours the level is low often enough
-    that a threshold set for a known variance (50, ~0.005 false detections per hour by
-    :func:`scan_threshold`) fired 4 times in 90 hours of simulated hover at 1 and 2 m/s^2
-    (benchmarks/bench_step_test.py)."""
-    return 1.0 + 3.0 * math.sqrt(2.0 / max(memory_samples, 1.0))
+    r = s_d kappa is measured, not known, and a window's statistic scales as 1 / r: a
+    level a few per cent low reads every window a few per cent high, and over hours it is
+    low often enough to matter. Thresholds set for a known variance (50, and the step
+    test's from :func:`scan_threshold`, both ~0.005 false detections per hour) fired 4
+    times in 90 hours of simulated hover at 1 and 2 m/s^2 (``benchmarks/bench_step_test.py
+    --minutes 60 --flights 30``, the fast test and the step test alike). The level s_d is
+    an exponential mean over ``memory_samples`` = tau / dt samples: a k = 2 tau / dt − 1
+    sample mean square's relative variance 2 / k; kappa's at its equilibrium count of 239
+    blocks is 1.3 / 239 (:func:`step_youth_factor`); 2 standard errors of their sum are
+    allowed for, as :func:`step_youth_factor` allows for kappa's while it is young. 1.17 at
+    ~95 Hz with the 5 s memory."""
+    k = max(2.0 * memory_samples - 1.0, 1.0)
+    return 1.0 + 2.0 * math.sqrt(2.0 / k + 1.3 / 239.0)
 
 
 def step_youth_factor(youth: float, blocks: int) -> float:

@@ -27,6 +27,7 @@ from groundstation.tension import (
     rotation_world_body,
     scan_threshold,
 )
+from groundstation.tension_change import level_scatter_factor
 
 MASS_KG = 0.030
 DT_S = 0.004  # 250 Hz
@@ -669,7 +670,9 @@ def test_ramp_is_tracked_without_divergence() -> None:
     err = np.abs(est - truth)[int(5.0 / DT_S) :]
     assert np.all(np.isfinite(est))
     assert err.max() <= 6e-3, err.max()
-    assert np.sqrt(np.mean(err**2)) <= 2.5e-3
+    # 2.55 mN since the change tests allow for the noise estimate's scatter (2.4 before;
+    # a ramp's steps are found a little later): level_scatter_factor.
+    assert np.sqrt(np.mean(err**2)) <= 2.6e-3
 
 
 def test_irregular_dt_and_gaps_do_not_diverge() -> None:
@@ -849,12 +852,14 @@ def step_detection_limit_s(r_n2: float, step_n: float, dt_s: float) -> float:
     """When a step's samples hold the step test's threshold h as non-centrality, s.
 
     ``n step^2 / (r (1 + n / m)) = h`` with m = ``long_reference_s`` of samples before it:
-    the information a test at that false-alarm rate needs (TensionFilter docstring).
+    the information a test at that false-alarm rate needs (TensionFilter docstring). h is
+    the threshold as the test applies it once its noise estimate is warm: the design's
+    times the noise estimate's scatter factor (``level_scatter_factor``).
     """
     filt = TensionFilter()
     design = filt.step_test_design(r_n2, dt_s)
     assert design is not None
-    h = design[2]
+    h = design[2] * level_scatter_factor(filt.params.noise_time_constant_s / dt_s)
     m = filt.params.long_reference_s / dt_s
     return h / (step_n**2 / r_n2 - h / m) * dt_s
 
@@ -880,10 +885,13 @@ def test_a_step_in_strong_coloured_noise_is_found_near_the_information_limit(
 ) -> None:
     """30 mN at 1 and 2 m/s^2, AR(1) rho = 0.3, jittered ~94 Hz, after 40 s of hover.
 
-    The information limit (``step_detection_limit_s``) is 0.86 s at 1 m/s^2 and 4.6 s at
-    2 m/s^2: at the limit about half the trials are detected, so the median delay is
-    bounded by 1.3 times it, every trial by the longest window (7.1 s) plus 1 s, and the
-    estimate is then within the information of the samples since the step.
+    The information limit (``step_detection_limit_s``, at the threshold as applied) is
+    ~1 s at 1 m/s^2 and ~5.6 s at 2 m/s^2: at the limit about half the trials are
+    detected, so the median delay is bounded by 1.3 times it, every detected trial by the
+    longest window (7.1 s) plus 1 s, and the estimate is then within the information of the
+    samples since the step. At 2 m/s^2 the 30 mN step's non-centrality over the longest
+    window is close to the threshold (which allows for the noise estimate's scatter,
+    ``level_scatter_factor``): one trial in eight may go unseen within the 9.5 s.
     """
     sigma_n = MASS_KG * accel_noise
     r = sigma_n**2 * 1.3 / 0.7
@@ -909,10 +917,12 @@ def test_a_step_in_strong_coloured_noise_is_found_near_the_information_limit(
                     # x = the mean of the window's samples: within 4 sigma of n samples
                     window_n = found / float(np.mean(dts))
                     assert np.linalg.norm(err) < 4.0 * math.sqrt(3 * r / window_n) + 3e-3
-        assert found is not None, f"not detected in 9.5 s (seed {seed})"
-        delays.append(found)
+        delays.append(math.inf if found is None else found)
+    missed = sum(d == math.inf for d in delays)
+    assert missed <= (0 if accel_noise < 2.0 else 1), delays
     limit_s = step_detection_limit_s(r, 0.030, float(np.mean(dts)))
     assert np.median(delays) <= 1.3 * limit_s, (np.round(delays, 2), limit_s)
+    delays = [d for d in delays if d != math.inf]
     # n_max: the window in which a 20 mN step reaches the sizing non-centrality
     design = TensionFilter().step_test_design(r, float(np.mean(dts)))
     assert design is not None
