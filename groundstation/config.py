@@ -258,16 +258,19 @@ class FilterSection(_Section):
     thrust, attitude and the thrust axis. Longer lets less of a sustained manoeuvre into the
     bias (error ≤ m·Δv/τ); shorter learns a bias never seen at rest sooner."""
     accel_hover_crossover_s: float = Field(0.3, ge=0.0)
-    """(added) While the drone hovers (1 s mean acceleration < 0.2 m/s², speed < 0.3 m/s),
-    the hover model replaces the accelerometer below ``1/(2π·this)``: its vibration noise
-    leaves the tension filter's band (groundstation.slow_accel), s; 0: off."""
+    """(added) 0 turns the hover off: the tension filter then observes the accelerometer
+    model alone. Otherwise, while the drone hovers (1 s mean acceleration < 0.2 m/s², speed
+    < 0.3 m/s), the filter also takes the thrust balance ``m·g·e3 − R·u·F`` through the
+    drone's velocity (groundstation.tension_kalman.HoverVelocity). Any other value than 0 or
+    0.3 is accepted with a warning: it was the crossover below which the hover model
+    replaced the accelerometer, s, which the velocity state replaced."""
     accel_hover_exit_window_s: float = Field(0.0, ge=0.0)
     """(added) A second, shorter mean for the hover test: the hover also ends when the
-    acceleration's mean over this window exceeds 4 of its own σ, s; 0: off. Since the hover's
-    change test on the accelerometer model ends a hover at a tug (always on), the short
-    window no longer speeds a tug up (it ends the hover on the acceleration before that test
-    can measure the step) and costs hover accuracy: docs/hover_exit.md measures both. Kept
-    for labs that set it."""
+    acceleration's mean over this window exceeds 4 of its own σ, s; 0: off. The filter
+    observes the accelerometer model in a hover too, so its change tests end a hover at a
+    tug; the short window does not speed a tug up (it ends the hover on the acceleration
+    before the tests can measure the step) and costs hover accuracy: docs/hover_exit.md
+    measures both. Kept for labs that set it."""
     accel_hover_noise_sigmas: float = Field(4.0, ge=0.0)
     """(added) The hover test's thresholds follow the vibration: the 1 s mean acceleration
     must stay below ``max(0.2 m/s², this × its own σ)`` and the accelerometer's speed below
@@ -282,6 +285,17 @@ class FilterSection(_Section):
     drag_velocity_time_constant_s: float = Field(8.0, gt=0.0)
     """(added) Without motion capture the rotor-drag term's velocity is the accelerometer's
     leaky integral with this time constant, s (groundstation.slow_accel)."""
+
+    @model_validator(mode="after")
+    def _crossover_without_meaning(self) -> FilterSection:
+        value = self.accel_hover_crossover_s
+        if value not in (0.0, 0.3):
+            _warn_once(
+                f"[filter] accel_hover_crossover_s = {value:g} is used only as on (> 0) or "
+                "off (0): the hover's thrust balance enters the tension filter through the "
+                "drone's velocity (a state of the filter), which replaced the crossover"
+            )
+        return self
 
 
 class LocalizationSection(_Section):

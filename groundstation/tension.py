@@ -897,6 +897,14 @@ class TensionFilter:
     per-sample variance instead, the filter would report a P 1.86-2.0 times too small and
     its change test would read its threshold of 50 as 25-27 on long windows.
 
+    **The hover's thrust balance** (``update(hover_model_world_n=...)``). While the caller
+    says the drone hovers, the drone's velocity joins the state on each axis,
+    ``m dv/dt = T - h`` with h the thrust balance ``m g e3 - R u F``, and ``v = 0`` is
+    observed with variance ``hover_velocity_std_mps^2 hover_velocity_time_s / dt``
+    (:class:`~groundstation.tension_kalman.HoverVelocity`): the accelerometer model (the
+    observation) and the thrust balance are weighed by what each can be off. A restart, a
+    reset, a gap or a coast stops it; the next hovering sample starts it at v = 0.
+
     **Process noise in seconds, memory from the noise.** A constant-tension filter in
     steady state is an exponential average with time constant tau = sqrt(r dt / q) (dt
     the sample spacing, q the process noise per second), so Q = q dt with
@@ -936,7 +944,11 @@ class TensionFilter:
     windows, since R is the long-run variance: a window of n samples counts as its
     effective sample size, never more, so the test errs toward silence on vibration.
     While the noise estimate is young the statistic is divided by an upper bound on its
-    error (``1 + 3 sqrt(2 / k)`` after k samples, fading by 1000), and the test waits for
+    error (``1 + 3 sqrt(2 / k)`` after k samples, fading by 1000), and never by less than
+    the warm estimate's own scatter allows for
+    (:func:`~groundstation.tension_change.level_scatter_factor`, 1.17 at ~95 Hz: without
+    it the thresholds below, set for a known noise, fired 4 times in 90 h of simulated
+    hover), both tests alike; and the test waits for
     ``noise_warmup_samples`` = 30 samples (0.3 s at 100 Hz) whose innovations were
     whitened with a noise of a few samples. The largest statistic is compared with
     ``change_threshold`` = 50: Bonferroni over 250 windows and 900 000 samples per hour

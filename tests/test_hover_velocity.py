@@ -10,11 +10,15 @@ thrust balance does not see yet is found in the accelerometer model's innovation
 
 from __future__ import annotations
 
+import logging
 import math
 
 import numpy as np
+import pytest
 from filterpy.kalman import KalmanFilter
 
+from groundstation import config as config_mod
+from groundstation.config import FilterSection
 from groundstation.tension import TensionFilter, TensionFilterParams
 from groundstation.tension_kalman import DiagonalKalman, HoverVelocity
 
@@ -117,3 +121,22 @@ def test_a_tug_under_the_hover_is_found() -> None:
             break
     limit_s = filt.params.change_threshold * 0.035**2 / 0.030**2 * 0.01
     assert found is not None and found - 5.0 < 1.5 * limit_s, (found, limit_s)
+
+
+def test_a_crossover_without_meaning_is_accepted_with_one_warning(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """``[filter] accel_hover_crossover_s``: only 0 (hover off) or on means something now;
+    another value is kept, with one warning that names what replaced it."""
+    config_mod._warned.clear()
+    with caplog.at_level(logging.WARNING, logger="groundstation.config"):
+        for _ in range(3):
+            sec = FilterSection(accel_hover_crossover_s=0.5)
+    assert sec.accel_hover_crossover_s == 0.5
+    said = [r.getMessage() for r in caplog.records]
+    assert len(said) == 1 and "velocity" in said[0] and "replaced" in said[0]
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="groundstation.config"):
+        FilterSection()
+        FilterSection(accel_hover_crossover_s=0.0)
+    assert caplog.records == []
