@@ -7,9 +7,10 @@ judged from 8 s. Per flight and world axis: the error's RMS against the median p
 ``tension_std_n`` (their ratio: about 1 for a consistent σ), and the tension filter's noise
 model at the end of the flight: ``s_d`` (half the mean squared first difference of its
 observation), ``κ`` (the long-run variance over ``s_d``, from 0.25 s block means) and
-``r = s_d·κ``, the filter's R (tension_noise.NoiseEstimate). While the drone hovers, the
-observation's band below the hover crossover (~0.5 Hz) is the hover model's; the blocks see
-the band above it, the accelerometer's. Takes ~10 s per flight.
+``r = s_d·κ``, the filter's R (tension_noise.NoiseEstimate), measured on the accelerometer
+model, which the filter observes; while the drone hovers the thrust balance enters through
+the velocity state (tension_kalman.HoverVelocity), and P is what σ_v allows it. Takes ~10 s
+per flight.
 """
 
 from __future__ import annotations
