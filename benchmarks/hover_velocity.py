@@ -61,10 +61,17 @@ def main(argv: list[str] | None = None) -> int:
     check_data(ap, args.data)
     print("| flight | quasi-static | velocity RMS about the stretch mean x / y / z, m/s |")
     print("| --- | ---: | --- |")
+    every: list[float] = []
     for name in DAYS:
         share, rms = flight(args.data / f"{name}.csv")
         cells = "under 0.5 s" if rms is None else " / ".join(f"{x:.3f}" for x in rms)
         print(f"| {name} | {100 * share:.0f} % | {cells} |")
+        every += [] if rms is None else rms.tolist()
+    if every:
+        print(
+            f"\nMedian over the flights' axes: {np.median(every):.3f} m/s "
+            f"({len(every)} axes, {min(every):.3f}–{max(every):.3f})."
+        )
     return 0
 
 

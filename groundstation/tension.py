@@ -686,7 +686,7 @@ class TensionFilterParams:
     drift_memory_s: float = 1.0
     gap_s: float = 0.25
     converged_min_samples: int = 25
-    hover_velocity_std_mps: float = 0.05
+    hover_velocity_std_mps: float = 0.02
     hover_velocity_time_s: float = 0.5
 
     def __post_init__(self) -> None:
