@@ -237,6 +237,8 @@ def test_without_a_rest_window_rest_is_turned_off_and_the_axis_kept(
 
     test = flight(spots, AXIS_TRUTH, seed=7, rest_s=2.0, accel_noise_mps2=0.1)  # from the floor
     fitted, _ = served_position_errors(written, test)
+    # The true calibration served as the written one is (--model full writes accel_slow =
+    # false: its fitted bias stands for the accelerometer's mean, so no hover either).
     truth_cfg = load_settings(
         None,
         {
@@ -244,6 +246,7 @@ def test_without_a_rest_window_rest_is_turned_off_and_the_axis_kept(
                 "thrust_scale": 0.93,
                 "thrust_axis_rad": [0.0, 0.035],
                 "accel_bias_mps2": [0.05, 0.0, 0.0],
+                "accel_slow": cal.accel_slow,
             }
         },
         use_env=False,
