@@ -1298,7 +1298,6 @@ class TensionFilter:
         dt_s: float,
         quat_wxyz: ArrayLike | None = None,
         thrust_axis_world: tuple[float, float, float] | None = None,
-        noise_var_n2: tuple[float, float, float] | None = None,
         hover_model_world_n: Sequence[float] | None = None,
     ) -> TensionEstimate:
         """One filter step with an observation (``eq:sysk1``, ``eq:sysk2``).
@@ -1319,10 +1318,6 @@ class TensionFilter:
             quat_wxyz: Unused; kept for callers of the earlier signature (the noise is
                 now measured per world axis, not derived from the thrust axis).
             thrust_axis_world: Unused, as ``quat_wxyz``.
-            noise_var_n2: This observation's long-run variance per axis, N^2, where the
-                caller knows it better than the filter's estimate (the accelerometer
-                model after a tug under a hover, whose noise the filter's estimate, made
-                on the hover model's observations, does not hold); None: the estimate.
             hover_model_world_n: The thrust balance ``m·g·e3 − R·u·F`` of this sample,
                 world frame, N, while the drone hovers (None: it does not): the velocity
                 joins the state (:class:`~groundstation.tension_kalman.HoverVelocity`) and
@@ -1359,8 +1354,6 @@ class TensionFilter:
             r = noise.push(z, dt, p.noise_time_constant_s, p.noise_warmup_samples)
         else:
             r = self._prior_var
-        if noise_var_n2 is not None:
-            r = noise_var_n2
         # R = the long-run variance r, not the per-sample s2: what the filter averages.
         r0, r1, r2 = r
 

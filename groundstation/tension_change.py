@@ -104,6 +104,13 @@ def youth_factor(noise_samples: int) -> float:
     return 1.0
 
 
+_KAPPA_VAR_PER_BLOCK = 1.3
+"""kappa's relative variance times its blocks (3 axes pooled, the squared second
+differences of neighbouring blocks correlated): relative standard error sqrt(1.3 / B)."""
+_KAPPA_BLOCKS = 239
+"""kappa's equilibrium block count: its 30 s exponential average of 0.25 s blocks."""
+
+
 def level_scatter_factor(memory_samples: float) -> float:
     """The change tests' floor of the youth factor, >= 1: the noise estimate's own scatter
     once it is warm, ``1 + 2 sqrt(2 / k + 1.3 / 239)``.
@@ -120,7 +127,7 @@ def level_scatter_factor(memory_samples: float) -> float:
     allowed for, as :func:`step_youth_factor` allows for kappa's while it is young. 1.17 at
     ~95 Hz with the 5 s memory."""
     k = max(2.0 * memory_samples - 1.0, 1.0)
-    return 1.0 + 2.0 * math.sqrt(2.0 / k + 1.3 / 239.0)
+    return 1.0 + 2.0 * math.sqrt(2.0 / k + _KAPPA_VAR_PER_BLOCK / _KAPPA_BLOCKS)
 
 
 def step_youth_factor(youth: float, blocks: int) -> float:
@@ -137,9 +144,12 @@ def step_youth_factor(youth: float, blocks: int) -> float:
         youth: The fast test's factor (:func:`youth_factor`).
         blocks: Blocks the noise shape has been averaged over, B.
     """
-    if blocks >= 239:
+    if blocks >= _KAPPA_BLOCKS:
         return youth
-    excess = 2.0 * (math.sqrt(1.3 / max(blocks, 1)) - math.sqrt(1.3 / 239.0))
+    excess = 2.0 * (
+        math.sqrt(_KAPPA_VAR_PER_BLOCK / max(blocks, 1))
+        - math.sqrt(_KAPPA_VAR_PER_BLOCK / _KAPPA_BLOCKS)
+    )
     return youth * min(1.0 + excess, 1.8)
 
 

@@ -111,8 +111,8 @@ class HoverVelocity:
     :class:`DiagonalKalman`'s x and P; this
     class holds per axis v, ``b = cov(T, v)`` and ``c = var(v)``, and the equations,
     written out. Active from :meth:`start` (the hover begins: v = 0, var σ_v², no
-    correlation) until :meth:`stop`. Tested against filterpy's ``KalmanFilter`` on the
-    2-state model (tests/test_hover_velocity.py).
+    correlation) until the filter clears ``active``. Tested against filterpy's
+    ``KalmanFilter`` on the 2-state model (tests/test_hover_velocity.py).
     """
 
     __slots__ = ("active", "b", "c", "v")
@@ -129,10 +129,6 @@ class HoverVelocity:
         self.v = [0.0, 0.0, 0.0]
         self.b = [0.0, 0.0, 0.0]
         self.c = [velocity_var_m2ps2] * 3
-
-    def stop(self) -> None:
-        """The hover ends (or the tension restarts): v is no longer followed."""
-        self.active = False
 
     def step(
         self,

@@ -460,7 +460,7 @@ class DroneEstimator:
             hovering=was_hovering,
         )
         if filtered.hover_change:
-            # A tug under the hover: the accelerometer model carries the low band again.
+            # A tug under the hover: the hover ends (its velocity no longer stays small).
             # The next hover averages afresh (new_hover above): the detection counted
             # makes change_detections differ from changes_at_hover_end.
             self.slow = slow_mod.end_hover(self.slow)

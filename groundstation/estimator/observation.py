@@ -53,8 +53,9 @@ class Observed(NamedTuple):
         hover_model_world_n: the thrust balance ``m·g·e3 − R·u·F`` (+ the rotor drag),
             world frame, N: the accelerometer model less ``m·a``, the acceleration the
             accelerometer reads (``accel_model − m·(R·(f − β) − g·e3)``); what the tension
-            is when the drone does not accelerate. None as ``accel_model_world_n``, and
-            without the slow stage.
+            is when the drone does not accelerate. Computed only while the slow stage
+            says the drone hovers (the filter uses it only then); None otherwise, and as
+            ``accel_model_world_n``.
     """
 
     observation: TensionObservation
@@ -125,6 +126,7 @@ def observe(
                     t1 + mass_kg * (r10 * lx + r11 * ly + r12 * lz),
                     t2 + mass_kg * (r20 * lx + r21 * ly + r22 * lz),
                 )
+        if slow is not None and slow.quasi_static:
             # − m·(R·(f − β) − g·e3): f − β as observe_tension read it (its own bias
             # subtracted), L not subtracted.
             bx, by, bz = slow.bias_body_mps2
