@@ -80,13 +80,12 @@ class SlowAccelParams:
         mocap_time_constant_s: low-pass of the motion-capture velocity (finite
             differences of positions) that the drag term uses, s.
         mocap_max_gap_s: motion capture older than this is not used, s.
-        hover_crossover_s: while quasi-static, the crossover below which the hover model
-            replaces the accelerometer (its vibration noise, not only its bias), s; 0: off.
+        hover: run the hover test (False: never quasi-static, the tension filter then
+            observes the accelerometer model alone; config ``[filter]
+            accel_hover_crossover_s = 0``).
         quasi_static_accel_mps2: quasi-static while the accelerometer's 1 s mean
             acceleration (bias removed) stays below this, m/s² ...
         quasi_static_speed_mps: ... and the drag's velocity below this, m/s.
-        release_time_constant_s: leaving quasi-static, the hover model hands the band back
-            to the accelerometer over this, s.
         fast_window_s: the short mean of the same acceleration, s: quasi-static also needs
             it small, so a tug or a manoeuvre ends the hover in a fraction of a second
             instead of the 1 s mean's second (0: off, the 1 s mean alone).
@@ -100,7 +99,7 @@ class SlowAccelParams:
             integral's σ (0, the default: the fixed thresholds alone; config ``[filter]
             accel_hover_noise_sigmas``). At 2 m/s² of vibration (100 Hz) σ₁
             ≈ 0.15 m/s² and the speed's σ ≈ 0.2 m/s per axis: fixed 0.2 and 0.3 are met a
-            fraction of the time and the crossover switches on and off.
+            fraction of the time and the hover test switches on and off.
         quasi_static_exit_ratio: hysteresis: in the hover, it ends only when the 1 s mean
             or the speed exceeds this many times its threshold for starting one (1, the
             default: none; ``[filter] accel_hover_exit_ratio``). Without it a noise-aware
@@ -113,20 +112,15 @@ class SlowAccelParams:
     velocity_time_constant_s: float = 8.0
     mocap_time_constant_s: float = 0.15
     mocap_max_gap_s: float = 0.2
-    hover_crossover_s: float = 0.3
+    hover: bool = True
     quasi_static_accel_mps2: float = 0.2
     quasi_static_speed_mps: float = 0.3
-    release_time_constant_s: float = 0.5
     fast_window_s: float = 0.0
     fast_sigmas: float = 4.0
     quasi_static_sigmas: float = 0.0
     quasi_static_exit_ratio: float = 1.0
 
     def __post_init__(self) -> None:
-        if not (self.hover_crossover_s >= 0.0):
-            raise ValueError(
-                f"SlowAccelParams.hover_crossover_s must be >= 0, got {self.hover_crossover_s!r}"
-            )
         for name in ("fast_window_s", "fast_sigmas", "quasi_static_sigmas"):
             value = getattr(self, name)
             if not (value >= 0.0 and math.isfinite(value)):
@@ -141,7 +135,6 @@ class SlowAccelParams:
         for name in (
             "quasi_static_accel_mps2",
             "quasi_static_speed_mps",
-            "release_time_constant_s",
             "time_constant_s",
             "rest_time_constant_s",
             "min_rest_s",
@@ -174,8 +167,6 @@ class SlowAccelState:
         mocap_raw_velocity_world_mps / mocap_accel_world_mps2: the raw first and second
             differences (a_ref).
         mocap_samples: consecutive motion-capture samples (the differences need 3).
-        fast_body_mps2: L, the accelerometer's low band that the hover model replaces while
-            quasi-static (zero otherwise), body frame, m/s².
         accel_1s_body_mps2: the 1 s mean of ``f − β − Rᵀ·g·e3``, body frame, m/s².
         accel_fast_body_mps2: its mean over ``fast_window_s``, body frame, m/s².
         vibration_var_mps4: the variance per axis of ``f − β − Rᵀ·g·e3`` around its 1 s
@@ -202,7 +193,6 @@ class SlowAccelState:
     mocap_raw_velocity_world_mps: Vec3 = _ZERO3
     mocap_accel_world_mps2: Vec3 = _ZERO3
     mocap_samples: int = 0
-    fast_body_mps2: Vec3 = _ZERO3
     accel_1s_body_mps2: Vec3 = _ZERO3
     accel_fast_body_mps2: Vec3 = _ZERO3
     vibration_var_mps4: float = 0.0
@@ -212,22 +202,20 @@ class SlowAccelState:
 
 
 def end_hover(state: SlowAccelState) -> SlowAccelState:
-    """The tension changed under a hover (a tug found on the accelerometer model): the
-    accelerometer carries the low band again at once (L = 0, no release), and no hover
-    begins before the 1 s mean holds only samples after the change (``HOVER_MEAN_S``):
+    """The tension changed under a hover (a tug found on the accelerometer model): the hover
+    ends at once (the tension filter drops the drone's velocity state), and no hover begins
+    before the 1 s mean holds only samples after the change (``HOVER_MEAN_S``):
     until then it cannot vouch that the controller has answered the new tension."""
-    return evolve(state, fast_body_mps2=_ZERO3, quasi_static=False, hover_hold_s=HOVER_MEAN_S)
+    return evolve(state, quasi_static=False, hover_hold_s=HOVER_MEAN_S)
 
 
 def correct_accel_body_mps2(state: SlowAccelState, accel_body_mps2: Vec3) -> Vec3:
-    """``f − β − L``: the reading with its slow error removed and, while quasi-static, its
-    low band replaced by the hover model's (L), body frame, m/s²."""
+    """``f − β``: the reading with its slow error removed, body frame, m/s²."""
     bx, by, bz = state.bias_body_mps2
-    lx, ly, lz = state.fast_body_mps2
     return (
-        accel_body_mps2[0] - bx - lx,
-        accel_body_mps2[1] - by - ly,
-        accel_body_mps2[2] - bz - lz,
+        accel_body_mps2[0] - bx,
+        accel_body_mps2[1] - by,
+        accel_body_mps2[2] - bz,
     )
 
 
@@ -314,7 +302,6 @@ def slow_accel_step(
             st,
             velocity_world_mps=_ZERO3,
             velocity_source="none",
-            fast_body_mps2=_ZERO3,
             accel_1s_body_mps2=_ZERO3,
             accel_fast_body_mps2=_ZERO3,
             quasi_static=False,
@@ -369,7 +356,6 @@ def slow_accel_step(
             learnt_at_rest=learnt_at_rest,
             velocity_world_mps=_ZERO3,
             velocity_source="none",
-            fast_body_mps2=_ZERO3,
             accel_1s_body_mps2=_ZERO3,
             accel_fast_body_mps2=_ZERO3,
             quasi_static=False,
@@ -393,14 +379,11 @@ def slow_accel_step(
         leak = math.exp(-dt_s / params.velocity_time_constant_s)
         velocity = (vx * leak + awx * dt_s, vy * leak + awy * dt_s, vz * leak + awz * dt_s)
         source = "accel"
-    # The hover crossover. e = f − β − Rᵀ·g·e3 is the drone's acceleration plus vibration,
-    # body frame. While the drone hovers (its 1 s mean acceleration and its velocity small),
-    # L follows e below 1/(2π·τ_h): then f − β − L reads only e's high band, and the
-    # observation's low band is the hover model's (thrust, attitude, axis), without the
-    # accelerometer's vibration noise, which the tension filter would otherwise average
-    # for tens of seconds. Out of the hover L returns to zero (release) and the
-    # accelerometer carries the manoeuvre, whose sustained acceleration the hover model
-    # would miss.
+    # The hover test. e = f − β − Rᵀ·g·e3 is the drone's acceleration plus vibration, body
+    # frame. While the drone hovers (its 1 s mean acceleration and its velocity small) the
+    # tension filter also takes the thrust balance through the drone's velocity
+    # (tension_kalman.HoverVelocity); out of it the accelerometer model alone carries the
+    # manoeuvre, whose sustained acceleration the thrust balance would miss.
     gx, gy, gz = r20 * gravity_mps2, r21 * gravity_mps2, r22 * gravity_mps2  # Rᵀ·g·e3
     ex = accel_body_mps2[0] - bias[0] - gx
     ey = accel_body_mps2[1] - bias[1] - gy
@@ -446,7 +429,7 @@ def slow_accel_step(
     if hold > 0.0:
         hold = hold - dt_s if hold > dt_s else 0.0
     quasi = (
-        params.hover_crossover_s > 0.0
+        params.hover
         and hold == 0.0
         and a1[0] * a1[0] + a1[1] * a1[1] + a1[2] * a1[2] < limit1
         and vx * vx + vy * vy + vz * vz < limit_v
@@ -458,20 +441,12 @@ def slow_accel_step(
         af = (fx + kf * (ex - fx), fy + kf * (ey - fy), fz + kf * (ez - fz))
         limit2 = max(qs2, params.fast_sigmas**2 * var * kf / (2.0 - kf))
         quasi = quasi and af[0] * af[0] + af[1] * af[1] + af[2] * af[2] < limit2
-    lx, ly, lz = st.fast_body_mps2
-    if quasi:
-        k = min(dt_s / params.hover_crossover_s, 1.0)
-        fast = (lx + k * (ex - lx), ly + k * (ey - ly), lz + k * (ez - lz))
-    else:
-        k = min(dt_s / params.release_time_constant_s, 1.0)
-        fast = (lx - k * lx, ly - k * ly, lz - k * lz)
     return evolve(
         st,
         bias_body_mps2=bias,
         air_samples=n,
         velocity_world_mps=velocity,
         velocity_source=source,
-        fast_body_mps2=fast,
         accel_1s_body_mps2=a1,
         accel_fast_body_mps2=af,
         vibration_var_mps4=var,

@@ -6,9 +6,9 @@ and :mod:`groundstation.slow_accel` (the accelerometer's slow error, our bias es
 1. the accelerometer reading, less the rest calibration's x/y offset when that is in force
    (``[calibration] rest`` without the slow stage: with it, the slow stage owns every
    per-power-on error of the accelerometer, the rest offset is measured and reported only);
-2. with the slow stage on (``[calibration] accel_slow``), less β and, while hovering, the
-   low band L (:func:`slow_accel.correct_accel_body_mps2`); the rotor drag's velocity from
-   the same state;
+2. with the slow stage on (``[calibration] accel_slow``), less β
+   (:func:`slow_accel.correct_accel_body_mps2`); the rotor drag's velocity from the same
+   state;
 3. :func:`observe_tension` with the calibration in force.
 
 After the contact stage has decided ground or air, :func:`learn_slow` feeds the same
@@ -47,9 +47,8 @@ class Observed(NamedTuple):
         rotation_rows_world_body: the message's attitude as ``R_world_body`` rows, computed
             once here for every stage (observation, contact, slow stage).
         accel_model_world_n: the accelerometer model's tension ``m·R·(f − β) − R·u·F``
-            (``eq:NE_tether``), world frame, N: the observation before the hover model
-            replaced its low band (``+ m·R·L``; the observation itself when L is zero or the
-            slow stage is off); None when no tension is observed.
+            (``eq:NE_tether``), world frame, N: the observation's tension as a tuple of
+            floats; None when no tension is observed.
         hover_model_world_n: the thrust balance ``m·g·e3 − R·u·F`` (+ the rotor drag),
             world frame, N: the accelerometer model less ``m·a``, the acceleration the
             accelerometer reads (``accel_model − m·(R·(f − β) − g·e3)``); what the tension
@@ -116,19 +115,10 @@ def observe(
     if tension is not None:
         t0, t1, t2 = tension.tolist()
         accel_model = (t0, t1, t2)
-        if slow is not None:
-            (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = rows
-            lx, ly, lz = slow.fast_body_mps2
-            if lx != 0.0 or ly != 0.0 or lz != 0.0:
-                # + m·R·L: the low band the hover model replaced, back in.
-                accel_model = (
-                    t0 + mass_kg * (r00 * lx + r01 * ly + r02 * lz),
-                    t1 + mass_kg * (r10 * lx + r11 * ly + r12 * lz),
-                    t2 + mass_kg * (r20 * lx + r21 * ly + r22 * lz),
-                )
         if slow is not None and slow.quasi_static:
             # − m·(R·(f − β) − g·e3): f − β as observe_tension read it (its own bias
-            # subtracted), L not subtracted.
+            # subtracted).
+            (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = rows
             bx, by, bz = slow.bias_body_mps2
             ax, ay, az = accel_read[0] - bx, accel_read[1] - by, accel_read[2] - bz
             if calibration is not None:
