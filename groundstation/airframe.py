@@ -382,6 +382,9 @@ def fit_airframe(
     upper = np.full(5, np.inf)
     if motor:
         lower[3], upper[3] = n_lo, n_hi
+    # Rotor drag opposes the motion (physical; the configuration refuses a negative one:
+    # unbounded, a flight with little drag in it fitted −5e-5 and calibrate failed on writing).
+    lower[4] = 0.0
     r0 = kin - R[:, :, 2] * thr[:, None] - ref  # the nominal thrust along body z
     # Start the scale where the hover says (the nominal map may be far off).
     theta0[0] = float(np.median(kin[:, 2] - ref[:, 2]) / max(np.median(thr), 1e-9))

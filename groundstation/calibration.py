@@ -400,7 +400,9 @@ class RestOffset:
 
 
 class RestCalibrator:
-    """The accelerometer's x/y offset from a still, disarmed drone.
+    """The accelerometer's x/y offset from a still, disarmed drone; and the one test of
+    "still on the floor" the estimator has (the slow stage learns its β at rest from
+    :attr:`still` and :attr:`rest_mean_body_mps2`).
 
     Feed every telemetry sample to :meth:`update`. While the drone is disarmed and still
     (every sample's gyro within ``max_gyro_rps``, its accelerometer within
@@ -434,12 +436,27 @@ class RestCalibrator:
         self._offset: RestOffset | None = None
         self._armed_prev: bool | None = None
         self._sum = self._sum2 = self._sum_a = self._first_accel = np.zeros(3)
+        self._still = False
+        self._mean: tuple[float, float, float] | None = None
         self._clear_window()
 
     def _clear_window(self) -> None:
         # The sums restart with the window's first sample (cheap while armed: every sample).
         self._n = 0
         self._t0 = self._t_last = math.nan
+        self._mean = None
+
+    @property
+    def still(self) -> bool:
+        """The last sample was taken disarmed and still (it entered the still window)."""
+        return self._still
+
+    @property
+    def rest_mean_body_mps2(self) -> tuple[float, float, float] | None:
+        """The still window's mean of ``a − b_cfg − R_world_bodyᵀ·(0, 0, g)`` on all three
+        axes, body frame, m/s², once the window has lasted ``min_still_s`` and reads about g
+        (None before, and from the next sample that is not still)."""
+        return self._mean
 
     @property
     def offset(self) -> RestOffset | None:
@@ -478,8 +495,10 @@ class RestCalibrator:
             self._offset = None  # cleared at disarm: the next rest measures afresh
             self._clear_window()
         self._armed_prev = armed
+        self._still = False
         if armed:
-            self._n = 0
+            if self._n:
+                self._clear_window()
             return self._offset
         a = np.asarray(accel_body_mps2, dtype=float).reshape(3)
         q = np.asarray(quat_wxyz, dtype=float).reshape(4)
@@ -512,12 +531,14 @@ class RestCalibrator:
         self._t_last = stamp_s
         self._sum += d
         self._sum2 += d * d
+        self._still = True
         if self.window_duration_s >= c.min_still_s:
             mean = self._sum / self._n
             gravity_dev = abs(
                 float(np.linalg.norm(mean + self._bias + down_body * self._g)) - self._g
             )
             if gravity_dev <= c.max_gravity_dev_mps2:
+                self._mean = (float(mean[0]), float(mean[1]), float(mean[2]))
                 var = np.maximum(self._sum2 / self._n - mean * mean, 0.0)
                 std = np.sqrt(var / max(self._n - 1, 1))
                 self._offset = RestOffset(

@@ -389,6 +389,16 @@ class CalibrationSection(_Section):
     ``AirframeFit.model_std_n``). The model's error, not the vibration's: the filter cannot
     average it away, so the Estimate's ``tension_std_n`` carries it,
     ``sqrt(filter variance + this²)``; zero: the filter's σ alone."""
+    hover_velocity_std_mps: float | None = Field(None, gt=0.0, lt=1.0)
+    """(added) σ_v, how far a hovering drone's velocity strays (its scatter about the
+    hover's mean, per world axis), m/s: while the drone hovers the tension filter takes the
+    thrust balance through the velocity, ``v = 0`` observed with variance ``σ_v²·T_c/dt``
+    (groundstation.tension_kalman.HoverVelocity). Written by ``groundstation calibrate``
+    from the motion-capture velocity in the hovers of its recordings
+    (groundstation.hover_fit); none: 0.02 (NanoBench's hovers, benchmarks/hover_velocity.py)."""
+    hover_velocity_time_s: float | None = Field(None, gt=0.0, lt=60.0)
+    """(added) T_c, the correlation time of that velocity, s (fitted with
+    ``hover_velocity_std_mps``); none: 0.5."""
     rotor_drag_n_s_per_m: float = Field(0.0, ge=0.0, le=1.0)
     """(added) ``D_xy``: the rotors' drag per m/s of body-horizontal speed, N·s/m; the
     observation adds ``R·D·Rᵀ·v`` back (v from motion capture, else the accelerometer's

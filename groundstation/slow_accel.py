@@ -51,7 +51,6 @@ __all__ = [
     "correct_accel_body_mps2",
     "drag_velocity_world_mps",
     "end_hover",
-    "is_still",
     "slow_accel_step",
 ]
 
@@ -72,9 +71,6 @@ class SlowAccelParams:
         time_constant_s: τ, the crossover in the air, s (> 0; ``inf``: the accelerometer's
             mean is trusted, β only from rest). Longer: less of a sustained manoeuvre leaks
             into β (error ≤ m·Δv/τ), slower to learn a bias never seen at rest.
-        rest_time_constant_s: at rest, β is the running mean of the still samples, forgetting
-            beyond this, s.
-        min_rest_s: a rest sets β once it has lasted this long, s.
         velocity_time_constant_s: τ_v of the accelerometer's leaky velocity (drag without
             motion capture), s.
         mocap_time_constant_s: low-pass of the motion-capture velocity (finite
@@ -107,8 +103,6 @@ class SlowAccelParams:
     """
 
     time_constant_s: float = 60.0
-    rest_time_constant_s: float = 5.0
-    min_rest_s: float = 1.0
     velocity_time_constant_s: float = 8.0
     mocap_time_constant_s: float = 0.15
     mocap_max_gap_s: float = 0.2
@@ -136,8 +130,6 @@ class SlowAccelParams:
             "quasi_static_accel_mps2",
             "quasi_static_speed_mps",
             "time_constant_s",
-            "rest_time_constant_s",
-            "min_rest_s",
             "velocity_time_constant_s",
             "mocap_time_constant_s",
             "mocap_max_gap_s",
@@ -154,9 +146,6 @@ class SlowAccelState:
 
     Attributes:
         bias_body_mps2: β, the accelerometer's slow error, body frame, m/s².
-        rest_mean_body_mps2: this rest's running mean of ``f − Rᵀ·g·e3``, body frame, m/s².
-        rest_s: how long this rest has lasted, s.
-        rest_samples: still samples in this rest (the running mean's count).
         air_samples: samples in the air since β was last set at rest (the running mean's
             count when no rest was seen).
         learnt_at_rest: β was set at rest at this power-on.
@@ -180,9 +169,6 @@ class SlowAccelState:
     """
 
     bias_body_mps2: Vec3 = _ZERO3
-    rest_mean_body_mps2: Vec3 = _ZERO3
-    rest_s: float = 0.0
-    rest_samples: int = 0
     air_samples: int = 0
     learnt_at_rest: bool = False
     velocity_world_mps: Vec3 = _ZERO3
@@ -276,6 +262,7 @@ def slow_accel_step(
     R_world_body: tuple[Vec3, Vec3, Vec3],
     phase: Phase,
     mocap_world_m: Vec3 | None,
+    rest_mean_body_mps2: Vec3 | None = None,
     gravity_mps2: float = GRAVITY_MPS2,
 ) -> SlowAccelState:
     """Learn β and the drag velocity from one sample (module doc for the equations).
@@ -289,6 +276,9 @@ def slow_accel_step(
         R_world_body: the attitude as rows of the rotation matrix.
         phase: rest / air / hold (see :data:`Phase`).
         mocap_world_m: the motion-capture position of this sample, m, or None.
+        rest_mean_body_mps2: at rest, the still window's mean of ``f − Rᵀ·g·e3`` once it
+            has lasted long enough (``calibration.RestCalibrator.rest_mean_body_mps2``, the
+            one test of stillness), body frame, m/s²; None: β is kept.
         gravity_mps2: g, m/s².
 
     Returns:
@@ -309,49 +299,16 @@ def slow_accel_step(
             hover_hold_s=0.0,
         )
     if phase == "rest":
-        # Still on the floor: a_ref = 0 exactly. A running mean of this rest's samples
-        # (a new rest starts a new mean: the drone may have been moved between flights),
-        # which becomes β once the rest has lasted min_rest_s (a brief disarm is no
-        # measurement: a few samples of vibration would set β).
-        n = st.rest_samples + 1 if st.rest_samples > 0 and st.air_samples == 0 else 1
-        gain = max(1.0 / n, dt_s / params.rest_time_constant_s) if n > 1 else 1.0
-        ref = (0.0, 0.0, gravity_mps2)
-        learnt_at_rest = st.learnt_at_rest
-    else:
-        n = st.air_samples + 1
-        if mocap_ok:
-            ax, ay, az = st.mocap_accel_world_mps2
-            ref = (ax, ay, gravity_mps2 + az)
-        else:
-            ref = (0.0, 0.0, gravity_mps2)
-        if st.learnt_at_rest:
-            gain = min(dt_s / params.time_constant_s, 1.0)
-        else:
-            # Never seen at rest (started in flight): the running mean until τ's worth.
-            gain = max(1.0 / n, min(dt_s / params.time_constant_s, 1.0))
-        learnt_at_rest = st.learnt_at_rest
-    # e = f − Rᵀ·(g·e3 + a_ref), body frame: what the accelerometer reads beyond the
-    # kinematics it should read.
-    rx, ry, rz = ref
-    ex = accel_body_mps2[0] - (r00 * rx + r10 * ry + r20 * rz)
-    ey = accel_body_mps2[1] - (r01 * rx + r11 * ry + r21 * rz)
-    ez = accel_body_mps2[2] - (r02 * rx + r12 * ry + r22 * rz)
-    if phase != "rest":
-        bx, by, bz = st.bias_body_mps2
-        bias = (bx + gain * (ex - bx), by + gain * (ey - by), bz + gain * (ez - bz))
-    if phase == "rest":
-        mx, my, mz = st.rest_mean_body_mps2 if n > 1 else (ex, ey, ez)
-        mean = (mx + gain * (ex - mx), my + gain * (ey - my), mz + gain * (ez - mz))
-        rest_s = (st.rest_s if n > 1 else 0.0) + dt_s
+        # Still on the floor: a_ref = 0 exactly, and the rest detector's window mean of
+        # f − Rᵀ·g·e3 is this power-on's bias (a new rest, a new window: the drone may have
+        # been moved between flights; a brief disarm is no measurement).
         bias = st.bias_body_mps2
-        if rest_s >= params.min_rest_s:
-            bias, learnt_at_rest = mean, True
+        learnt_at_rest = st.learnt_at_rest
+        if rest_mean_body_mps2 is not None:
+            bias, learnt_at_rest = rest_mean_body_mps2, True
         return evolve(
             st,
             bias_body_mps2=bias,
-            rest_mean_body_mps2=mean,
-            rest_s=rest_s,
-            rest_samples=n,
             air_samples=0,
             learnt_at_rest=learnt_at_rest,
             velocity_world_mps=_ZERO3,
@@ -362,6 +319,25 @@ def slow_accel_step(
             regime_velocity_world_mps=_ZERO3,
             hover_hold_s=0.0,
         )
+    n = st.air_samples + 1
+    if mocap_ok:
+        ax, ay, az = st.mocap_accel_world_mps2
+        ref = (ax, ay, gravity_mps2 + az)
+    else:
+        ref = (0.0, 0.0, gravity_mps2)
+    if st.learnt_at_rest:
+        gain = min(dt_s / params.time_constant_s, 1.0)
+    else:
+        # Never seen at rest (started in flight): the running mean until τ's worth.
+        gain = max(1.0 / n, min(dt_s / params.time_constant_s, 1.0))
+    # e = f − Rᵀ·(g·e3 + a_ref), body frame: what the accelerometer reads beyond the
+    # kinematics it should read.
+    rx, ry, rz = ref
+    ex = accel_body_mps2[0] - (r00 * rx + r10 * ry + r20 * rz)
+    ey = accel_body_mps2[1] - (r01 * rx + r11 * ry + r21 * rz)
+    ez = accel_body_mps2[2] - (r02 * rx + r12 * ry + r22 * rz)
+    bx, by, bz = st.bias_body_mps2
+    bias = (bx + gain * (ex - bx), by + gain * (ey - by), bz + gain * (ez - bz))
     source: Literal["accel", "mocap"]
     if mocap_ok:
         velocity, source = st.mocap_velocity_world_mps, "mocap"
@@ -454,22 +430,3 @@ def slow_accel_step(
         regime_velocity_world_mps=(rv[0], rv[1], rv[2]),
         hover_hold_s=hold,
     )
-
-
-def is_still(
-    accel_body_mps2: Vec3,
-    gyro_rps: Vec3 | None,
-    gravity_mps2: float = GRAVITY_MPS2,
-    *,
-    max_gyro_rps: float = 0.1,
-    max_accel_dev_mps2: float = 0.5,
-) -> bool:
-    """A disarmed sample is at rest when the body barely turns and the specific force is
-    about g (a drone carried by hand or bumped is not)."""
-    ax, ay, az = accel_body_mps2
-    if abs(math.sqrt(ax * ax + ay * ay + az * az) - gravity_mps2) > max_accel_dev_mps2:
-        return False
-    if gyro_rps is None:
-        return True
-    gx, gy, gz = gyro_rps
-    return gx * gx + gy * gy + gz * gz <= max_gyro_rps * max_gyro_rps

@@ -17,6 +17,7 @@ import pytest
 from groundstation import contact as contact_mod
 from groundstation import follow as follow_mod
 from groundstation.attitude import Rows, rows_from_quat_wxyz
+from groundstation.calibration import RestCalibrator
 from groundstation.config import LocalizationSection
 from groundstation.estimator import checks, output
 from groundstation.estimator.contact_control import contact_decide
@@ -144,34 +145,49 @@ def test_observation_refuses_a_degenerate_quaternion() -> None:
         )
 
 
-def test_learn_slow_learns_at_rest_only_when_disarmed_and_still() -> None:
-    params = SlowAccelParams(min_rest_s=0.05)
-    state = SlowAccelState()
-    still = _telemetry(armed=False, thrust_n=0.0, accel_mps2=(0.2, 0.0, G), gyro_rps=(0, 0, 0))
-    for k in range(30):
-        msg = still.model_copy(update={"seq": k, "stamp_s": 0.01 * k})
-        obs = observe(
-            msg,
-            mass_kg=MASS_KG,
-            calibration=None,
-            rest_offset_xy_mps2=None,
-            slow=state,
-            ground_thrust_ratio=0.5,
-        )
-        state = learn_slow(state, params, msg, obs, dt_s=0.01, on_ground=True, calibration=None)
-    assert state.learnt_at_rest and state.bias_body_mps2[0] == pytest.approx(0.2, abs=1e-9)
-    # Turning (gyro) on the floor: no rest sample, the state is held.
-    turning = still.model_copy(update={"seq": 99, "stamp_s": 1.0, "gyro_rps": (0.0, 0.0, 1.0)})
+def _learn(state: SlowAccelState, rest: RestCalibrator, msg: Telemetry) -> SlowAccelState:
+    """One message through the rest detector, then the slow stage (as the drone does)."""
+    rest.update(msg.stamp_s, msg.accel_mps2, msg.quat_wxyz, msg.armed, msg.gyro_rps)
     obs = observe(
-        turning,
+        msg,
         mass_kg=MASS_KG,
         calibration=None,
         rest_offset_xy_mps2=None,
         slow=state,
         ground_thrust_ratio=0.5,
     )
-    held = learn_slow(state, params, turning, obs, dt_s=0.01, on_ground=True, calibration=None)
-    assert held.bias_body_mps2 == state.bias_body_mps2 and held.rest_samples == state.rest_samples
+    return learn_slow(
+        state,
+        SlowAccelParams(),
+        msg,
+        obs,
+        dt_s=0.01,
+        on_ground=True,
+        calibration=None,
+        still=rest.still,
+        rest_mean_body_mps2=rest.rest_mean_body_mps2,
+    )
+
+
+def test_learn_slow_learns_at_rest_only_when_disarmed_and_still() -> None:
+    """β at rest is the rest detector's window mean (the one test of stillness), once the
+    window has lasted ``RestCriteria.min_still_s``; a sample that is not still holds β."""
+    state = SlowAccelState()
+    rest = RestCalibrator()
+    still = _telemetry(armed=False, thrust_n=0.0, accel_mps2=(0.2, 0.0, G), gyro_rps=(0, 0, 0))
+    for k in range(90):  # 0.9 s: not yet a rest
+        state = _learn(state, rest, still.model_copy(update={"seq": k, "stamp_s": 0.01 * k}))
+    assert not state.learnt_at_rest and state.bias_body_mps2 == (0.0, 0.0, 0.0)
+    for k in range(90, 120):
+        state = _learn(state, rest, still.model_copy(update={"seq": k, "stamp_s": 0.01 * k}))
+    assert state.learnt_at_rest and state.bias_body_mps2[0] == pytest.approx(0.2, abs=1e-9)
+    assert state.bias_body_mps2[2] == pytest.approx(0.0, abs=1e-9)  # z too, not only x/y
+    # Turning (gyro) on the floor: no rest sample, the state is held.
+    turning = still.model_copy(
+        update={"seq": 199, "stamp_s": 1.2, "gyro_rps": (0.0, 0.0, 1.0), "accel_mps2": (1, 0, G)}
+    )
+    held = _learn(state, rest, turning)
+    assert not rest.still and held.bias_body_mps2 == state.bias_body_mps2
 
 
 # ---------------------------------------------------------------- checks

@@ -116,6 +116,34 @@ def calibration_from_config(
     return cal, section.source if section.source != "none" else "config"
 
 
+def slow_accel_params(params: DroneParams) -> slow_mod.SlowAccelParams:
+    """The slow stage's settings from ``[filter]`` (the service's, and ``calibrate``'s when
+    it runs the same hover test over a recording)."""
+    return slow_mod.SlowAccelParams(
+        time_constant_s=params.filter.accel_slow_time_constant_s,
+        velocity_time_constant_s=params.filter.drag_velocity_time_constant_s,
+        hover=params.filter.accel_hover_crossover_s > 0.0,
+        fast_window_s=params.filter.accel_hover_exit_window_s,
+        quasi_static_sigmas=params.filter.accel_hover_noise_sigmas,
+        quasi_static_exit_ratio=params.filter.accel_hover_exit_ratio,
+    )
+
+
+_FILTER_DEFAULTS = TensionFilterParams()
+
+
+def hover_velocity_params(section: CalibrationSection) -> tuple[float, float]:
+    """``TensionFilterParams``' σ_v (m/s) and T_c (s) where ``calibrate`` fitted them
+    (``[calibration] hover_velocity_std_mps`` / ``hover_velocity_time_s``); the filter's
+    defaults otherwise."""
+    std = section.hover_velocity_std_mps
+    time = section.hover_velocity_time_s
+    return (
+        _FILTER_DEFAULTS.hover_velocity_std_mps if std is None else std,
+        _FILTER_DEFAULTS.hover_velocity_time_s if time is None else time,
+    )
+
+
 def calibrated_attitude_source(section: CalibrationSection, label: str) -> str | None:
     """The attitude a calibration's thrust axis holds in (:class:`DroneEstimator`).
 
@@ -221,27 +249,16 @@ class DroneEstimator:
         self.gate = GateState()
         self.calibration, self.calibration_source = calibration_from_config(params.calibration)
         self.vbat_range_v = params.calibration.thrust_vbat_range_v
-        self.rest = (
-            RestCalibrator(bias_body_mps2=params.calibration.accel_bias_mps2)
-            if params.calibration.rest
-            else None
-        )
+        self.rest_detector = RestCalibrator(bias_body_mps2=params.calibration.accel_bias_mps2)
+        """The one test of "still on the floor": the rest offset's (``[calibration] rest``)
+        and the slow stage's β at rest."""
+        self.rest = self.rest_detector if params.calibration.rest else None
+        """The rest calibration (None: ``[calibration] rest`` off)."""
         self.contact_params = contact_mod.ContactParams(
             ground_thrust_ratio=params.filter.ground_thrust_ratio
         )
         self.contact = contact_mod.ContactState()
-        self.slow_params = (
-            slow_mod.SlowAccelParams(
-                time_constant_s=params.filter.accel_slow_time_constant_s,
-                velocity_time_constant_s=params.filter.drag_velocity_time_constant_s,
-                hover=params.filter.accel_hover_crossover_s > 0.0,
-                fast_window_s=params.filter.accel_hover_exit_window_s,
-                quasi_static_sigmas=params.filter.accel_hover_noise_sigmas,
-                quasi_static_exit_ratio=params.filter.accel_hover_exit_ratio,
-            )
-            if params.calibration.accel_slow
-            else None
-        )
+        self.slow_params = slow_accel_params(params) if params.calibration.accel_slow else None
         """``[calibration] accel_slow``: the accelerometer's slow content replaced (None: off)."""
         self.slow = slow_mod.SlowAccelState()
         mx, my, mz = params.calibration.tension_model_std_n
@@ -265,11 +282,14 @@ class DroneEstimator:
         self.rest_active = False
         """A rest offset may be applied: the accelerometer model, and not as the fallback of
         an attitude from another source (its rest offset would carry the frames' tilt)."""
+        hover_std_mps, hover_time_s = hover_velocity_params(params.calibration)
         self.filter_control = FilterControl(
             TensionFilterParams(
                 mass_kg=params.drone.mass_kg,
                 accel_noise_mps2=params.drone.accel_noise_mps2,
                 thrust_noise_n=params.drone.thrust_noise_n,
+                hover_velocity_std_mps=hover_std_mps,
+                hover_velocity_time_s=hover_time_s,
             )
         )
         # [follow] and FollowParams share their field names (a new key fails loudly).
@@ -413,8 +433,7 @@ class DroneEstimator:
             self.mocap_stamp_s = msg.stamp_s
         self.accepted += 1
         self.telemetry_rate.add(now_s)
-        if self.rest is not None:
-            self._feed_rest(msg, now_s)
+        self._feed_rest(msg, now_s)
 
         # Ground or air, with hysteresis: between ground_thrust_ratio and the weight the
         # floor may still carry the drone (its push is no tension) until lift-off is seen.
@@ -435,6 +454,7 @@ class DroneEstimator:
         if self.slow_active:
             assert self.slow_params is not None
             was_hovering = self.slow.quasi_static
+            still = not msg.armed and self.rest_detector.still  # armed: no property calls
             self.slow = learn_slow(
                 self.slow,
                 self.slow_params,
@@ -443,6 +463,8 @@ class DroneEstimator:
                 dt_s=dt_s,
                 on_ground=on_ground,
                 calibration=self.calibration,
+                still=still,
+                rest_mean_body_mps2=self.rest_detector.rest_mean_body_mps2 if still else None,
             )
             if self.slow.quasi_static != was_hovering:
                 detections = self.filter_control.change_detections
@@ -622,11 +644,10 @@ class DroneEstimator:
         """Feed an accepted sample to the rest calibration (only after the gate: a repeated
         or out-of-order message must not enter the still window); with ``[calibration]
         rest_required``, warn once when the drone arms without a rest offset in force."""
-        rest = self.rest
-        assert rest is not None
+        rest = self.rest_detector
         was_armed = rest.armed
         rest.update(msg.stamp_s, msg.accel_mps2, msg.quat_wxyz, msg.armed, msg.gyro_rps)
-        if not self.params.calibration.rest_required:
+        if self.rest is None or not self.params.calibration.rest_required:
             return
         missing = checks.rest_missing_at_arming(
             was_armed=bool(was_armed),

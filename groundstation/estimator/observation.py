@@ -141,12 +141,16 @@ def learn_slow(
     dt_s: float,
     on_ground: bool,
     calibration: ObservationCalibration | None,
+    still: bool,
+    rest_mean_body_mps2: Vec3 | None,
 ) -> slow_mod.SlowAccelState:
-    """One accepted sample into the slow stage: at rest (disarmed and still), in the air
-    (observing a tension), or held (spool-up, landing, a dip)."""
+    """One accepted sample into the slow stage: at rest (disarmed and still: ``still`` and
+    ``rest_mean_body_mps2`` from the rest detector, :class:`~groundstation.calibration.
+    RestCalibrator`, the one test of stillness), in the air (observing a tension), or held
+    (spool-up, landing, a dip)."""
     accel_read = observed.accel_read_body_mps2
     phase: slow_mod.Phase
-    if not msg.armed and slow_mod.is_still(accel_read, msg.gyro_rps):
+    if not msg.armed and still:
         phase = "rest"
     elif not on_ground and observed.observation.tension_world_n is not None:
         phase = "air"
@@ -165,4 +169,5 @@ def learn_slow(
         R_world_body=observed.rotation_rows_world_body,
         phase=phase,
         mocap_world_m=msg.position_m,
+        rest_mean_body_mps2=rest_mean_body_mps2 if phase == "rest" else None,
     )

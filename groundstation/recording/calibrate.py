@@ -34,6 +34,8 @@ from groundstation.calibration import (
     hover_mask,
 )
 from groundstation.config import ConfigError, Settings, load_settings
+from groundstation.estimator.drone import slow_accel_params
+from groundstation.hover_fit import HOVER_FIT_MIN_S, fit_hover_velocity, hover_flags
 from groundstation.outputs import NewFile, OutputError, check_output
 from groundstation.recording.format import RecordingError
 from groundstation.recording.reader import iter_messages
@@ -868,11 +870,14 @@ def run_calibrate(
             rec = recs[d]
             afit = airframe_drone(rec, settings, untethered=untethered)
             echo(format_airframe(d, afit, rec.files, rec.segments))
+            hover_keys, hover_line = hover_velocity_drone(rec, settings)
+            echo(hover_line)
             echo(_attitude_line(d, rec.attitude_source))
             source = f"groundstation calibrate {stamp} from {names}"
             table = _airframe_table(
                 afit, settings.for_drone(d).calibration, source, rec.attitude_source
             )
+            table.update(hover_keys)
             patch["drones"][d] = {"calibration": table}
             head = [
                 f"groundstation calibrate (airframe constants), {stamp}, from {names}, "
@@ -897,13 +902,15 @@ def run_calibrate(
         fit = cals[d].fit
         rec = recs[d]
         echo(format_fit(d, fit, rec.files))
+        hover_keys, hover_line = hover_velocity_drone(rec, settings)
+        echo(hover_line)
         echo(_attitude_line(d, rec.attitude_source))
         for note in cals[d].rest_note:
             echo(f"  {note}")
         params = settings.for_drone(d)
         source = f"groundstation calibrate {stamp} from {names}"
         tables: dict[str, Any] = {
-            "calibration": _calibration_table(cals[d], source, rec.attitude_source)
+            "calibration": _calibration_table(cals[d], source, rec.attitude_source) | hover_keys
         }
         if params.calibration.thrust_model != "vbat_linear":
             # the full model fits the straight battery line only: say so in what it writes
@@ -935,6 +942,36 @@ def run_calibrate(
                 tables["base"] = {"position_m": [round(float(x), 5) for x in base]}
         patch["drones"][d] = tables
     return _write_config(settings, config_path, patch, comments, out_path, echo, force)
+
+
+def hover_velocity_drone(rec: DroneRecording, settings: Settings) -> tuple[dict[str, float], str]:
+    """σ_v and T_c of one drone's hovers (groundstation.hover_fit): the keys to write (none
+    when there is too little hover under motion capture) and the line to print."""
+    params = settings.for_drone(rec.drone)
+    flags = hover_flags(
+        rec.data,
+        slow_accel_params(params),
+        mass_kg=params.drone.mass_kg,
+        floor_z_m=params.base.floor_z_m,
+        ground_thrust_ratio=params.filter.ground_thrust_ratio,
+        accel_bias_mps2=params.calibration.accel_bias_mps2,
+    )
+    fit, hover_s = fit_hover_velocity(rec.data, flags)
+    if fit is None:
+        return {}, (
+            f"    hover velocity           not fitted: {hover_s:.1f} s of hover under motion "
+            f"capture (the service's hover test; need {HOVER_FIT_MIN_S:.0f} s): the "
+            "filter's defaults stand"
+        )
+    keys = {
+        "hover_velocity_std_mps": round(fit.std_mps, 6),
+        "hover_velocity_time_s": round(fit.time_s, 4),
+    }
+    return keys, (
+        f"    hover_velocity_std_mps   {fit.std_mps:.4f}  hover_velocity_time_s {fit.time_s:.3f}"
+        f"  ({fit.hover_s:.1f} s of hover in {fit.stretches} stretches: the velocity's "
+        "scatter and correlation time, which bound the hover's thrust balance)"
+    )
 
 
 def _attitude_line(drone: str, source: str) -> str:

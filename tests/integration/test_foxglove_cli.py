@@ -239,12 +239,19 @@ def test_a_recording_replayed_offline_opens_in_3d(procs: Procs, tmp_path: Path) 
     assert {t.parent_frame_id for tf in transforms for t in tf.transforms} == {"world"}
 
 
-async def _server_info_and_channels(port: int, timeout_s: float) -> tuple[dict[str, Any], set[str]]:
+_SCENE_AND_ESTIMATE = frozenset({"scene", "tether/cf1/estimate"})
+
+
+async def _server_info_and_channels(
+    port: int, timeout_s: float, wanted: frozenset[str] = _SCENE_AND_ESTIMATE
+) -> tuple[dict[str, Any], set[str]]:
+    """The server's info and the topics it advertised, read until every ``wanted`` topic
+    is seen (each channel is advertised when its first message is: they come one by one)."""
     async with websockets.connect(f"ws://127.0.0.1:{port}", subprotocols=[SUBPROTOCOL]) as ws:
         info: dict[str, Any] = {}
         topics: set[str] = set()
         deadline = time.monotonic() + timeout_s
-        while time.monotonic() < deadline and not {"scene", "tether/cf1/estimate"} <= topics:
+        while time.monotonic() < deadline and not wanted <= topics:
             try:
                 raw = await asyncio.wait_for(ws.recv(), max(0.1, deadline - time.monotonic()))
             except TimeoutError:
@@ -263,8 +270,9 @@ def test_demo_serves_foxglove_in_its_one_process(procs: Procs) -> None:
         "demo", "demo", "--headless", "--foxglove-port", str(fox_port), "--duration", "60"
     )
     wait_for_port(fox_port, timeout_s=30)
-    info, topics = asyncio.run(_server_info_and_channels(fox_port, timeout_s=30))
+    wanted = frozenset({"scene", "tf", "tether/cf1/estimate", "tether/cf1/telemetry"})
+    info, topics = asyncio.run(_server_info_and_channels(fox_port, timeout_s=30, wanted=wanted))
     assert info["name"] == "groundstation"
-    assert {"scene", "tf", "tether/cf1/estimate", "tether/cf1/telemetry"} <= topics, topics
+    assert wanted <= topics, topics
     assert f"foxglove: ws://127.0.0.1:{fox_port}" in demo.output()
     assert demo.stop(signal.SIGTERM) == 0

@@ -1,0 +1,173 @@
+"""The hover's velocity scatter from flights under motion capture: σ_v and T_c, fitted.
+
+Pure physics: numpy, and the estimator's own hover test (groundstation.slow_accel).
+
+While the drone hovers the tension filter takes the thrust balance through the drone's
+velocity (groundstation.tension_kalman.HoverVelocity): ``m·dv/dt = T − h`` with ``v = 0``
+observed with variance ``σ_v²·T_c/dt`` per sample. How far the velocity strays in a hover
+(σ_v) and how long it stays strayed (T_c, its correlation time) are properties of the drone
+and its position controller, not of the estimator; a simulated hover and a real Crazyflie's
+differ by 20× in σ_v. So they are measured where the velocity is known, in the calibration
+flights::
+
+    hover     = the service's hover test (slow_accel_step, without motion capture, as the
+                service runs it), armed, above the floor
+    d         = v_mocap − mean(v_mocap over the stretch)       # a constant velocity is no
+                                                               # acceleration
+    σ_v²      = mean(d²) over the stretches and the three axes
+    T_c       = dt · τ_int,   τ_int = 1 + 2·Σ ρ_k               # per axis, Sokal's window,
+                                                               # weighted by each axis' d²
+
+``σ_v²·T_c`` is ``d``'s spectral density at zero frequency (what a mean of ``v`` over a window
+much longer than T_c scatters by), which the filter's observation variance is; it does not
+depend on how the motion-capture velocity was smoothed, σ_v and T_c separately do a little.
+A stretch is at least the hover test's own window (``slow_accel.HOVER_MEAN_S``), so its mean
+is a mean over more than T_c.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from groundstation import slow_accel as slow_mod
+from groundstation.airframe import MIN_HEIGHT_M, mocap_kinematics
+from groundstation.attitude import GRAVITY_MPS2, rows_from_quat_wxyz
+from groundstation.calibration import CalibrationData, RestCalibrator, _integrated_autocorr_time
+
+__all__ = ["HOVER_FIT_MIN_S", "HoverVelocityFit", "fit_hover_velocity", "hover_flags"]
+
+FloatArray = NDArray[np.float64]
+
+HOVER_FIT_MIN_S = 3.0
+"""Hover (stretches of at least ``slow_accel.HOVER_MEAN_S``) under motion capture needed to
+fit σ_v and T_c, s: hand-set, the same minimum as ``calibrate``'s steady hover
+(``recording.calibrate.MIN_HOVER_S``); below it the defaults stand."""
+
+
+@dataclass(frozen=True)
+class HoverVelocityFit:
+    """Result of :func:`fit_hover_velocity`.
+
+    Attributes:
+        std_mps: σ_v, the velocity's scatter about each stretch's mean, per world axis, m/s.
+        time_s: T_c, its correlation time, s.
+        hover_s: seconds of hover used.
+        stretches: hover stretches used.
+    """
+
+    std_mps: float
+    time_s: float
+    hover_s: float
+    stretches: int
+
+
+def hover_flags(
+    data: CalibrationData,
+    params: slow_mod.SlowAccelParams,
+    *,
+    mass_kg: float,
+    floor_z_m: float,
+    ground_thrust_ratio: float,
+    accel_bias_mps2: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    min_height_m: float = MIN_HEIGHT_M,
+) -> NDArray[np.bool_]:
+    """(n,) where the service's hover test says the drone hovers: ``slow_accel_step`` run
+    over each recording as the service runs it without motion capture ("rest" while the rest
+    detector says disarmed and still, β its window mean; "air" while armed, at or above
+    ``ground_thrust_ratio`` of the weight and ``min_height_m`` above the floor by motion
+    capture; "hold" otherwise), the configured accelerometer bias subtracted."""
+    n = len(data)
+    out = np.zeros(n, bool)
+    weight_n = mass_kg * GRAVITY_MPS2
+    bx, by, bz = accel_bias_mps2
+    for seg in np.unique(data.segment):
+        state = slow_mod.SlowAccelState()
+        rest = RestCalibrator(bias_body_mps2=accel_bias_mps2)
+        last: float | None = None
+        for i in np.flatnonzero(data.segment == seg).tolist():
+            stamp = float(data.stamp_s[i])
+            dt = 0.0 if last is None else max(stamp - last, 0.0)
+            last = stamp
+            z = float(data.position_world_m[i, 2])
+            air = (
+                bool(data.armed[i])
+                and float(data.thrust_n[i]) >= ground_thrust_ratio * weight_n
+                and math.isfinite(z)
+                and z >= floor_z_m + min_height_m
+            )
+            a = data.accel_body_mps2[i]
+            armed = bool(data.armed[i])
+            gyro = data.gyro_rps[i]
+            rest.update(
+                stamp, a, data.quat_wxyz[i], armed, gyro if np.all(np.isfinite(gyro)) else None
+            )
+            phase: slow_mod.Phase = "air" if air else "hold"
+            if not armed and rest.still:
+                phase = "rest"
+            state = slow_mod.slow_accel_step(
+                state,
+                params,
+                dt_s=dt,
+                stamp_s=stamp,
+                accel_body_mps2=(float(a[0]) - bx, float(a[1]) - by, float(a[2]) - bz),
+                R_world_body=rows_from_quat_wxyz(tuple(data.quat_wxyz[i].tolist())),
+                phase=phase,
+                mocap_world_m=None,
+                rest_mean_body_mps2=rest.rest_mean_body_mps2 if phase == "rest" else None,
+            )
+            out[i] = state.quasi_static
+    return out
+
+
+def fit_hover_velocity(
+    data: CalibrationData,
+    hovering: NDArray[np.bool_],
+    *,
+    min_hover_s: float = HOVER_FIT_MIN_S,
+) -> tuple[HoverVelocityFit | None, float]:
+    """σ_v and T_c from the motion-capture velocity in the hover stretches (module doc).
+
+    Args:
+        data: the drone's samples (with motion-capture positions).
+        hovering: (n,) the hover test's verdict per sample (:func:`hover_flags`).
+        min_hover_s: below this much hover nothing is fitted.
+
+    Returns:
+        ``(fit or None, seconds of hover found)``.
+    """
+    vel, _ = mocap_kinematics(data)
+    usable = hovering & np.all(np.isfinite(vel), axis=1)
+    idx = np.flatnonzero(usable)
+    if idx.size < 2:
+        return None, 0.0
+    cut = (np.diff(idx) != 1) | (np.diff(data.segment[idx]) != 0)
+    starts = np.concatenate(([0], np.flatnonzero(cut) + 1))
+    ends = np.concatenate((starts[1:], [idx.size]))
+    runs: list[tuple[int, int]] = []
+    dts: list[float] = []
+    for a, b in zip(starts.tolist(), ends.tolist(), strict=True):
+        t = data.stamp_s[idx[a:b]]
+        if b - a >= 3 and t[-1] - t[0] >= slow_mod.HOVER_MEAN_S:
+            runs.append((a, b))
+            dts.append(float(np.median(np.diff(t))))
+    hover_s = float(sum((b - a) * dt for (a, b), dt in zip(runs, dts, strict=True)))
+    if hover_s < min_hover_s:
+        return None, hover_s
+    v = vel[idx]
+    d = np.concatenate([v[a:b] - v[a:b].mean(axis=0) for a, b in runs])
+    var_axes = (d * d).mean(axis=0)
+    # Each axis' correlation time in samples, on the stretches' own (mean-removed) series.
+    tau = np.array([_integrated_autocorr_time(v[:, k], runs) for k in range(3)])
+    var = float(var_axes.mean())
+    if not var > 0.0:
+        return None, hover_s
+    dt = float(np.median(dts))
+    time_s = dt * float((var_axes * tau).sum() / var_axes.sum())
+    fit = HoverVelocityFit(
+        std_mps=math.sqrt(var), time_s=time_s, hover_s=hover_s, stretches=len(runs)
+    )
+    return fit, hover_s
