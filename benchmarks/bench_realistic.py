@@ -120,8 +120,8 @@ def _tug_scenario() -> str:
 
 
 FILTER_OVERRIDES: dict[str, Any] = {}
-"""``[filter]`` values every flight of this module is served with (benchmarks.hover_exit
-sets ``accel_hover_exit_window_s``); empty: the defaults."""
+"""``[filter]`` values every flight of this module is served with (a study sets them before
+it flies); empty: the defaults."""
 
 
 def _settings(

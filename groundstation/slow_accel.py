@@ -82,12 +82,6 @@ class SlowAccelParams:
         quasi_static_accel_mps2: quasi-static while the accelerometer's 1 s mean
             acceleration (bias removed) stays below this, m/s² ...
         quasi_static_speed_mps: ... and the drag's velocity below this, m/s.
-        fast_window_s: the short mean of the same acceleration, s: quasi-static also needs
-            it small, so a tug or a manoeuvre ends the hover in a fraction of a second
-            instead of the 1 s mean's second (0: off, the 1 s mean alone).
-        fast_sigmas: "small" for the short mean: below this many of its own standard
-            deviations (from the vibration measured around the 1 s mean), and never below
-            ``quasi_static_accel_mps2``: the vibration alone does not end a hover.
         quasi_static_sigmas: the hover test's thresholds follow the vibration too: the 1 s
             mean's is ``max(quasi_static_accel_mps2, quasi_static_sigmas·σ₁)``, σ₁ its
             standard deviation from the vibration measured around it; the speed's (the
@@ -109,13 +103,11 @@ class SlowAccelParams:
     hover: bool = True
     quasi_static_accel_mps2: float = 0.2
     quasi_static_speed_mps: float = 0.3
-    fast_window_s: float = 0.0
-    fast_sigmas: float = 4.0
     quasi_static_sigmas: float = 0.0
     quasi_static_exit_ratio: float = 1.0
 
     def __post_init__(self) -> None:
-        for name in ("fast_window_s", "fast_sigmas", "quasi_static_sigmas"):
+        for name in ("quasi_static_sigmas",):
             value = getattr(self, name)
             if not (value >= 0.0 and math.isfinite(value)):
                 raise ValueError(f"SlowAccelParams.{name} must be finite and >= 0, got {value!r}")
@@ -157,7 +149,6 @@ class SlowAccelState:
             differences (a_ref).
         mocap_samples: consecutive motion-capture samples (the differences need 3).
         accel_1s_body_mps2: the 1 s mean of ``f − β − Rᵀ·g·e3``, body frame, m/s².
-        accel_fast_body_mps2: its mean over ``fast_window_s``, body frame, m/s².
         vibration_var_mps4: the variance per axis of ``f − β − Rᵀ·g·e3`` around its 1 s
             mean (the vibration), (m/s²)², a 2 s mean.
         quasi_static: the drone hovers (both below their thresholds).
@@ -180,7 +171,6 @@ class SlowAccelState:
     mocap_accel_world_mps2: Vec3 = _ZERO3
     mocap_samples: int = 0
     accel_1s_body_mps2: Vec3 = _ZERO3
-    accel_fast_body_mps2: Vec3 = _ZERO3
     vibration_var_mps4: float = 0.0
     quasi_static: bool = False
     regime_velocity_world_mps: Vec3 = _ZERO3
@@ -293,7 +283,6 @@ def slow_accel_step(
             velocity_world_mps=_ZERO3,
             velocity_source="none",
             accel_1s_body_mps2=_ZERO3,
-            accel_fast_body_mps2=_ZERO3,
             quasi_static=False,
             regime_velocity_world_mps=_ZERO3,
             hover_hold_s=0.0,
@@ -314,7 +303,6 @@ def slow_accel_step(
             velocity_world_mps=_ZERO3,
             velocity_source="none",
             accel_1s_body_mps2=_ZERO3,
-            accel_fast_body_mps2=_ZERO3,
             quasi_static=False,
             regime_velocity_world_mps=_ZERO3,
             hover_hold_s=0.0,
@@ -376,15 +364,13 @@ def slow_accel_step(
         leak2 = math.exp(-dt_s / 2.0)
         rv = (ox * leak2 + awx * dt_s, oy * leak2 + awy * dt_s, oz * leak2 + awz * dt_s)
     vx, vy, vz = rv
-    # The vibration around the 1 s mean (per axis), and the short mean: its standard
-    # deviation is the vibration's times sqrt(k / (2 − k)) for an exponential mean of gain k
-    # over white noise.
+    # The vibration around the 1 s mean (per axis): the mean's standard deviation is the
+    # vibration's times sqrt(k / (2 − k)) for an exponential mean of gain k over white noise.
     dx, dy, dz = ex - a1[0], ey - a1[1], ez - a1[2]
     kv = min(dt_s / 2.0, 1.0)
     var = st.vibration_var_mps4
     var += kv * ((dx * dx + dy * dy + dz * dz) / 3.0 - var)
-    qs2 = params.quasi_static_accel_mps2**2
-    limit1 = qs2
+    limit1 = params.quasi_static_accel_mps2**2
     limit_v = params.quasi_static_speed_mps**2
     sigmas2 = params.quasi_static_sigmas**2
     if sigmas2 > 0.0:
@@ -410,13 +396,6 @@ def slow_accel_step(
         and a1[0] * a1[0] + a1[1] * a1[1] + a1[2] * a1[2] < limit1
         and vx * vx + vy * vy + vz * vz < limit_v
     )
-    af = _ZERO3
-    if params.fast_window_s > 0.0:
-        kf = min(dt_s / params.fast_window_s, 1.0)
-        fx, fy, fz = st.accel_fast_body_mps2
-        af = (fx + kf * (ex - fx), fy + kf * (ey - fy), fz + kf * (ez - fz))
-        limit2 = max(qs2, params.fast_sigmas**2 * var * kf / (2.0 - kf))
-        quasi = quasi and af[0] * af[0] + af[1] * af[1] + af[2] * af[2] < limit2
     return evolve(
         st,
         bias_body_mps2=bias,
@@ -424,7 +403,6 @@ def slow_accel_step(
         velocity_world_mps=velocity,
         velocity_source=source,
         accel_1s_body_mps2=a1,
-        accel_fast_body_mps2=af,
         vibration_var_mps4=var,
         quasi_static=quasi,
         regime_velocity_world_mps=(rv[0], rv[1], rv[2]),

@@ -123,7 +123,6 @@ def slow_accel_params(params: DroneParams) -> slow_mod.SlowAccelParams:
         time_constant_s=params.filter.accel_slow_time_constant_s,
         velocity_time_constant_s=params.filter.drag_velocity_time_constant_s,
         hover=params.filter.accel_hover_crossover_s > 0.0,
-        fast_window_s=params.filter.accel_hover_exit_window_s,
         quasi_static_sigmas=params.filter.accel_hover_noise_sigmas,
         quasi_static_exit_ratio=params.filter.accel_hover_exit_ratio,
     )
