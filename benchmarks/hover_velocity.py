@@ -1,77 +1,137 @@
-"""How much a hovering Crazyflie's velocity moves: the basis of ``hover_velocity_std_mps``.
+"""How far a hovering drone's velocity strays: σ_v and T_c as ``calibrate`` fits them.
 
-``python -m benchmarks.hover_velocity [--data DIR]``
+``python -m benchmarks.hover_velocity [--data DIR] [--sim]``
 
-NanoBench (``../shared/data/nanobench``, real untethered Crazyflie flights with Vicon): the
-Vicon velocity (first differences of the positions, a 0.05 s moving mean) in the stretches
-where the drone flies as the hover test would call quasi-static (in the air above 0.25 m,
-speed below 0.3 m/s, the 1 s mean of the acceleration below 0.2 m/s²); per flight with at
-least 0.5 s of them, the share of the flight and the RMS per world axis of the velocity
-about its mean over each stretch (what the thrust balance's average has to allow for: a
-constant velocity is no acceleration).
+The computation is ``calibrate``'s own (groundstation.hover_fit): the service's hover test
+run over the flight without motion capture marks the hover; in its stretches of at least
+1 s, the motion-capture velocity's scatter about each stretch's mean (σ_v) and its
+correlation time (T_c); nothing is fitted under 3 s of such stretches.
+
+NanoBench (``../shared/data/nanobench``, real untethered Crazyflie flights with Vicon), per
+flight: the share of the airborne samples the hover test calls a hover, and the fit. These
+flights are trajectories: what the test calls a hover is mostly slow motion (the linear
+ramp), so σ_v here is that of slow flight, not of a drone holding a spot.
+
+``--sim``: the realistic simulator with motion capture, 60 s hovers at paper spots 0, 2 and
+4 (1 m/s² of vibration, seed 900), fitted on the Telemetry's motion-capture positions (the
+simulator's timing and noise classes on) and on the true positions.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 from pathlib import Path
 
 import numpy as np
 
+from benchmarks.nanobench import MASS_KG, nominal_thrust_n
 from benchmarks.nanobench_cli import AIR_MIN_Z_M, DATA, DAYS, check_data
+from groundstation.calibration import GRAVITY_MPS2, CalibrationData
+from groundstation.config import load_settings
+from groundstation.estimator.drone import slow_accel_params
+from groundstation.hover_fit import fit_hover_velocity, hover_flags
 
-SPEED_MAX_MPS = 0.3
-ACCEL_1S_MAX_MPS2 = 0.2
-"""The hover test's fixed thresholds (``SlowAccelParams.quasi_static_*``)."""
+SIM_SPOTS = (0, 2, 4)
+SIM_SECONDS = 60.0
+SIM_NOISE_MPS2 = 1.0
+SIM_SEED = 900
 
 
-def _moving_mean(x: np.ndarray, n: int) -> np.ndarray:
-    kernel = np.ones(n) / n
-    return np.stack([np.convolve(x[:, i], kernel, mode="same") for i in range(3)], axis=1)
-
-
-def flight(path: Path) -> tuple[float, np.ndarray | None]:
-    """The quasi-static share of a flight and the velocity's RMS about each stretch's
-    mean per axis, m/s (None: under 0.5 s of them)."""
+def nanobench_flight(path: Path) -> CalibrationData:
+    """One full NanoBench flight as samples (the bridge's default PWM map for the thrust)."""
     a = np.genfromtxt(path, delimiter=",", names=True)
-    pos = np.stack([a["px"], a["py"], a["pz"]], 1)
-    ok = np.all(np.isfinite(pos), 1)
-    t, pos = a["t"][ok], pos[ok]
-    dt = float(np.median(np.diff(t)))
-    v = _moving_mean(np.gradient(pos, t, axis=0), max(1, round(0.05 / dt)))
-    a1 = _moving_mean(np.gradient(v, t, axis=0), max(1, round(1.0 / dt)))
-    quasi = (
-        (pos[:, 2] > AIR_MIN_Z_M)
-        & (np.linalg.norm(v, axis=1) < SPEED_MAX_MPS)
-        & (np.linalg.norm(a1, axis=1) < ACCEL_1S_MAX_MPS2)
+    pwm = np.stack([a[f"motor_motor_m{i}"] for i in range(1, 5)], axis=1)
+    return CalibrationData.from_arrays(
+        a["t"],
+        np.stack([a[f"imu_acc_{k}"] for k in "xyz"], 1) * GRAVITY_MPS2,
+        np.stack([a[f"att_stateEstimate_q{k}"] for k in "wxyz"], 1),
+        nominal_thrust_n(pwm),
+        armed=pwm.max(axis=1) > 0,
+        position_world_m=np.stack([a["px"], a["py"], a["pz"]], 1),
+        gyro_rps=np.stack([a[f"imu_gyro_{k}"] for k in "xyz"], 1),
     )
-    if quasi.sum() * dt < 0.5:
-        return float(quasi.mean()), None
-    # Stretches: consecutive quasi-static samples; the velocity about each one's mean.
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], quasi.astype(int), [0]])))
-    dev = [v[s:e] - v[s:e].mean(axis=0) for s, e in zip(edges[::2], edges[1::2], strict=True)]
-    d = np.concatenate(dev)
-    return float(quasi.mean()), np.sqrt((d**2).mean(axis=0))
+
+
+def _row(label: str, data: CalibrationData, share_of: np.ndarray, mass_kg: float) -> str:
+    params = load_settings(None, {}, use_env=False).for_drone("cf1")
+    flags = hover_flags(
+        data,
+        slow_accel_params(params),
+        mass_kg=mass_kg,
+        floor_z_m=params.base.floor_z_m,
+        ground_thrust_ratio=params.filter.ground_thrust_ratio,
+    )
+    share = float(flags[share_of].mean()) if share_of.any() else 0.0
+    fit, hover_s = fit_hover_velocity(data, flags)
+    if fit is None:
+        return f"| {label} | {100 * share:.0f} % | {hover_s:.1f} | not fitted | |"
+    return (
+        f"| {label} | {100 * share:.0f} % | {fit.hover_s:.1f} | {fit.std_mps:.4f} | "
+        f"{fit.time_s:.3f} |"
+    )
+
+
+def sim_flight(spot: int, true_positions: bool) -> CalibrationData:
+    """A realistic-simulator hover with motion capture, as ``calibrate`` would read it."""
+    from benchmarks import bench_realistic as br
+    from groundstation.sim.runner import Simulator
+
+    scenario = br._scenario_for_spot(spot)
+    cal = br._true_calibration(SIM_NOISE_MPS2, SIM_SEED, {}, scenario)
+    settings = br._settings(SIM_NOISE_MPS2, SIM_SEED, {}, cal, True)
+    sim = Simulator(settings, br._NullBus(), scenario=scenario)  # type: ignore[arg-type]
+    rows: list[dict[str, object]] = []
+    truth: dict[float, list[float]] = {}
+    while sim.t_s < SIM_SECONDS:
+        for sample in sim.step():
+            kind = sample.key.split("/", 2)[2]
+            body = json.loads(sample.payload)
+            if kind == "truth":
+                truth[round(body["stamp_s"], 6)] = body["position_m"]
+            elif kind == "telemetry":
+                rows.append(body)
+    nan3 = [float("nan")] * 3
+    pos = [
+        truth.get(round(float(r["stamp_s"]), 6), nan3)  # type: ignore[arg-type]
+        if true_positions
+        else (r.get("position_m") or nan3)
+        for r in rows
+    ]
+    return CalibrationData.from_arrays(
+        [r["stamp_s"] for r in rows],
+        [r["accel_mps2"] for r in rows],
+        [r["quat_wxyz"] for r in rows],
+        [r["thrust_n"] for r in rows],
+        armed=[r.get("armed", True) for r in rows],
+        position_world_m=pos,
+        gyro_rps=[r.get("gyro_rps") or nan3 for r in rows],
+    )
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", type=Path, default=DATA, help="the NanoBench CSV directory")
+    ap.add_argument("--sim", action="store_true", help="the realistic simulator instead")
     args = ap.parse_args(argv)
+    head = (
+        "| {} | hover share | hover s (stretches ≥ 1 s) | σ_v m/s | T_c s |\n"
+        "| --- | ---: | ---: | ---: | ---: |"
+    )
+    if args.sim:
+        print(head.format("spot, positions"))
+        for spot in SIM_SPOTS:
+            for true_positions in (False, True):
+                data = sim_flight(spot, true_positions)
+                label = f"{spot}, {'true' if true_positions else 'motion capture'}"
+                print(_row(label, data, np.ones(len(data), bool), 0.030))
+        return 0
     check_data(ap, args.data)
-    print("| flight | quasi-static | velocity RMS about the stretch mean x / y / z, m/s |")
-    print("| --- | ---: | --- |")
-    every: list[float] = []
+    print(head.format("flight"))
     for name in DAYS:
-        share, rms = flight(args.data / f"{name}.csv")
-        cells = "under 0.5 s" if rms is None else " / ".join(f"{x:.3f}" for x in rms)
-        print(f"| {name} | {100 * share:.0f} % | {cells} |")
-        every += [] if rms is None else rms.tolist()
-    if every:
-        print(
-            f"\nMedian over the flights' axes: {np.median(every):.3f} m/s "
-            f"({len(every)} axes, {min(every):.3f}–{max(every):.3f})."
-        )
+        data = nanobench_flight(args.data / f"{name}.csv")
+        airborne = data.armed & (data.position_world_m[:, 2] > AIR_MIN_Z_M)
+        print(_row(name, data, airborne, MASS_KG))
     return 0
 
 

@@ -18,11 +18,14 @@ flights::
     T_c       = dt · τ_int,   τ_int = 1 + 2·Σ ρ_k               # per axis, Sokal's window,
                                                                # weighted by each axis' d²
 
-``σ_v²·T_c`` is ``d``'s spectral density at zero frequency (what a mean of ``v`` over a window
-much longer than T_c scatters by), which the filter's observation variance is; it does not
-depend on how the motion-capture velocity was smoothed, σ_v and T_c separately do a little.
-A stretch is at least the hover test's own window (``slow_accel.HOVER_MEAN_S``), so its mean
-is a mean over more than T_c.
+``v_mocap`` is the positions' derivative on an even grid (:func:`bridged_velocity`: a lost
+message or two bridged, as a Crazyflie's radio loses some). ``σ_v²·T_c`` is ``d``'s spectral
+density at zero frequency (what a mean of ``v`` over a window much longer than T_c scatters
+by), which the filter's observation variance is; it depends little on how the velocity was
+smoothed, σ_v and T_c separately do more. A stretch is at least the hover test's own window
+(``slow_accel.HOVER_MEAN_S``); a velocity that wanders over many seconds within a hover
+(a slow drift of the spot) is partly taken out with each stretch's mean, which is what the
+filter, whose velocity starts afresh with each hover, sees too.
 """
 
 from __future__ import annotations
@@ -32,15 +35,25 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.signal import savgol_filter
 
 from groundstation import slow_accel as slow_mod
-from groundstation.airframe import MIN_HEIGHT_M, mocap_kinematics
+from groundstation.airframe import MIN_HEIGHT_M
 from groundstation.attitude import GRAVITY_MPS2, rows_from_quat_wxyz
 from groundstation.calibration import CalibrationData, RestCalibrator, _integrated_autocorr_time
 
 __all__ = ["HOVER_FIT_MIN_S", "HoverVelocityFit", "fit_hover_velocity", "hover_flags"]
 
 FloatArray = NDArray[np.float64]
+
+VELOCITY_WINDOW_S = 0.25
+"""Width of the Savitzky–Golay derivative (cubic) of the motion-capture positions, s: the
+airframe fit's (``airframe.mocap_kinematics``)."""
+
+BRIDGE_PERIODS = 5.0
+"""A step of the drone's clock up to this many median periods is bridged (the positions
+interpolated onto an even grid; a lost Telemetry message or two: a Crazyflie's radio drops
+some), a longer one cuts the run: hand-set, well inside T_c's scale (0.05 s at 100 Hz)."""
 
 HOVER_FIT_MIN_S = 3.0
 """Hover (stretches of at least ``slow_accel.HOVER_MEAN_S``) under motion capture needed to
@@ -123,6 +136,41 @@ def hover_flags(
     return out
 
 
+def bridged_velocity(data: CalibrationData) -> FloatArray:
+    """Motion-capture velocity at each sample, world frame, (n, 3), m/s; NaN where unknown.
+
+    Per run of consecutive samples with a position (within one recording, the clock's steps
+    at most :data:`BRIDGE_PERIODS` median periods), the positions are interpolated onto an
+    even grid at the run's median period, differentiated there (Savitzky–Golay, cubic,
+    :data:`VELOCITY_WINDOW_S`) and read back at the samples' times.
+    """
+    n = len(data)
+    vel = np.full((n, 3), math.nan)
+    for seg in np.unique(data.segment):
+        idx = np.flatnonzero((data.segment == seg) & np.all(np.isfinite(data.position_world_m), 1))
+        if idx.size < 9:
+            continue
+        t_all = data.stamp_s[idx]
+        steps = np.diff(t_all)
+        period = float(np.median(steps))
+        if not period > 0:
+            continue
+        cuts = np.flatnonzero(~(steps > 0) | (steps > BRIDGE_PERIODS * period)) + 1
+        for piece in np.split(idx, cuts):
+            t = data.stamp_s[piece]
+            if piece.size < 9 or t[-1] - t[0] < VELOCITY_WINDOW_S:
+                continue
+            grid = np.arange(t[0], t[-1] + 0.5 * period, period)
+            win = max(round(VELOCITY_WINDOW_S / period) | 1, 7)
+            if win > grid.size:
+                continue
+            p = data.position_world_m[piece]
+            pg = np.stack([np.interp(grid, t, p[:, k]) for k in range(3)], 1)
+            vg = savgol_filter(pg, win, 3, deriv=1, delta=period, axis=0)
+            vel[piece] = np.stack([np.interp(t, grid, vg[:, k]) for k in range(3)], 1)
+    return vel
+
+
 def fit_hover_velocity(
     data: CalibrationData,
     hovering: NDArray[np.bool_],
@@ -139,7 +187,7 @@ def fit_hover_velocity(
     Returns:
         ``(fit or None, seconds of hover found)``.
     """
-    vel, _ = mocap_kinematics(data)
+    vel = bridged_velocity(data)
     usable = hovering & np.all(np.isfinite(vel), axis=1)
     idx = np.flatnonzero(usable)
     if idx.size < 2:

@@ -90,9 +90,9 @@ BUDGET: dict[str, tuple[int, int, int, int]] = {
     # the slow stage lost its low band L (dead since the velocity state) and the hover
     # test's short window (off by default), and took its rest from the rest detector (one
     # test of stillness, no running mean of its own) (below each, in parentheses) plus 5 %,
-    # rounded up: hover 7,665 -> 7,584 bytecodes, on the ground 2,846 -> 2,682. Before: the hover's velocity state (tension_kalman.HoverVelocity)
-    # cost ~540 bytecodes per hovering message and replaced the change test on the
-    # accelerometer model (~760).
+    # rounded up: hover 7,665 -> 7,584 bytecodes, on the ground 2,846 -> 2,682. Before:
+    # the hover's velocity state (tension_kalman.HoverVelocity) cost ~540 bytecodes per
+    # hovering message and replaced the change test on the accelerometer model (~760).
     "hover": (109, 169, 11, 7964),
     # (103.4, 160.1, 10.1, 7584)
     "hover, motion capture, follow on": (155, 223, 15, 9951),
