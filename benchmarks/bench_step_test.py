@@ -68,11 +68,14 @@ def spacing(rng: np.random.Generator, n: int) -> np.ndarray:
     return out
 
 
-def hover(level: float, colour: str, minutes: float, flights: int) -> dict[str, Any]:
+def hover(
+    level: float, colour: str, minutes: float, flights: int, seed_base: int = 5000
+) -> dict[str, Any]:
     largest, detections, r_ratio = [], 0, []
     r_true = (MASS_KG * level) ** 2 * LONG_RUN[colour]
     for f in range(flights):
-        rng = np.random.default_rng(5000 + f + int(100 * level) + (7 if colour == "ar1" else 0))
+        seed = seed_base + f + int(100 * level) + (7 if colour == "ar1" else 0)
+        rng = np.random.default_rng(seed)
         n = int(minutes * 60.0 / 0.0106)
         v = noise(rng, n, MASS_KG * level, colour)
         dts = spacing(rng, n)
@@ -189,6 +192,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--quick", action="store_true", help="short run; do not write docs")
     ap.add_argument("--minutes", type=float, help="minutes per hover flight (10; quick 2)")
     ap.add_argument("--flights", type=int, help="hover flights per case (12; quick 3)")
+    ap.add_argument(
+        "--seed-base",
+        type=int,
+        default=5000,
+        help="the hovers' seeds start here (5000; another base flies other hovers, to add "
+        "hours to an earlier run's)",
+    )
     args = ap.parse_args(argv)
     quick = args.quick
     minutes = args.minutes or (2.0 if quick else 10.0)
@@ -198,7 +208,7 @@ def main(argv: list[str] | None = None) -> int:
     res: dict[str, Any] = {"hover": [], "steps": []}
     res["commit"] = git_commit()
     for level, colour in CASES:
-        held = hover(level, colour, minutes, flights)
+        held = hover(level, colour, minutes, flights, args.seed_base)
         res["hover"].append({"level": level, "colour": colour, **held})
         print(f"hover {level} {colour}: {res['hover'][-1]}", file=sys.stderr, flush=True)
         res["steps"].append({"level": level, "colour": colour, **steps(level, colour, trials)})
@@ -208,6 +218,8 @@ def main(argv: list[str] | None = None) -> int:
         cmd += f" --minutes {args.minutes:g}"
     if args.flights is not None:
         cmd += f" --flights {args.flights}"
+    if args.seed_base != 5000:
+        cmd += f" --seed-base {args.seed_base}"
     text = render(res, cmd, time.time() - t0)
     print(text)
     if not quick:
