@@ -408,7 +408,8 @@ class CalibrationSection(_Section):
     thrust balance through the velocity, ``v = 0`` observed with variance ``σ_v²·T_c/dt``
     (groundstation.tension_kalman.HoverVelocity). Written by ``groundstation calibrate``
     from the motion-capture velocity in the hovers of its recordings
-    (groundstation.hover_fit); none: 0.02 (NanoBench's hovers, benchmarks/hover_velocity.py)."""
+    (groundstation.hover_fit); none: 0.02 (NanoBench's quasi-static stretches,
+    docs/constants.md)."""
     hover_velocity_time_s: float | None = Field(None, gt=0.0, lt=60.0)
     """(added) T_c, the correlation time of that velocity, s (fitted with
     ``hover_velocity_std_mps``); none: 0.5."""
