@@ -207,11 +207,18 @@ def calibrate(train: list[Flight], work: Path, tag: str, extra: list[str]) -> tu
     return out, text
 
 
+HOVER_VELOCITY_DEFAULT = "# hover_velocity_* removed\n"
+"""A variant's marker: the calibration without its fitted σ_v and T_c."""
+
+
 def variant_config(src: Path, dst: Path, extra_toml: str) -> Path:
     """``src`` with ``extra_toml`` appended, except ``accel_slow = false``, which replaces the
-    calibration's own ``accel_slow = true``."""
+    calibration's own ``accel_slow = true``, and ``HOVER_VELOCITY_DEFAULT``, which removes the
+    calibration's ``hover_velocity_*`` (the filter's defaults then)."""
     text = src.read_text()
-    if extra_toml.strip() == "accel_slow = false":
+    if extra_toml == HOVER_VELOCITY_DEFAULT:
+        dst.write_text(re.sub(r"(?m)^hover_velocity_(std_mps|time_s) = .*\n", "", text))
+    elif extra_toml.strip() == "accel_slow = false":
         if "accel_slow = true" not in text:
             raise RuntimeError(f"{src}: no accel_slow = true to turn off")
         dst.write_text(text.replace("accel_slow = true", "accel_slow = false"))
@@ -279,6 +286,12 @@ def main(argv: list[str] | None = None) -> int:
             ),
             ("airframe + slow accelerometer (default)", [], ""),
             (
+                "airframe + slow accelerometer, the filter's σ_v and T_c (the calibration's "
+                "fitted `hover_velocity_std_mps` / `hover_velocity_time_s` removed)",
+                [],
+                HOVER_VELOCITY_DEFAULT,
+            ),
+            (
                 "airframe + slow accelerometer, hover test with fixed thresholds "
                 "(`[filter] accel_hover_noise_sigmas = 0`, `accel_hover_exit_ratio = 1`: the "
                 "default before the test followed the vibration)",
@@ -287,12 +300,20 @@ def main(argv: list[str] | None = None) -> int:
             ),
         ]
         results: dict[str, dict[str, list[Judged]]] = {v[0]: {} for v in variants}
-        keys = ("uncalibrated", "full", "mean_trusted", "no_rotor_drag", "default", "hover_fixed")
+        keys = (
+            "uncalibrated",
+            "full",
+            "mean_trusted",
+            "no_rotor_drag",
+            "default",
+            "hover_velocity_default",
+            "hover_fixed",
+        )
         figures: dict[str, dict[str, Any]] = {}
         reports: dict[str, str] = {}
         refused: dict[str, str] = {}
         for fold, train, held in folds:
-            for label, extra, toml in variants:
+            for index, (label, extra, toml) in enumerate(variants):
                 if extra is None:
                     cfg = base
                 else:
@@ -305,7 +326,7 @@ def main(argv: list[str] | None = None) -> int:
                         continue
                     if label.endswith("(default)"):
                         reports[fold] = report
-                    cfg = variant_config(cal, work / f"v-{tag}-{len(toml)}.toml", toml)
+                    cfg = variant_config(cal, work / f"v-{tag}-{index}.toml", toml)
                 results[label][fold] = [judge(flights[n], cfg, work) for n in held]
         say("# NanoBench through the command line (real untethered Crazyflie flights)")
         say("")
