@@ -25,9 +25,10 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.nanobench import MASS_KG, nominal_thrust_n
+from benchmarks.nanobench import MASS_KG
+from benchmarks.nanobench import load as nanobench_flight
 from benchmarks.nanobench_cli import AIR_MIN_Z_M, DATA, DAYS, check_data
-from groundstation.calibration import GRAVITY_MPS2, CalibrationData
+from groundstation.calibration import CalibrationData
 from groundstation.config import load_settings
 from groundstation.estimator.drone import slow_accel_params
 from groundstation.hover_fit import fit_hover_velocity, hover_flags
@@ -36,21 +37,6 @@ SIM_SPOTS = (0, 2, 4)
 SIM_SECONDS = 60.0
 SIM_NOISE_MPS2 = 1.0
 SIM_SEED = 900
-
-
-def nanobench_flight(path: Path) -> CalibrationData:
-    """One full NanoBench flight as samples (the bridge's default PWM map for the thrust)."""
-    a = np.genfromtxt(path, delimiter=",", names=True)
-    pwm = np.stack([a[f"motor_motor_m{i}"] for i in range(1, 5)], axis=1)
-    return CalibrationData.from_arrays(
-        a["t"],
-        np.stack([a[f"imu_acc_{k}"] for k in "xyz"], 1) * GRAVITY_MPS2,
-        np.stack([a[f"att_stateEstimate_q{k}"] for k in "wxyz"], 1),
-        nominal_thrust_n(pwm),
-        armed=pwm.max(axis=1) > 0,
-        position_world_m=np.stack([a["px"], a["py"], a["pz"]], 1),
-        gyro_rps=np.stack([a[f"imu_gyro_{k}"] for k in "xyz"], 1),
-    )
 
 
 def _row(label: str, data: CalibrationData, share_of: np.ndarray, mass_kg: float) -> str:
@@ -129,7 +115,7 @@ def main(argv: list[str] | None = None) -> int:
     check_data(ap, args.data)
     print(head.format("flight"))
     for name in DAYS:
-        data = nanobench_flight(args.data / f"{name}.csv")
+        data = nanobench_flight(f"{name}.csv", args.data)
         airborne = data.armed & (data.position_world_m[:, 2] > AIR_MIN_Z_M)
         print(_row(name, data, airborne, MASS_KG))
     return 0

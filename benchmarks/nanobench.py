@@ -36,9 +36,10 @@ def nominal_thrust_n(pwm: np.ndarray) -> np.ndarray:
     return np.where(pwm > 0, per_motor, 0.0).sum(axis=1)
 
 
-def load(name: str) -> CalibrationData:
-    """One excerpt as samples: accelerometer g → m/s², the attitude the drone reports."""
-    a = np.genfromtxt(DATA / name, delimiter=",", names=True)
+def load(name: str, data_dir: Path = DATA) -> CalibrationData:
+    """One flight as samples (an excerpt by default; ``data_dir`` the full files'
+    directory): accelerometer g → m/s², the attitude the drone reports."""
+    a = np.genfromtxt(data_dir / name, delimiter=",", names=True)
     pwm = np.stack([a[f"motor_motor_m{i}"] for i in range(1, 5)], axis=1)
     return CalibrationData.from_arrays(
         a["t"],
