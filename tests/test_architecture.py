@@ -101,6 +101,7 @@ NEVER = {
         "contact",
         "slow_accel",
         "airframe",
+        "hover_fit",
         "thrust_model",
     ),
 }
