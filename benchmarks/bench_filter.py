@@ -54,11 +54,11 @@ DOC_PATH = Path(__file__).resolve().parent.parent / "docs" / "filter_benchmark.m
 FILTERS: dict[str, TensionFilterParams] = {
     "adaptive": TensionFilterParams(),
     "fixed-hover": TensionFilterParams(
-        change_threshold=1e300, drift_min_time_constant_s=6.0, hover_wander_n2_per_s=0.0
+        false_alarms_per_h=0.0, drift_min_time_constant_s=6.0, hover_wander_n2_per_s=0.0
     ),
     "fixed-fast": TensionFilterParams(
         hover_time_constant_s=0.13,
-        change_threshold=1e300,
+        false_alarms_per_h=0.0,
         drift_min_time_constant_s=0.13,
         hover_wander_n2_per_s=0.0,
     ),
@@ -192,7 +192,7 @@ def bench_false_alarms(params: TensionFilterParams, hours: float, chunks: int) -
         r = run(params, np.tile(tension, (n, 1)), rng)
         dets += int(r.detections.sum())
         max_stat = max(max_stat, float(r.statistic.max()))
-        over_half += int(np.sum(r.statistic > 0.5 * params.change_threshold))
+        over_half += int(np.sum(r.statistic > 0.5 * TensionFilter(params).fast_threshold(DT_S)))
     return {
         "hours": n * chunks * DT_S / 3600.0,
         "detections": dets,
@@ -386,7 +386,8 @@ def main(argv: list[str] | None = None) -> int:
         " (-20, 5, -60) mN +- 50 mN",
         f"- false detections: {fa['detections']}",
         f"- largest change statistic: {fa['max_statistic']:.1f}"
-        f" (threshold {adaptive.change_threshold:.0f}; chi-square 3 dof per window)",
+        f" (threshold {TensionFilter(adaptive).fast_threshold(DT_S):.1f}; chi-square 3 dof"
+        " per window)",
         f"- samples with the statistic above half the threshold: "
         f"{fa['samples_over_half_threshold']}",
         "",

@@ -38,7 +38,7 @@ capture. The accelerometer noise level is set per experiment; the pipeline is *n
   the step's samples hold a non-centrality ``n step^2 / r`` (r the true long-run noise
   variance along the pull, measured in the same flights before the pull) equal to the
   threshold of the test that applies at that noise (the step test's, set for
-  ``long_false_alarms_per_h``; the fast test's 50 where the step test is off): a detector
+  its half of ``false_alarms_per_h``; the fast test's where the step test is off): a detector
   with that false-alarm rate finds
   the step about half the time by then, with the level before it known exactly.
 * **Uncalibrated envelope**: one error class on at a time (vibration at 1.0 m/s^2 on in
@@ -310,7 +310,7 @@ def oracle_estimates(f: Flight, tau_s: float, r_n2: np.ndarray) -> tuple[np.ndar
         hover_time_constant_s=tau_s,
         hover_wander_n2_per_s=0.0,
         drift_min_time_constant_s=tau_s,
-        change_threshold=1e300,
+        false_alarms_per_h=0.0,
     )
     filt = TensionFilter(params)
     tp = f.settings.for_drone(DRONE)
@@ -572,7 +572,7 @@ def tug(noise: float, seeds: list[int]) -> dict[str, Any]:
     # along the pull) equal to the step test's threshold: detected about half the time.
     r_mean, dt_mean = float(np.mean(r_along)), float(np.mean(dt_means))
     design = TensionFilter().step_test_design(r_mean, dt_mean)
-    h = TensionFilterParams().change_threshold if design is None else design[2]
+    h = TensionFilter().fast_threshold(dt_mean) if design is None else design[2]
     info_s = h * r_mean / step_n**2 * dt_mean
     ok_delays = [x for x in delays if x is not None]
     return {
@@ -918,10 +918,10 @@ def _render_tug(res: dict[str, Any]) -> list[str]:
         "limit: the time at which the step's samples, the level before it known, hold a "
         "non-centrality n step^2 / r equal to the threshold h of the test that applies at "
         "that noise (column h: the step test's, set for "
-        f"{TensionFilterParams().long_false_alarms_per_h:g} false alarms per hour; the fast "
-        "test's 50 where the step test is off; r the true long-run noise variance along the "
-        "pull, measured in the same flights): a test at that false-alarm rate detects the "
-        "step about half the time by then.",
+        f"{0.5 * TensionFilterParams().false_alarms_per_h:g} false alarms per hour, half of "
+        "the filter's; the fast test's where the step test is off; r the true long-run "
+        "noise variance along the pull, measured in the same flights): a test at that "
+        "false-alarm rate detects the step about half the time by then.",
         "",
         "| accel noise | seeds | t90 ours / oracle | settle ours / oracle | never settled "
         "| detections per seed | first detection per seed | median detection / information "

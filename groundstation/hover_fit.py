@@ -40,7 +40,12 @@ from scipy.signal import savgol_filter
 from groundstation import slow_accel as slow_mod
 from groundstation.airframe import MIN_HEIGHT_M
 from groundstation.attitude import GRAVITY_MPS2, rows_from_quat_wxyz
-from groundstation.calibration import CalibrationData, RestCalibrator, _integrated_autocorr_time
+from groundstation.calibration import (
+    CalibrationData,
+    RestCalibrator,
+    _index_runs,
+    _integrated_autocorr_time,
+)
 
 __all__ = ["HOVER_FIT_MIN_S", "HoverVelocityFit", "fit_hover_velocity", "hover_flags"]
 
@@ -106,14 +111,14 @@ def hover_flags(
             dt = 0.0 if last is None else max(stamp - last, 0.0)
             last = stamp
             z = float(data.position_world_m[i, 2])
+            armed = bool(data.armed[i])
             air = (
-                bool(data.armed[i])
+                armed
                 and float(data.thrust_n[i]) >= ground_thrust_ratio * weight_n
                 and math.isfinite(z)
                 and z >= floor_z_m + min_height_m
             )
             a = data.accel_body_mps2[i]
-            armed = bool(data.armed[i])
             gyro = data.gyro_rps[i]
             rest.update(
                 stamp, a, data.quat_wxyz[i], armed, gyro if np.all(np.isfinite(gyro)) else None
@@ -192,12 +197,9 @@ def fit_hover_velocity(
     idx = np.flatnonzero(usable)
     if idx.size < 2:
         return None, 0.0
-    cut = (np.diff(idx) != 1) | (np.diff(data.segment[idx]) != 0)
-    starts = np.concatenate(([0], np.flatnonzero(cut) + 1))
-    ends = np.concatenate((starts[1:], [idx.size]))
     runs: list[tuple[int, int]] = []
     dts: list[float] = []
-    for a, b in zip(starts.tolist(), ends.tolist(), strict=True):
+    for a, b in _index_runs(idx, data.segment):
         t = data.stamp_s[idx[a:b]]
         if b - a >= 3 and t[-1] - t[0] >= slow_mod.HOVER_MEAN_S:
             runs.append((a, b))

@@ -107,10 +107,11 @@ class SlowAccelParams:
     quasi_static_exit_ratio: float = 1.0
 
     def __post_init__(self) -> None:
-        for name in ("quasi_static_sigmas",):
-            value = getattr(self, name)
-            if not (value >= 0.0 and math.isfinite(value)):
-                raise ValueError(f"SlowAccelParams.{name} must be finite and >= 0, got {value!r}")
+        sigmas = self.quasi_static_sigmas
+        if not (sigmas >= 0.0 and math.isfinite(sigmas)):
+            raise ValueError(
+                f"SlowAccelParams.quasi_static_sigmas must be finite and >= 0, got {sigmas!r}"
+            )
         if not (
             self.quasi_static_exit_ratio >= 1.0 and math.isfinite(self.quasi_static_exit_ratio)
         ):

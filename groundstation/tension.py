@@ -620,9 +620,10 @@ class TensionFilterParams:
             noise), within [``hover_time_constant_s``, ``hover_max_time_constant_s``]:
             longer memory where the noise is larger. 0: tau = ``hover_time_constant_s``.
         hover_max_time_constant_s: Longest time constant at hover, s.
-        change_threshold: Threshold on the change statistic (chi-square with 3 degrees of
-            freedom per window under no change, after normalisation by the innovations'
-            measured variance and effective sample size), dimensionless.
+        false_alarms_per_h: False detections per hour of hover the two change tests
+            together are set for, 1/h: each test's threshold is derived from half of it
+            (:func:`~groundstation.tension_change.scan_threshold` over the test's own
+            windows at the measured sample spacing); 0: no change test. The tests' one knob.
         change_min_window: Shortest window of the change test, samples (a single outlier
             cannot trigger a detection).
         change_max_window_s: Longest window of the change test, s.
@@ -632,8 +633,6 @@ class TensionFilterParams:
             which a step of ``long_min_step_n``, the level before it known, reaches it
             (``n_max = long_sizing_threshold * r / step^2`` samples).
         long_min_step_n: The step the long-window test is sized for, N.
-        long_false_alarms_per_h: False detections per hour of hover the step test's
-            threshold is set for (:func:`scan_threshold`, noise known), 1/h.
         long_max_window_s: Cap on the long-window test's longest window, s.
         long_reference_s: Longest stretch before a window that serves as its reference
             level in the long-window test, s.
@@ -669,13 +668,12 @@ class TensionFilterParams:
     hover_time_constant_s: float = 6.0
     hover_wander_n2_per_s: float = 4.5e-8
     hover_max_time_constant_s: float = 40.0
-    change_threshold: float = 50.0
+    false_alarms_per_h: float = 0.005
     change_min_window: int = 4
     change_max_window_s: float = 1.0
     ring_size: int = 512
     long_sizing_threshold: float = 40.0
     long_min_step_n: float = 0.020
-    long_false_alarms_per_h: float = 0.005
     long_max_window_s: float = 8.0
     long_reference_s: float = 10.0
     long_history_size: int = 4096
@@ -696,11 +694,9 @@ class TensionFilterParams:
             "noise_time_constant_s": self.noise_time_constant_s,
             "noise_prior_samples": self.noise_prior_samples,
             "hover_time_constant_s": self.hover_time_constant_s,
-            "change_threshold": self.change_threshold,
             "change_max_window_s": self.change_max_window_s,
             "long_sizing_threshold": self.long_sizing_threshold,
             "long_min_step_n": self.long_min_step_n,
-            "long_false_alarms_per_h": self.long_false_alarms_per_h,
             "long_max_window_s": self.long_max_window_s,
             "long_reference_s": self.long_reference_s,
             "drift_time_constant_s": self.drift_time_constant_s,
@@ -717,6 +713,7 @@ class TensionFilterParams:
                 )
         non_negative = {
             "thrust_noise_n": self.thrust_noise_n,
+            "false_alarms_per_h": self.false_alarms_per_h,
             "hover_wander_n2_per_s": self.hover_wander_n2_per_s,
             "drift_exponent": self.drift_exponent,
             "drift_memory_s": self.drift_memory_s,
@@ -802,8 +799,9 @@ class TensionEstimate:
             re-initialised the filter from the samples since the change.
         samples: Observations taken since start or reset.
         change_statistic: Largest windowed chi-square statistic of this step: the fast
-            test's, or the step test's times ``change_threshold`` over its own threshold
-            when larger, so that either is a detection above ``change_threshold``
+            test's, or the step test's times the fast test's threshold over its own
+            when larger, so that either is a detection above the fast test's threshold
+            (:attr:`TensionFilter.change_threshold`)
             (dimensionless; the step test's is 0 on the samples it is not evaluated).
         process_noise_scale: Factor on the process noise applied this step by the drift
             adaptation (1 at hover).
@@ -951,13 +949,15 @@ class TensionFilter:
     hover), both tests alike; and the test waits for
     ``noise_warmup_samples`` = 30 samples (0.3 s at 100 Hz) whose innovations were
     whitened with a noise of a few samples. The largest statistic is compared with
-    ``change_threshold`` = 50: Bonferroni over 250 windows and 900 000 samples per hour
-    gives at most ~0.02 false detections per hour (chi2_3 tail at 50 is 8e-11; the
-    windows are strongly correlated, so the real rate is far lower; the benchmarks count
-    them: none in 10 min at 0.5, 1 and 2 m/s^2 on the realistic simulator). A 30 mN
+    the threshold :func:`~groundstation.tension_change.scan_threshold` gives for half of
+    ``false_alarms_per_h`` (0.0025/h) over the windows [``change_min_window``, 1 s] at the
+    measured spacing (the Brownian scan approximation of the crossing rate of a sliding
+    chi-square scan: 51.2 at 100 Hz, 53.2 at 250 Hz; before a spacing is known, at the
+    rate that fills the ring in 1 s, the highest; the hand-set 50 it replaces was 0.005/h
+    at 100 Hz). The false detections are counted in docs/step_test_benchmark.md. A 30 mN
     step is detected a few samples after it at 0.3 m/s^2 and 250 Hz (non-centrality
     ~10 per sample). At 1 and 2 m/s^2, 100 Hz and r = 2 s2 the same step adds only 0.5
-    and 0.125 per sample, 1 s and 4 s of samples to reach 50, and meanwhile the hover
+    and 0.125 per sample, 1 s and 4 s of samples to reach ~50, and meanwhile the hover
     filter (tau >= 6 s) and the drift adaptation take part of the step into the state,
     which the innovations then no longer show: this test alone detected it in 1 of 4
     flights at 1 m/s^2 and 0 of 4 at 2 m/s^2 (t90 3.3 s and never, realistic simulator).
@@ -992,17 +992,17 @@ class TensionFilter:
     scan over windows [n0, n1] crosses h at about
     ``h^(d/2) e^(-h/2) / (2^(d/2) Gamma(d/2)) * (h/2) * (1/n0 - 1/n1)`` per sample
     (d = 3, the Brownian scan approximation, noise known), so h is set per noise level
-    for ``long_false_alarms_per_h`` = 0.005 per hour: 43.5 at 1 m/s^2 and 40.4 at
-    2 m/s^2 (longer windows, fewer independent looks); one fixed h = 32 would be
-    0.7 per hour at 1 m/s^2. The on-line noise estimate adds its scatter and bias (at
-    the end of a 10 min hover it reads r at 0.74-1.11 of the truth, median 0.90-0.98 per
-    case, below on the realistic simulator's mix), which fattens the tail beyond the
-    formula's, so the margin was measured
+    for its half of ``false_alarms_per_h`` (0.0025 per hour; at 0.005 per hour it was
+    43.5 at 1 m/s^2 and 40.4 at 2 m/s^2: longer windows, fewer independent looks); one
+    fixed h = 32 would be 0.7 per hour at 1 m/s^2. The on-line noise estimate adds its
+    scatter and bias (at the end of a 10 min hover it reads r at 0.74-1.11 of the truth,
+    median 0.90-0.98 per case, below on the realistic simulator's mix), which fattens the
+    tail beyond the formula's, so the margin was measured
     (docs/step_test_benchmark.md, ``python -m benchmarks.bench_step_test``: the filter
     alone, not told the noise, jittered ~94 Hz): in 12 hovers of 10 min per case, at 1
     and 2 m/s^2, white + AR(0.6) (lag-1 0.2, the realistic simulator's) and AR(1)
     rho = 0.3, no detection in 8 h; the largest statistic of a flight, on the fast test's
-    scale (50 = detection), was 24-43 (median per case 30-36).
+    scale (then 50 = detection), was 24-43 (median per case 30-36).
 
     *Information limit.* With the level before the step known exactly, a GLR at threshold
     h detects a step delta about half the time once ``n delta^2 / r = h``: for 30 mN at
@@ -1081,7 +1081,7 @@ class TensionFilter:
     learned on line: the noise, its colour, the rate, the memory.
 
     *Detection against false alarms* (the long-window step test above). What a lower
-    ``long_false_alarms_per_h`` costs, by the formulas above (``scan_threshold`` over
+    rate for that test costs, by the formulas above (``scan_threshold`` over
     that test's windows; a 30 mN step, r = 2 s2 as in the realistic simulator's noise,
     100 Hz, 10 s of reference before the step; the time is where the test detects it
     about half the time)::
@@ -1092,12 +1092,14 @@ class TensionFilter:
         h at 2 m/s^2            40.4    35.1    28.8    24.0    19.3
         detection at 2 m/s^2    5.0 s   4.1 s   3.2 s   2.5 s   1.9 s
 
-    0.005 per hour because a false detection is not harmless: with following on it moves
+    0.005 per hour for the two tests together (``false_alarms_per_h``, each test half)
+    because a false detection is not harmless: with following on it moves
     the drone, with ``land_below_m`` it can stop the motors. 0.005 per hour is one per
     200 h of hover per drone (1700 seven-minute battery packs), and with eight drones one
     per 25 h of flying; 0.7 per hour (h = 32) would be one every 11 minutes of an
     eight-drone hover, for a detection 28 % sooner (0.72 s against 1.00 s at 1 m/s^2).
-    Measured detections follow the 0.005 column (docs/realistic_benchmark.md, 30 mN tug).
+    Measured detections follow the 0.005 column (docs/realistic_benchmark.md, 30 mN tug;
+    measured at 0.005 per hour for this test alone, before the two tests shared one rate).
 
     **Initialisation.** The first observation initialises the state (x = y, P = R),
     unlike the paper, whose filter started from T = 0: with H = 0 and s2 = 0 the
@@ -1124,12 +1126,14 @@ class TensionFilter:
         self._hover_v = HoverVelocity()  # v beside T while the drone hovers
         p = self.params
         self._change = ChangeTest(
-            p.change_min_window, p.change_max_window_s, p.ring_size, p.change_threshold
+            p.change_min_window, p.change_max_window_s, p.ring_size, self.fast_threshold(None)
         )
+        # Spacings within 1 % of the one the fast test's threshold was derived at.
+        self._fast_band = (math.nan, math.nan)
         self._step = StepTest(
             p.long_sizing_threshold,
             p.long_min_step_n,
-            p.long_false_alarms_per_h,
+            0.5 * p.false_alarms_per_h,
             p.long_max_window_s,
             p.long_reference_s,
             p.long_history_size,
@@ -1403,6 +1407,12 @@ class TensionFilter:
                 )
             if floor[1] > youth:
                 test_youth = floor[1]
+        # The fast test's threshold follows the spacing (log of its longest window):
+        # derived again once the spacing has moved by 1 %.
+        lo, hi = self._fast_band
+        if not lo < spacing < hi and spacing > 0.0:  # False for a NaN spacing
+            self._fast_band = (0.99 * spacing, 1.01 * spacing)
+            self._change.set_threshold(self.fast_threshold(spacing))
         # This step's time constant: the hover one (hover_time_constant, written out),
         # shortened by the drift adaptation.
         tau_hover = p.hover_time_constant_s
@@ -1456,7 +1466,8 @@ class TensionFilter:
                 stat, window = 0.0, 0
             else:
                 stat, window = self._change.evaluate(self._dt_mean, test_youth)
-        change = stat > p.change_threshold
+        h_fast = self._change.threshold
+        change = stat > h_fast
         if change:
             # Restart from the observations since the change (x = their mean, P = R / n).
             self._restart(self._change.mean_of_window(window), window, r)
@@ -1467,11 +1478,11 @@ class TensionFilter:
             change = step_stat > h_step
             if change:
                 self._restart(mean, window, r)
-            # On the fast test's scale: a detection is a statistic above change_threshold.
+            # On the fast test's scale: a detection is a statistic above its threshold.
             if lazy is not None:
-                lazy.other = step_stat * (p.change_threshold / h_step)
+                lazy.other = step_stat * (h_fast / h_step)
             else:
-                stat = max(stat, step_stat * (p.change_threshold / h_step))
+                stat = max(stat, step_stat * (h_fast / h_step))
         if not warming:
             self._step.push(z)
         if self.trace is not None:
@@ -1529,13 +1540,38 @@ class TensionFilter:
             tau = min(max(math.sqrt(rbar * dt_mean_s / q), tau), p.hover_max_time_constant_s)
         return tau
 
+    @property
+    def change_threshold(self) -> float:
+        """The fast change test's threshold now (:meth:`fast_threshold` at the measured
+        spacing), dimensionless: a ``change_statistic`` above it is a detection."""
+        return self._change.threshold
+
+    def fast_threshold(self, dt_mean_s: float | None) -> float:
+        """The fast test's threshold at a mean sample spacing, dimensionless.
+
+        :func:`~groundstation.tension_change.scan_threshold` for half of
+        ``false_alarms_per_h`` (the other half is the step test's) over the windows
+        [``change_min_window``, ``change_max_window_s`` / dt] samples (at most the ring);
+        with no spacing known, at ``change_max_window_s`` / ``ring_size`` (the highest rate
+        the ring serves: the highest threshold). Infinite when ``false_alarms_per_h`` is 0.
+        """
+        p = self.params
+        if p.false_alarms_per_h == 0.0:
+            return math.inf
+        dt = p.change_max_window_s / p.ring_size
+        if dt_mean_s is not None and dt_mean_s == dt_mean_s and dt_mean_s > 0.0:
+            dt = dt_mean_s
+        n_lo = float(p.change_min_window)
+        n_hi = min(float(p.ring_size), max(n_lo, float(int(p.change_max_window_s / dt))))
+        return scan_threshold(0.5 * p.false_alarms_per_h, n_lo, max(n_hi, n_lo + 1.0), dt)
+
     def step_test_design(self, r_n2: float, dt_s: float) -> tuple[float, float, float] | None:
         """Windows and threshold of the long-window step test at a noise level and rate.
 
         ``n_max = long_sizing_threshold * r / long_min_step_n^2`` samples (a 20 mN step,
         the level before it known, reaches the sizing non-centrality in n_max samples),
         at most ``long_max_window_s`` and half the history; windows from n_max / 4; the
-        threshold from :func:`scan_threshold` for ``long_false_alarms_per_h``. None (the
+        threshold from :func:`scan_threshold` for half of ``false_alarms_per_h``. None (the
         test off) while n_max lies within the fast test's longest window
         (:meth:`groundstation.tension_change.StepTest.design`).
 

@@ -365,6 +365,14 @@ class ChangeTest:
         self._sigma = -1.0  # the slack; < 0: no certificate
         self._moves = 0  # ring.moves when the anchor was set
 
+    def set_threshold(self, threshold: float) -> None:
+        """A new detection threshold (the spacing moved): the certificate is dropped."""
+        self.threshold = threshold
+        n = 1.0 / self.inv_n
+        self._radius = np.sqrt(threshold * n) * (1.0 - 1e-9) - 1e-12
+        self._radius_min = float(self._radius[0])
+        self._sigma = -1.0
+
     def clear(self) -> None:
         """Forgets the windows (a new regime): none can detect until they fill again."""
         self.ring.count = 0
@@ -564,6 +572,8 @@ class StepTest:
         :func:`scan_threshold`. None (the test off) while n_max lies within the fast test's
         longest window.
         """
+        if self.false_alarms_per_h == 0.0:
+            return None
         n_fast = max(self.fast_min_window, int(self.fast_max_window_s / dt_s))
         n_max = min(
             self.sizing_threshold * r_n2 / (self.min_step_n * self.min_step_n),

@@ -119,7 +119,7 @@ def test_a_tug_under_the_hover_is_found() -> None:
             assert t >= 5.0, f"a detection before the tug, at {t:.2f} s"
             found = t
             break
-    limit_s = filt.params.change_threshold * 0.035**2 / 0.030**2 * 0.01
+    limit_s = filt.change_threshold * 0.035**2 / 0.030**2 * 0.01
     assert found is not None and found - 5.0 < 1.5 * limit_s, (found, limit_s)
 
 

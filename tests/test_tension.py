@@ -372,7 +372,7 @@ def test_a_new_hover_averages_from_its_start() -> None:
     (x tends to their mean, with the old estimate as a one-sample prior), where the hover
     filter (tau >= 6 s) would still hold most of the old tension after 1 s; the noise
     estimate is kept, and P never shrinks."""
-    params = TensionFilterParams(change_threshold=1e300)  # no change test: the rule alone
+    params = TensionFilterParams(false_alarms_per_h=0.0)  # no change test: the rule alone
     rng = np.random.default_rng(5)
     sigma_n = MASS_KG * 0.8
     new_n = HOVER_TENSION_N + np.array([0.006, -0.004, 0.003])
@@ -431,7 +431,7 @@ def test_invalid_observation_in_filter_raises() -> None:
         {"noise_prior_samples": 0.0},
         {"gap_s": -1.0},
         {"long_sizing_threshold": 0.0},
-        {"long_false_alarms_per_h": 0.0},
+        {"false_alarms_per_h": -1.0},
         {"long_min_step_n": -0.02},
         {"long_max_window_s": math.inf},
         {"long_reference_s": 0.0},
@@ -800,7 +800,7 @@ def test_no_false_tug_on_coloured_vibration_noise(accel_noise: float) -> None:
         if k > n // 4:
             errs.append(e.tension_world_n - HOVER_TENSION_N)
     assert false_adaptive == 0
-    assert largest < 0.8 * adaptive.params.change_threshold, largest  # with a margin
+    assert largest < 0.8 * adaptive.change_threshold, largest  # with a margin
     # At the information limit of a tau average: sqrt(r dt / (2 tau)) per axis.
     r = sigma_n**2 * 1.3 / 0.7
     limit = math.sqrt(r * float(np.mean(dts)) / (2 * TAU_S))
@@ -879,6 +879,39 @@ def test_scan_threshold_solves_the_false_alarm_rate() -> None:
         scan_threshold(0.005, 180.0, 45.0, 0.01)
 
 
+def test_the_false_alarm_rate_is_the_change_tests_one_knob() -> None:
+    """Each test's threshold is derived from half of ``false_alarms_per_h`` at the measured
+    spacing (the fast test over its windows [change_min_window, 1 s], the step test over its
+    own); a lower rate raises both; 0 turns both off and a 300 mN step is then not found."""
+    rng = np.random.default_rng(4)
+    filt = TensionFilter()
+    p = filt.params
+    before = filt.change_threshold  # no spacing yet: the ring's highest rate, the highest h
+    assert before == pytest.approx(scan_threshold(0.5 * p.false_alarms_per_h, 4, 512, 1 / 512))
+    for _ in range(400):
+        filt.update(HOVER_TENSION_N + rng.normal(0.0, 0.03, 3), 0.01)
+    h = filt.change_threshold
+    assert h == pytest.approx(scan_threshold(0.5 * p.false_alarms_per_h, 4, 100, 0.01), rel=0.01)
+    assert h < before
+    assert h == pytest.approx(filt.fast_threshold(0.01), rel=0.01)
+    design = filt.step_test_design(2 * 0.03**2, 0.01)
+    assert design is not None
+    n_lo, n_hi, h_step = design
+    assert h_step == pytest.approx(scan_threshold(0.5 * p.false_alarms_per_h, n_lo, n_hi, 0.01))
+    rarer = TensionFilter(TensionFilterParams(false_alarms_per_h=0.0005))
+    assert rarer.fast_threshold(0.01) > h + 4.0
+    design_rarer = rarer.step_test_design(2 * 0.03**2, 0.01)
+    assert design_rarer is not None and design_rarer[2] > h_step + 4.0
+    off = TensionFilter(TensionFilterParams(false_alarms_per_h=0.0))
+    assert off.change_threshold == math.inf and off.step_test_design(2 * 0.03**2, 0.01) is None
+    found = False
+    for k in range(1500):
+        step = 0.3 if k >= 1000 else 0.0
+        e = off.update(HOVER_TENSION_N + step + rng.normal(0.0, 0.03, 3), 0.01)
+        found = found or e.change_detected
+    assert not found
+
+
 @pytest.mark.parametrize("accel_noise", [1.0, 2.0])
 def test_a_step_in_strong_coloured_noise_is_found_near_the_information_limit(
     accel_noise: float,
@@ -949,7 +982,7 @@ def test_no_step_detection_in_minutes_of_coloured_noise(accel_noise: float, colo
             e = filt.update(HOVER_TENSION_N + v[k], float(dts[k]))
             assert not e.change_detected, f"false detection at {k} (seed {seed})"
             largest = max(largest, e.change_statistic)
-    assert largest < TensionFilterParams().change_threshold
+    assert largest < filt.change_threshold
 
 
 def test_the_step_test_leaves_the_ideal_profile_as_it_was() -> None:
