@@ -127,14 +127,23 @@ class Score:
     p95_m: float
     tension_rmse_n: float
     samples: int
+    tension_within_2_sigma: float
+    position_within_2_sigma: float
 
 
-def judge(rec: Recorded, settings: Settings) -> tuple[list[float], list[np.ndarray]]:
+Judged = tuple[list[float], list[np.ndarray], list[tuple[int, int]]]
+"""Per judged sample: the position error (m), the tension error (N, 3-vector), and how many of
+the three axes the published σ holds within 2σ (tension, position; a position without a σ
+holds none)."""
+
+
+def judge(rec: Recorded, settings: Settings) -> Judged:
     """Serve a recording (no motion capture in it) through the pipeline; per judged sample
-    the position error (m) and the tension error (N, 3-vector)."""
+    the position error (m), the tension error (N, 3-vector) and the axes within 2σ."""
     pipe = Pipeline(settings)
     pos_err: list[float] = []
     ten_err: list[np.ndarray] = []
+    within: list[tuple[int, int]] = []
     for m in rec.messages:
         now = m.log_time_ns / 1e9
         for out in pipe.handle(Sample(m.key, m.payload), now):
@@ -147,25 +156,34 @@ def judge(rec: Recorded, settings: Settings) -> tuple[list[float], list[np.ndarr
             tr = rec.truth.get(round(stamp, 6))
             if tr is None:
                 continue
-            ten_err.append(np.subtract(est["tension_n"], tr["tension_n"]))
+            d_t = np.subtract(est["tension_n"], tr["tension_n"])
+            ten_err.append(d_t)
+            t_in = int(np.sum(np.abs(d_t) <= 2.0 * np.asarray(est["tension_std_n"], float)))
             if est["position_m"] is None:
                 pos_err.append(float("inf"))
+                p_in = 0
             else:
-                pos_err.append(
-                    float(np.linalg.norm(np.subtract(est["position_m"], tr["position_m"])))
-                )
+                d_p = np.subtract(est["position_m"], tr["position_m"])
+                pos_err.append(float(np.linalg.norm(d_p)))
+                std = est.get("position_std_m")
+                p_in = 0 if std is None else int(np.sum(np.abs(d_p) <= 2.0 * np.asarray(std)))
+            within.append((t_in, p_in))
         pipe.tick(now)
-    return pos_err, ten_err
+    return pos_err, ten_err, within
 
 
-def score(parts: list[tuple[list[float], list[np.ndarray]]]) -> Score:
-    p = np.concatenate([np.asarray(a, float) for a, _ in parts])
-    t = np.concatenate([np.asarray(b, float).reshape(-1, 3) for _, b in parts])
+def score(parts: list[Judged]) -> Score:
+    p = np.concatenate([np.asarray(a, float) for a, _, _ in parts])
+    t = np.concatenate([np.asarray(b, float).reshape(-1, 3) for _, b, _ in parts])
+    w = np.concatenate([np.asarray(c, float).reshape(-1, 2) for _, _, c in parts])
+    axes = 3.0 * max(len(w), 1)
     return Score(
         float(np.median(p)),
         float(np.percentile(p, 95)),
         float(np.sqrt(np.mean(np.sum(t**2, axis=1) / 3.0))),
         int(p.size),
+        float(w[:, 0].sum() / axes),
+        float(w[:, 1].sum() / axes),
     )
 
 
@@ -259,16 +277,27 @@ def main(argv: list[str] | None = None) -> int:
         "(undetermined counts as infinite); tension RMSE per axis."
     )
     say("")
-    say("| configuration | position median cm | p95 cm | tension RMSE mN | samples |")
-    say("| --- | ---: | ---: | ---: | ---: |")
+    say(
+        "| configuration | position median cm | p95 cm | tension RMSE mN | samples "
+        "| within 2σ: tension | position |"
+    )
+    say("| --- | ---: | ---: | ---: | ---: | ---: | ---: |")
     for label, s in rows.items():
         if s is None:
-            say(f"| {label} | refused | | | |")
+            say(f"| {label} | refused | | | | | |")
         else:
             say(
                 f"| {label} | {100 * s.median_m:.1f} | {100 * s.p95_m:.1f} | "
-                f"{1e3 * s.tension_rmse_n:.2f} | {s.samples} |"
+                f"{1e3 * s.tension_rmse_n:.2f} | {s.samples} | "
+                f"{100 * s.tension_within_2_sigma:.0f} % | "
+                f"{100 * s.position_within_2_sigma:.0f} % |"
             )
+    say("")
+    say(
+        "Within 2σ: the share of per-axis errors within twice the published σ "
+        "(`tension_std_n`, `position_std_m`; a position without a σ counts as outside); a "
+        "consistent σ holds about 95 %."
+    )
     say("")
     for model, text in printed.items():
         say(f"`calibrate --model {model}` printed:")

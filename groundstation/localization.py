@@ -428,6 +428,7 @@ def try_localize(
     exit_elevation: AngleObservation | None = None,
     mocap_world_m: ArrayLike | None = None,
     mocap_std_m: float = 0.002,
+    model_var_n2: tuple[float, float, float] | None = None,
 ) -> PositionEstimate | LocalizationFailure:
     """Drone position and its uncertainty from the tension at the drone and the base.
 
@@ -450,6 +451,15 @@ def try_localize(
         mocap_world_m: Motion-capture position, world, m, shape (3,), for
             ``azimuth="mocap"``; None otherwise.
         mocap_std_m: Its horizontal standard deviation, m, > 0.
+        model_var_n2: Variance per world axis of an error of the tension that holds still
+            from sample to sample (the calibration's misfit, ``[calibration]
+            tension_model_std_n`` squared), N², finite and >= 0; None: none. It widens the
+            position's covariance (the sigma points are drawn from ``tension_cov_n2`` plus
+            it) but not the azimuth's determination nor the blend to the base, which ask
+            whether the *noise* turns the pull's direction from sample to sample; a still
+            error's direction is a bias the blend would not take out (on the realistic
+            simulator calibrated by ``calibrate``, blending on it too lost 5.7 cm of median
+            position for nothing: ``python -m benchmarks.bench_powerons``).
 
     Returns:
         The estimate, or a :class:`LocalizationFailure` with the reason. Never NaN.
@@ -467,6 +477,7 @@ def try_localize(
         exit_elevation,
         mocap_world_m,
         mocap_std_m,
+        model_var_n2,
     )
 
 
@@ -483,6 +494,7 @@ def _try_localize(
     exit_elevation: AngleObservation | None,
     mocap_world_m: ArrayLike | None,
     mocap_std_m: float,
+    model_var_n2: tuple[float, float, float] | None = None,
 ) -> PositionEstimate | LocalizationFailure:
     """:func:`try_localize`, its arguments by position (``localize`` calls it too)."""
     # This runs once per telemetry message on 3-vectors and a 3x3: the arithmetic is on
@@ -493,6 +505,11 @@ def _try_localize(
     T = tension_world_n
     C = tension_cov_n2
     B = base_world_m
+    mx = my = mz = 0.0
+    model_ok = True
+    if model_var_n2 is not None:
+        mx, my, mz = model_var_n2
+        model_ok = mx >= 0.0 and my >= 0.0 and mz >= 0.0 and math.isfinite(mx + my + mz)
     if (
         type(T) is _ndarray
         and type(C) is _ndarray
@@ -525,6 +542,7 @@ def _try_localize(
             math.isfinite(
                 tx + ty + tz + bx + by + bz + c00 + c01 + c02 + c10 + c11 + c12 + c20 + c21 + c22
             )
+            and model_ok
             and 0.0 < weight_n_per_m < math.inf
             and 0.0 < length_m < math.inf
             and (floor_z_m == -math.inf or (math.isfinite(floor_z_m) and not bz < floor_z_m))
@@ -533,7 +551,7 @@ def _try_localize(
                 tx, ty, tz,
                 0.5 * (c00 + c00), 0.5 * (c01 + c10), 0.5 * (c02 + c20),
                 0.5 * (c11 + c11), 0.5 * (c12 + c21), 0.5 * (c22 + c22),
-                weight_n_per_m, length_m, bx, by, bz, floor_z_m, plumb_k,
+                weight_n_per_m, length_m, bx, by, bz, floor_z_m, plumb_k, mx, my, mz,
             )  # fmt: skip
             if common is not None:
                 return common
@@ -569,11 +587,12 @@ def _try_localize(
         return LocalizationFailure(f"floor_z_m must be finite or -inf, got {floor_z_m!r}")
     if math.isfinite(floor_z_m) and bz < floor_z_m:
         return LocalizationFailure(f"base z {bz} m is below the floor {floor_z_m} m")
+    if not model_ok:
+        return LocalizationFailure(f"model_var_n2 must be finite and >= 0, got {[mx, my, mz]!r}")
     # cov = (cov + cov') / 2
     c00, c01, c02, c10, c11, c12, c20, c21, c22 = c_in
     cxy, cxz, cyz = 0.5 * (c01 + c10), 0.5 * (c02 + c20), 0.5 * (c12 + c21)
     cxx, cyy, czz = 0.5 * (c00 + c00), 0.5 * (c11 + c11), 0.5 * (c22 + c22)
-    cov = [cxx, cxy, cxz, cxy, cyy, cyz, cxz, cyz, czz]
     # Python floats from here on, as numpy's .tolist() gave them before (an np.float64
     # omega would make every result an np.float64).
     weight_n_per_m, length_m = float(weight_n_per_m), float(length_m)
@@ -587,11 +606,12 @@ def _try_localize(
     sigma_h_n = math.sqrt(max(lam_max, 0.0))
 
     # All catenary evaluations in one vectorised call:
-    #   0: the estimate; 1..6: sigma points T +- sqrt(3) S e_i; 7: (k sigma_H, T_v), the
-    #   reach of a tether whose azimuth is unknown.
-    sq = _cholesky3(cov)
+    #   0: the estimate; 1..6: sigma points T +- sqrt(3) S e_i (S S' = cov + the model's
+    #   variance); 7: (k sigma_H, T_v), the reach of a tether whose azimuth is unknown.
+    cov_points = [cxx + mx, cxy, cxz, cxy, cyy + my, cyz, cxz, cyz, czz + mz]
+    sq = _cholesky3(cov_points)
     if sq is None:  # singular (e.g. zero) covariance
-        sq = _sqrt_psd(np.array(cov).reshape(3, 3)).ravel().tolist()
+        sq = _sqrt_psd(np.array(cov_points).reshape(3, 3)).ravel().tolist()
     # Points T, T + sqrt(3) S[:, i], T - sqrt(3) S[:, i] (i = 0, 1, 2), per coordinate.
     a0, a1, a2, b0, b1, b2, c0, c1, c2 = [_SIGMA_SCALE * v for v in sq]
     px = [tx, tx + a0, tx + a1, tx + a2, tx - a0, tx - a1, tx - a2]
@@ -701,6 +721,10 @@ def _try_localize(
     if source_t and std_t > 0.0:
         w_t = (std_beta / std_t) ** 2
         var_other = max(std_beta * std_beta - w_t * w_t * std_t * std_t, 0.0)
+    elif source_t:
+        # The tension's azimuth without noise across it holds all the weight (its sigma
+        # points may still spread across it: the model's variance).
+        w_t, var_other = 1.0, 0.0
     else:
         w_t = 0.0
         var_other = std_beta * std_beta if std_beta < math.inf else 0.0
@@ -801,6 +825,9 @@ def _localize_tension_free(
     bz: float,
     floor_z_m: float,
     plumb_k: float,
+    mx: float = 0.0,
+    my: float = 0.0,
+    mz: float = 0.0,
 ) -> PositionEstimate | None:
     """:func:`try_localize`'s common case, a freely hanging tether whose azimuth comes from
     the tension alone and is certain (rho = 1), with the very operations of its general
@@ -813,7 +840,8 @@ def _localize_tension_free(
     both give the same floats.
 
     Inputs as in :func:`try_localize` after its checks: the tension's components, the
-    symmetrised covariance's, omega, L, the base and the floor.
+    symmetrised covariance's, omega, L, the base, the floor and the model's variance per
+    axis (``model_var_n2``: added to the covariance's diagonal for the sigma points only).
     """
     hypot, asinh, isfinite, sqrt = math.hypot, math.asinh, math.isfinite, math.sqrt
     horizontal_n = hypot(tx, ty)
@@ -832,18 +860,20 @@ def _localize_tension_free(
     beta = math.atan2(math.sin(beta), math.cos(beta))
     ux, uy = math.cos(beta), math.sin(beta)
 
-    # Sigma points T, T +- sqrt(3) S e_i, S the lower Cholesky factor (_cholesky3).
-    if not cxx > 0.0:
+    # Sigma points T, T +- sqrt(3) S e_i, S the lower Cholesky factor (_cholesky3) of the
+    # covariance plus the model's variance.
+    exx = cxx + mx
+    if not exx > 0.0:
         return None
-    l00 = sqrt(cxx)
+    l00 = sqrt(exx)
     l10 = cxy / l00
     l20 = cxz / l00
-    d1 = cyy - l10 * l10
+    d1 = cyy + my - l10 * l10
     if not d1 > 0.0:
         return None
     l11 = sqrt(d1)
     l21 = (cyz - l20 * l10) / l11
-    d2 = czz - l20 * l20 - l21 * l21
+    d2 = czz + mz - l20 * l20 - l21 * l21
     if not d2 > 0.0:
         return None
     if not (cxx < 1e150 and cyy < 1e150):
@@ -1006,6 +1036,7 @@ def localize(
     exit_elevation: AngleObservation | None = None,
     mocap_world_m: ArrayLike | None = None,
     mocap_std_m: float = 0.002,
+    model_var_n2: tuple[float, float, float] | None = None,
 ) -> PositionEstimate | None:
     """Like :func:`try_localize`, with None in place of a failure (never NaN).
 
@@ -1023,6 +1054,7 @@ def localize(
         exit_elevation: See :func:`try_localize`.
         mocap_world_m: See :func:`try_localize`.
         mocap_std_m: See :func:`try_localize`.
+        model_var_n2: See :func:`try_localize`.
 
     Returns:
         The estimate, or None when there is no tension estimate or the math failed
@@ -1041,6 +1073,7 @@ def localize(
         exit_elevation,
         mocap_world_m,
         mocap_std_m,
+        model_var_n2,
     )
     return out if type(out) is PositionEstimate else None
 
@@ -1059,6 +1092,7 @@ def try_localize_batch(
     exit_elevation: list[AngleObservation | None] | None = None,
     mocap_world_m: list[ArrayLike | None] | None = None,
     mocap_std_m: float = 0.002,
+    model_var_n2: ArrayLike | None = None,
 ) -> list[PositionEstimate | LocalizationFailure]:
     """:func:`try_localize` of N independent cases at once, with the same results.
 
@@ -1086,6 +1120,7 @@ def try_localize_batch(
         exit_elevation: Per case, or None for none in any.
         mocap_world_m: Per case, or None for none in any.
         mocap_std_m: See :func:`try_localize`.
+        model_var_n2: Per case, N², shape (N, 3) or (3,), or None (:func:`try_localize`).
 
     Returns:
         One :class:`PositionEstimate` or :class:`LocalizationFailure` per case, in order.
@@ -1102,6 +1137,9 @@ def try_localize_batch(
     big_l = np.broadcast_to(np.asarray(length_m, dtype=np.float64), (n,))
     base = np.broadcast_to(np.asarray(base_world_m, dtype=np.float64), (n, 3))
     floor = np.broadcast_to(np.asarray(floor_z_m, dtype=np.float64), (n,))
+    model = np.broadcast_to(
+        np.asarray(0.0 if model_var_n2 is None else model_var_n2, dtype=np.float64), (n, 3)
+    )
 
     def case(i: int) -> PositionEstimate | LocalizationFailure:
         return try_localize(
@@ -1117,6 +1155,9 @@ def try_localize_batch(
             exit_elevation=exit_elevation[i] if exit_elevation is not None else None,
             mocap_world_m=mocap_world_m[i] if mocap_world_m is not None else None,
             mocap_std_m=mocap_std_m,
+            model_var_n2=None
+            if model_var_n2 is None
+            else (float(model[i, 0]), float(model[i, 1]), float(model[i, 2])),
         )
 
     out: list[PositionEstimate | LocalizationFailure | None] = [None] * n
@@ -1128,6 +1169,7 @@ def try_localize_batch(
             for i, obs in enumerate(obs_list):
                 if _valid_angle(obs) is not None:
                     fast[i] = False
+    model_ok = (np.isfinite(model.sum(axis=1)) & (model >= 0.0).all(axis=1)).tolist()
     for i, (w_i, l_i, bz_i, f_i) in enumerate(
         zip(omega.tolist(), big_l.tolist(), base[:, 2].tolist(), floor.tolist(), strict=True)
     ):
@@ -1135,13 +1177,14 @@ def try_localize_batch(
             0.0 < w_i < math.inf
             and 0.0 < l_i < math.inf
             and (f_i == -math.inf or (math.isfinite(f_i) and bz_i >= f_i))
+            and model_ok[i]
         ):
             fast[i] = False
     idx = [i for i, f in enumerate(fast) if f]
     if idx:
         sel = idx if len(idx) < n else slice(None)
         results = _localize_arrays(
-            T[sel], cov_in[sel], omega[sel], big_l[sel], base[sel], floor[sel], plumb_k
+            T[sel], cov_in[sel], omega[sel], big_l[sel], base[sel], floor[sel], plumb_k, model[sel]
         )
         for i, pos in zip(idx, results, strict=True):
             out[i] = pos
@@ -1156,6 +1199,7 @@ def _localize_arrays(
     base: FloatArray,
     floor: FloatArray,
     plumb_k: float,
+    model: FloatArray,
 ) -> list[PositionEstimate | None]:
     """:func:`try_localize`'s free-hanging, tension-azimuth case over arrays of M cases.
 
@@ -1167,7 +1211,7 @@ def _localize_arrays(
     """
     m = T.shape[0]
     with np.errstate(all="ignore"):
-        return _localize_arrays_body(m, T, c, omega, big_l, base, floor, plumb_k)
+        return _localize_arrays_body(m, T, c, omega, big_l, base, floor, plumb_k, model)
 
 
 def _localize_arrays_body(
@@ -1179,6 +1223,7 @@ def _localize_arrays_body(
     base: FloatArray,
     floor: FloatArray,
     plumb_k: float,
+    model: FloatArray,
 ) -> list[PositionEstimate | None]:
     # Non-finite inputs make their case's sum non-finite (an overflowing sum only sends a
     # valid case to try_localize).
@@ -1193,15 +1238,17 @@ def _localize_arrays_body(
     vertical_n = -tz
     lam_max = 0.5 * (cxx + cyy) + np.sqrt(np.maximum(0.25 * (cxx - cyy) ** 2 + cxy * cxy, 0.0))
     sigma_h_n = np.sqrt(np.maximum(lam_max, 0.0))
-    # _cholesky3 (a failing pivot: the case goes to try_localize)
-    l00 = np.sqrt(cxx)
+    # _cholesky3 of cov + the model's variance (a failing pivot: the case goes to try_localize)
+    mx, my, mz = model.T
+    exx = cxx + mx
+    l00 = np.sqrt(exx)
     l10 = cxy / l00
     l20 = cxz / l00
-    d1 = cyy - l10 * l10
+    d1 = cyy + my - l10 * l10
     l11 = np.sqrt(d1)
     l21 = (cyz - l20 * l10) / l11
-    d2 = czz - l20 * l20 - l21 * l21
-    ok &= (cxx > 0.0) & (d1 > 0.0) & (d2 > 0.0) & (horizontal_n > MIN_HORIZONTAL_N)
+    d2 = czz + mz - l20 * l20 - l21 * l21
+    ok &= (exx > 0.0) & (d1 > 0.0) & (d2 > 0.0) & (horizontal_n > MIN_HORIZONTAL_N)
     # Sigma points T, T + sqrt(3) S[:, i], T - sqrt(3) S[:, i], as (M, 3 coordinates, 7).
     zero = np.zeros(m)
     S = _SIGMA_SCALE * np.stack([l00, zero, zero, l10, l11, zero, l20, l21, np.sqrt(d2)], axis=1)
@@ -1416,6 +1463,7 @@ def localize_batch(
     exit_elevation: list[AngleObservation | None] | None = None,
     mocap_world_m: list[ArrayLike | None] | None = None,
     mocap_std_m: float = 0.002,
+    model_var_n2: ArrayLike | None = None,
 ) -> list[PositionEstimate | None]:
     """:func:`try_localize_batch` with None in place of a failure (as :func:`localize`)."""
     outs = try_localize_batch(
@@ -1431,5 +1479,6 @@ def localize_batch(
         exit_elevation=exit_elevation,
         mocap_world_m=mocap_world_m,
         mocap_std_m=mocap_std_m,
+        model_var_n2=model_var_n2,
     )
     return [o if isinstance(o, PositionEstimate) else None for o in outs]

@@ -44,8 +44,10 @@ BASE_M = np.array([0.0, 0.0, 0.754])
 FIELDS = tuple(PositionEstimate.__dataclass_fields__)
 
 
-def _cases(seed: int, n: int) -> Iterator[dict[str, Any]]:
-    """n cases cycling through the regimes, as keyword arguments of try_localize."""
+def _cases(seed: int, n: int, with_model: bool = False) -> Iterator[dict[str, Any]]:
+    """n cases cycling through the regimes, as keyword arguments of try_localize; with
+    ``with_model`` each also has a calibration misfit (``model_var_n2``, up to (10 mN)²,
+    zero on some axes)."""
     rng = np.random.default_rng(seed)
     for i in range(n):
         regime = i % 8
@@ -69,7 +71,7 @@ def _cases(seed: int, n: int) -> Iterator[dict[str, Any]]:
             cov = [np.zeros((3, 3)), np.diag([1e-6, 0.0, 1e-6]), np.eye(3) * 1e-7][i // 8 % 3]
         base = np.array([rng.uniform(-1.0, 1.0), rng.uniform(-1.0, 1.0), rng.uniform(0.3, 1.2)])
         floor = float(rng.choice([-math.inf, 0.0, base[2] - rng.uniform(0.0, 0.4)]))
-        yield {
+        kw = {
             "tension_world_n": tension,
             "tension_cov_n2": cov,
             "weight_n_per_m": omega,
@@ -77,6 +79,10 @@ def _cases(seed: int, n: int) -> Iterator[dict[str, Any]]:
             "base_world_m": base,
             "floor_z_m": floor,
         }
+        if with_model:
+            m = rng.uniform(0.0, 1e-4, 3) * (rng.random(3) < 0.8)
+            kw["model_var_n2"] = (float(m[0]), float(m[1]), float(m[2]))
+        yield kw
 
 
 def _same(got: object, want: object) -> bool:
@@ -101,9 +107,9 @@ def _general(kw: dict[str, Any], monkeypatch: pytest.MonkeyPatch) -> object:
         return try_localize(**kw)
 
 
-@pytest.mark.parametrize("seed", [0, 1, 2])
+@pytest.mark.parametrize(("seed", "with_model"), [(0, False), (1, False), (2, False), (7, True)])
 def test_common_case_gives_the_general_paths_floats(
-    seed: int, monkeypatch: pytest.MonkeyPatch
+    seed: int, with_model: bool, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     taken = []
     real = loc._localize_tension_free
@@ -114,7 +120,7 @@ def test_common_case_gives_the_general_paths_floats(
         return out
 
     regimes: dict[str, int] = {}
-    for kw in _cases(seed, 480):
+    for kw in _cases(seed, 480, with_model):
         monkeypatch.setattr(loc, "_localize_tension_free", counted)
         got = try_localize(**kw)
         monkeypatch.undo()
@@ -131,11 +137,14 @@ def _reference(kw: dict[str, Any]) -> tuple[np.ndarray, np.ndarray, float, float
     """Position, covariance, r, beta, std_beta of a free, tension-azimuth case whose
     azimuth is certain (std <= 1 / (2 k): no blending toward the base), with numpy:
     the unscented transform (7 sigma points, kappa = 0) of the closed form
-    (catenary.locate), each point carried along its own azimuth atan2(-T_y, -T_x)."""
+    (catenary.locate), each point carried along its own azimuth atan2(-T_y, -T_x); the
+    points drawn from the covariance plus the model's variance, the azimuth's σ from the
+    covariance alone."""
     t = np.asarray(kw["tension_world_n"], dtype=float)
     c = np.asarray(kw["tension_cov_n2"], dtype=float)
     c = 0.5 * (c + c.T)
-    s = np.linalg.cholesky(c) * math.sqrt(3.0)
+    model = np.diag(kw.get("model_var_n2") or (0.0, 0.0, 0.0))
+    s = np.linalg.cholesky(c + model) * math.sqrt(3.0)
     pts = np.array([t, *(t + s[:, i] for i in range(3)), *(t - s[:, i] for i in range(3))])
     h = np.hypot(pts[:, 0], pts[:, 1])
     r, z = catenary.locate(h, -pts[:, 2], kw["weight_n_per_m"], kw["length_m"], 0.0)
@@ -153,10 +162,10 @@ def _reference(kw: dict[str, Any]) -> tuple[np.ndarray, np.ndarray, float, float
     return position, cov, r0, float(beta[0]), std_beta
 
 
-@pytest.mark.parametrize("seed", [3, 4])
-def test_common_case_against_an_independent_reference(seed: int) -> None:
+@pytest.mark.parametrize(("seed", "with_model"), [(3, False), (4, False), (8, True)])
+def test_common_case_against_an_independent_reference(seed: int, with_model: bool) -> None:
     checked = 0
-    for kw in _cases(seed, 480):
+    for kw in _cases(seed, 480, with_model):
         kw["floor_z_m"] = -math.inf  # the free curve everywhere (the floor: the test above)
         got = try_localize(**kw)
         if not (isinstance(got, PositionEstimate) and got.case == "free"):
@@ -177,9 +186,9 @@ def test_common_case_against_an_independent_reference(seed: int) -> None:
     assert checked > 150
 
 
-@pytest.mark.parametrize("seed", [5, 6])
-def test_batch_gives_the_same_floats_on_every_regime(seed: int) -> None:
-    cases = list(_cases(seed, 480))
+@pytest.mark.parametrize(("seed", "with_model"), [(5, False), (6, False), (9, True)])
+def test_batch_gives_the_same_floats_on_every_regime(seed: int, with_model: bool) -> None:
+    cases = list(_cases(seed, 480, with_model))
     fields = ("tension_world_n", "tension_cov_n2", "weight_n_per_m", "length_m")
     cols = {f: np.array([kw[f] for kw in cases]) for f in fields}
     got = localize_batch(
@@ -189,6 +198,7 @@ def test_batch_gives_the_same_floats_on_every_regime(seed: int) -> None:
         cols["length_m"],
         np.array([kw["base_world_m"] for kw in cases]),
         np.array([kw["floor_z_m"] for kw in cases]),
+        model_var_n2=np.array([kw["model_var_n2"] for kw in cases]) if with_model else None,
     )
     for g, kw in zip(got, cases, strict=True):
         want = try_localize(**kw)
@@ -283,3 +293,27 @@ def test_catenary_float_versions_against_the_array_versions(seed: int) -> None:
         assert run == pytest.approx(float(want.floor_run_m[i]), rel=1e-12, abs=1e-14)
         contacts += contact
     assert 0.1 * n < contacts < 0.9 * n
+
+
+def test_a_calibration_misfit_widens_the_position_not_its_estimate() -> None:
+    """``model_var_n2`` (the calibration's misfit) is drawn into the sigma points: the
+    position's covariance grows; the point, the azimuth and its determination (the noise's
+    question) do not move. Negative or non-finite: a failure that says so."""
+    t = np.array([0.03, -0.01, -0.06])
+    cov = np.diag([1e-7, 1e-7, 2e-7])
+    kw = dict(weight_n_per_m=0.055, length_m=1.6, base_world_m=BASE_M)
+    plain = try_localize(t, cov, **kw)
+    wide = try_localize(t, cov, **kw, model_var_n2=(25e-6, 25e-6, 16e-6))
+    assert isinstance(plain, PositionEstimate) and isinstance(wide, PositionEstimate)
+    assert np.array_equal(plain.position_world_m, wide.position_world_m)
+    assert plain.azimuth_rad == wide.azimuth_rad and wide.azimuth_determined
+    assert plain.azimuth_std_rad == wide.azimuth_std_rad
+    assert np.all(wide.std_world_m > 3.0 * plain.std_world_m)
+    # The same as the covariance carrying it, where that leaves the azimuth determined.
+    both = try_localize(t, cov + np.diag([25e-6, 25e-6, 16e-6]), **kw)
+    assert isinstance(both, PositionEstimate)
+    assert np.allclose(both.cov_world_m2, wide.cov_world_m2, rtol=1e-9)
+    assert _same(try_localize(t, cov, **kw, model_var_n2=(0.0, 0.0, 0.0)), plain)
+    for bad in ((-1e-6, 0.0, 0.0), (math.nan, 0.0, 0.0), (0.0, math.inf, 0.0)):
+        out = try_localize(t, cov, **kw, model_var_n2=bad)
+        assert isinstance(out, LocalizationFailure) and "model_var_n2" in out.reason

@@ -29,7 +29,7 @@ MASS_KG = 0.030
 TENSION_N = np.array([-0.015, 0.005, -0.040])
 
 
-def _stds(cfg: dict, *, armed: bool = True) -> np.ndarray:
+def _estimates(cfg: dict, *, armed: bool = True) -> list[dict]:
     pipe = Pipeline(load_settings(None, cfg, use_env=False))
     rng = np.random.default_rng(1)
     out = []
@@ -37,8 +37,24 @@ def _stds(cfg: dict, *, armed: bool = True) -> np.ndarray:
         body = hover_body(k, TENSION_N, rng, mass_kg=MASS_KG, dt_s=0.004, armed=armed)
         for s in pipe.handle(Sample("tether/cf1/telemetry", json.dumps(body).encode()), k * 0.004):
             if s.key.endswith("/estimate"):
-                out.append(json.loads(s.payload)["tension_std_n"])
-    return np.array(out)
+                out.append(json.loads(s.payload))
+    return out
+
+
+def _stds(cfg: dict, *, armed: bool = True) -> np.ndarray:
+    return np.array([e["tension_std_n"] for e in _estimates(cfg, armed=armed)])
+
+
+def test_the_position_sigma_carries_it_too_and_the_position_stays() -> None:
+    """The position's σ is computed from the filter's covariance plus the model's variance
+    (localization's ``model_var_n2``); the position itself does not move."""
+    model = [0.004, 0.003, 0.005]
+    plain = _estimates({"drone": {"mass_kg": MASS_KG}})[-1]
+    cal = {"thrust_scale": 1.0, "source": "test", "tension_model_std_n": model}
+    wide = _estimates({"drone": {"mass_kg": MASS_KG}, "calibration": cal})[-1]
+    assert plain["position_m"] is not None and wide["position_m"] is not None
+    np.testing.assert_allclose(wide["position_m"], plain["position_m"], atol=1e-12)
+    assert np.all(np.array(wide["position_std_m"]) > 2.0 * np.array(plain["position_std_m"]))
 
 
 def test_the_published_sigma_carries_the_calibrations_error_in_the_air_only() -> None:

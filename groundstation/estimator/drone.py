@@ -263,7 +263,8 @@ class DroneEstimator:
         mx, my, mz = params.calibration.tension_model_std_n
         self.model_var_n2 = (mx * mx, my * my, mz * mz) if mx or my or mz else None
         """``[calibration] tension_model_std_n`` squared, N² (None: zero): the calibration's
-        error, added to the filter's variance in the published σ."""
+        error, added to the filter's variance in the published σ and to the covariance the
+        position's σ is computed from (in the air)."""
         self.changes_at_hover_end = 0
         """The filter's change detections when the last hover ended: a hover that begins
         after one more (a manoeuvre that changed the tension) restarts the filter's
@@ -489,6 +490,7 @@ class DroneEstimator:
             self._drop("non_finite_estimate", "filter produced NaN/inf")
         est = filtered.estimate
         localize_in = None
+        model_var = self.model_var_n2 if not on_ground else None
         if est is not None and filtered.converged:
             localize_in = LocalizeIn(
                 est.tension_world_n,
@@ -502,10 +504,10 @@ class DroneEstimator:
                 if self.localization.elevation
                 else None,
                 msg.position_m,
+                model_var,
             )
         std_n = filtered.std_n
-        model_var = self.model_var_n2
-        if model_var is not None and not on_ground:
+        if model_var is not None:
             s0, s1, s2 = std_n
             v0, v1, v2 = model_var
             std_n = (math.sqrt(s0 * s0 + v0), math.sqrt(s1 * s1 + v1), math.sqrt(s2 * s2 + v2))

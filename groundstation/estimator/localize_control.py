@@ -48,6 +48,8 @@ class LocalizeIn(NamedTuple):
         exit_azimuth: the reel's exit azimuth while fresh (None: none).
         exit_elevation: the reel's exit elevation while fresh and used (None: none).
         mocap_world_m: this message's motion-capture position, m (None: none).
+        model_var_n2: the calibration's misfit per world axis, N² (None: none): widens
+            the position's covariance (``localization.try_localize``).
     """
 
     tension_world_n: np.ndarray
@@ -59,6 +61,7 @@ class LocalizeIn(NamedTuple):
     exit_azimuth: AngleObservation | None
     exit_elevation: AngleObservation | None
     mocap_world_m: Vec3 | None
+    model_var_n2: tuple[float, float, float] | None = None
 
 
 EXIT_AZIMUTH_MIN_COS = 0.02
@@ -111,4 +114,5 @@ def localize_one(section: LocalizationSection, x: LocalizeIn) -> PositionEstimat
         exit_elevation=x.exit_elevation,
         mocap_world_m=x.mocap_world_m,
         mocap_std_m=section.mocap_std_m,
+        model_var_n2=x.model_var_n2,
     )
