@@ -1,6 +1,7 @@
 """Why the published tension σ is wider than the error on a hover (a diagnosis, no page).
 
-``python -m benchmarks.sigma_consistency [--noise 1.0] [--spots 0,2,4] [--seed 500]``
+``python -m benchmarks.sigma_consistency [--noise 1.0] [--spots 0,2,4] [--seed 500]
+[--hover-velocity-std MPS] [--hover-velocity-time S] [--thrust-noise N] [--wander N2PS]``
 
 Realistic simulator, calibration = truth (``benchmarks.bench_realistic.fly``), 20 s hovers,
 judged from 8 s. Per flight and world axis: the error's RMS against the median published
@@ -11,18 +12,27 @@ observation), ``κ`` (the long-run variance over ``s_d``, from 0.25 s block mean
 model, which the filter observes; while the drone hovers the thrust balance enters through
 the velocity state (tension_kalman.HoverVelocity), and P is what σ_v allows it. Takes ~10 s
 per flight.
+
+The options change one prior of the hover's (T, v) filter at a time, to see which one sets
+the σ: ``--hover-velocity-std`` / ``--hover-velocity-time`` (σ_v and T_c, as
+``[calibration] hover_velocity_std_mps`` / ``hover_velocity_time_s``), ``--thrust-noise``
+(``[drone] thrust_noise_n``, the velocity's process noise while hovering) and ``--wander``
+(``TensionFilterParams.hover_wander_n2_per_s``, the tension's random walk, which has no key).
 """
 
 from __future__ import annotations
 
 import argparse
+import functools
 import math
 from typing import Any
 
 import numpy as np
 
 from benchmarks import bench_realistic as br
+from groundstation.estimator import drone as drone_mod
 from groundstation.pipeline import Pipeline
+from groundstation.tension import TensionFilterParams
 
 
 def flight(noise: float, spot: int, seed: int) -> dict[str, Any]:
@@ -60,7 +70,35 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--noise", type=float, default=1.0, help="vibration, m/s^2 (1.0)")
     ap.add_argument("--spots", default="0,2,4", help="paper hover spots (0,2,4)")
     ap.add_argument("--seed", type=int, default=500)
+    ap.add_argument("--hover-velocity-std", type=float, help="σ_v, m/s (default: the filter's)")
+    ap.add_argument("--hover-velocity-time", type=float, help="T_c, s (default: the filter's)")
+    ap.add_argument("--thrust-noise", type=float, help="[drone] thrust_noise_n, N")
+    ap.add_argument("--wander", type=float, help="hover_wander_n2_per_s, N^2/s")
     args = ap.parse_args(argv)
+    cal_over: dict[str, float] = {}
+    if args.hover_velocity_std is not None:
+        cal_over["hover_velocity_std_mps"] = args.hover_velocity_std
+    if args.hover_velocity_time is not None:
+        cal_over["hover_velocity_time_s"] = args.hover_velocity_time
+    if cal_over:
+        truth = br._true_calibration
+
+        def with_hover(*a: Any, **k: Any) -> dict[str, Any]:
+            return {**truth(*a, **k), **cal_over}
+
+        br._true_calibration = with_hover  # type: ignore[assignment]
+    if args.thrust_noise is not None:
+        load = br.load_settings
+
+        def with_thrust_noise(path: Any, over: dict[str, Any], **k: Any) -> Any:
+            over = {**over, "drone": {**over.get("drone", {}), "thrust_noise_n": args.thrust_noise}}
+            return load(path, over, **k)
+
+        br.load_settings = with_thrust_noise  # type: ignore[assignment]
+    if args.wander is not None:
+        drone_mod.TensionFilterParams = functools.partial(  # type: ignore[misc]
+            TensionFilterParams, hover_wander_n2_per_s=args.wander
+        )
     print(
         "| spot | error RMS x/y/z mN | median σ x/y/z mN | within 2σ x/y/z | κ | "
         "sqrt(s_d) x/y/z mN | sqrt(r) x/y/z mN |"
