@@ -20,18 +20,19 @@ trusted, and a touch-down is noticed where it can be:
   acceleration is ~0; in the air the drone falls at ``(F + T_z) / m - g``, below
   ``-(1 - ratio) g`` plus what the tether holds (-4.9 m/s^2 at the ratio; -10.4 m/s^2 in
   that dip). So the vertical acceleration, smoothed over ``accel_time_constant_s`` (50 ms)
-  and less the bias learnt at rest, must stay within ``rest_accel_mps2`` (2.5 m/s^2, about
-  half of ``(1 - ratio) g``) for ``rest_hold_s`` (0.2 s: longer than a motor's spin-down,
-  during which the thrust reads low before the drone falls; 30-40 ms in the realistic
-  simulator). Then the vertical accelerometer bias is learnt (the drone does not move)
-  and the resting motion-capture height is remembered (a marker sits above the floor).
+  and less the bias learnt at rest, must stay within half of ``(1 - ratio) g`` (derived:
+  2.45 m/s^2 at the ratio 0.5, halfway between a rest and the slowest fall) for
+  ``rest_hold_s`` (0.2 s: longer than a motor's spin-down, during which the thrust reads
+  low before the drone falls; 30-40 ms in the realistic simulator). Then the vertical
+  accelerometer bias is learnt (the drone does not move) and the resting motion-capture
+  height is remembered (a marker sits above the floor).
   Disarmed is the ground at once (no estimate is made without the motors), but what is
   learnt there also waits for that evidence: a drone stopped in mid-air falls, |f| ~ 0.
   Until the evidence is in, a low-thrust sample keeps the state it found; in the air the
   service then coasts the tension filter (the floor may be carrying part of the weight),
   it does not publish "on the ground".
 * **Falling** (on the ground, without motion capture, armed): the smoothed vertical
-  acceleration below ``-rest_accel_mps2`` for ``rest_hold_s`` says the floor holds nothing:
+  acceleration below minus that for ``rest_hold_s`` says the floor holds nothing:
   in the air (``reason = "falling"``). The floor cannot accelerate the drone downward, so
   no ground state outlives this; on the floor the 50 ms mean of 2 m/s^2 of vibration
   wanders by ~1 m/s^2 and would have to stay 2.5 sigma low for 0.2 s.
@@ -175,9 +176,9 @@ class ContactParams:
         bias_time_constant_s: Averaging time of the vertical accelerometer bias at rest, s.
         accel_time_constant_s: Smoothing of the vertical acceleration that tells a rest on
             the floor (~0) from a fall (below ``-(1 - ground_thrust_ratio) g``), s.
-        rest_accel_mps2: At rest the smoothed vertical acceleration, less the bias, stays
-            within this of 0; below minus this the drone falls, m/s^2.
-        rest_hold_s: For this long, s (a rest, or a fall, is seen only then).
+        rest_hold_s: At rest the smoothed vertical acceleration, less the bias, stays within
+            half of ``(1 - ground_thrust_ratio) g`` of 0 (below minus that the drone
+            falls) for this long, s (a rest, or a fall, is seen only then).
     """
 
     ground_thrust_ratio: float = 0.5
@@ -194,7 +195,6 @@ class ContactParams:
     noise_long_run_ratio: float = 3.0
     bias_time_constant_s: float = 1.0
     accel_time_constant_s: float = 0.05
-    rest_accel_mps2: float = 2.5
     rest_hold_s: float = 0.2
 
     def __post_init__(self) -> None:
@@ -219,7 +219,6 @@ class ContactParams:
             "noise_long_run_ratio",
             "bias_time_constant_s",
             "accel_time_constant_s",
-            "rest_accel_mps2",
             "rest_hold_s",
         ):
             value = getattr(self, name)
@@ -256,8 +255,8 @@ class ContactState:
         accel_smooth_mps2: Vertical acceleration smoothed over ``accel_time_constant_s``,
             m/s^2, or None before the first finite one.
         still_s: How long the smoothed acceleration (less the bias) has been within
-            ``rest_accel_mps2`` of 0, s.
-        falling_s: How long it has been below ``-rest_accel_mps2``, s.
+            half of ``(1 - ground_thrust_ratio) g`` of 0, s.
+        falling_s: How long it has been below minus that, s.
     """
 
     on_ground: bool = True
@@ -358,15 +357,18 @@ def contact_step(
     # in the air it falls at (F + T_z) / m - g. (At hover thrust "still" says nothing: a
     # hovering drone is still too.)
     low_thrust = not armed or not (thrust_n >= params.ground_thrust_ratio * weight_n)
+    # Halfway between a rest (mean 0) and the slowest fall, at the ratio (mean -(1 - ratio)
+    # g): the likelihood-ratio boundary of the two under the same vibration.
+    rest_accel = 0.5 * (1.0 - params.ground_thrust_ratio) * gravity_mps2
     smooth = state.accel_smooth_mps2
     still_s, falling_s = 0.0, 0.0
     if math.isfinite(accel):
         w = min(1.0, dt / params.accel_time_constant_s) if smooth is not None else 1.0
         smooth = accel if smooth is None else smooth + w * (accel - smooth)
         rel = smooth - (state.accel_bias_z_mps2 or 0.0)
-        if low_thrust and abs(rel) < params.rest_accel_mps2:
+        if low_thrust and abs(rel) < rest_accel:
             still_s = state.still_s + dt
-        elif rel < -params.rest_accel_mps2:
+        elif rel < -rest_accel:
             falling_s = state.falling_s + dt
     at_rest = still_s >= params.rest_hold_s
 

@@ -46,6 +46,7 @@ from groundstation.attitude import GRAVITY_MPS2
 from groundstation.frozen import evolve
 
 __all__ = [
+    "MOCAP_HOLD_S",
     "SlowAccelParams",
     "SlowAccelState",
     "correct_accel_body_mps2",
@@ -58,6 +59,13 @@ Vec3 = tuple[float, float, float]
 _ZERO3: Vec3 = (0.0, 0.0, 0.0)
 HOVER_MEAN_S = 1.0
 """The hover test's mean acceleration window, s."""
+MOCAP_HOLD_S = 0.3
+"""Motion capture stays in use for this long (telemetry stamp) after the frame that brought
+it, s: the estimator's external position (``estimator.drone``) and the slow stage's
+differences of positions alike (one value). Real motion capture reaches a drone's telemetry
+at 70-116 Hz against the IMU's 100 Hz, in bursts, with gaps up to 150 ms (the realistic
+profile draws the same): without the hold, follow would switch to the tether-based position
+on every telemetry message without a fresh frame."""
 Phase = Literal["rest", "air", "hold"]
 """``rest``: on the floor, disarmed and still (a_ref = 0 exactly); ``air``: flying (the
 filter observes); ``hold``: anything else (spool-up, landing, armed on the floor): β kept."""
@@ -75,7 +83,6 @@ class SlowAccelParams:
             motion capture), s.
         mocap_time_constant_s: low-pass of the motion-capture velocity (finite
             differences of positions) that the drag term uses, s.
-        mocap_max_gap_s: motion capture older than this is not used, s.
         hover: run the hover test (False: never quasi-static, the tension filter then
             observes the accelerometer model alone; config ``[filter]
             accel_hover_crossover_s = 0``).
@@ -99,7 +106,6 @@ class SlowAccelParams:
     time_constant_s: float = 60.0
     velocity_time_constant_s: float = 8.0
     mocap_time_constant_s: float = 0.15
-    mocap_max_gap_s: float = 0.2
     hover: bool = True
     quasi_static_accel_mps2: float = 0.2
     quasi_static_speed_mps: float = 0.3
@@ -125,7 +131,6 @@ class SlowAccelParams:
             "time_constant_s",
             "velocity_time_constant_s",
             "mocap_time_constant_s",
-            "mocap_max_gap_s",
         ):
             value = getattr(self, name)
             if not (value > 0.0):  # inf allowed, NaN refused
@@ -206,16 +211,14 @@ def _mocap_step(
 ) -> SlowAccelState:
     """Low-passed first and second differences of the motion-capture position."""
     if mocap_world_m is None:
-        if state.mocap_stamp_s is not None and stamp_s - state.mocap_stamp_s > (
-            params.mocap_max_gap_s
-        ):
+        if state.mocap_stamp_s is not None and stamp_s - state.mocap_stamp_s > MOCAP_HOLD_S:
             return evolve(state, mocap_stamp_s=None, mocap_world_m=None, mocap_samples=0)
         return state
     prev, prev_t = state.mocap_world_m, state.mocap_stamp_s
     if prev is None or prev_t is None:
         return evolve(state, mocap_stamp_s=stamp_s, mocap_world_m=mocap_world_m, mocap_samples=1)
     dt = stamp_s - prev_t
-    if not (0.0 < dt <= params.mocap_max_gap_s):
+    if not (0.0 < dt <= MOCAP_HOLD_S):
         return evolve(state, mocap_stamp_s=stamp_s, mocap_world_m=mocap_world_m, mocap_samples=1)
     k = min(dt / params.mocap_time_constant_s, 1.0)  # first-order low-pass gain
     v_old = state.mocap_velocity_world_mps

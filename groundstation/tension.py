@@ -609,7 +609,9 @@ class TensionFilterParams:
             autocorrelation per axis) on line; False keeps the prior, white.
         noise_time_constant_s: Memory of the noise estimate, s.
         noise_prior_samples: Weight of the prior in the noise estimate, samples.
-        noise_warmup_samples: Samples of noise estimate before the change test runs.
+        noise_warmup_samples: Samples of noise estimate before the change tests run, and
+            observations after a start or reset before the estimate is reported converged
+            (and localized): the estimate is trusted when its noise is, >= 1.
         hover_time_constant_s: Shortest time constant of the filter at hover, s: the
             process noise is ``Q = r dt_mean / tau^2 * dt`` per axis (r the observation
             noise, dt_mean the mean sample spacing), tau at least this whatever the noise
@@ -648,8 +650,6 @@ class TensionFilterParams:
         drift_memory_s: Decay of the drift adaptation once the drift is gone, s.
         gap_s: A time step longer than this breaks the noise model's sample chain and
             the change test's windows, s.
-        converged_min_samples: Samples after start or reset before an estimate is
-            reported as converged.
         hover_velocity_std_mps: σ_v, the hovering drone's velocity scatter per world
             axis, m/s: the thrust balance enters the filter through the velocity
             (:class:`~groundstation.tension_kalman.HoverVelocity`) while the caller says
@@ -683,7 +683,6 @@ class TensionFilterParams:
     drift_exponent: float = 3.0
     drift_memory_s: float = 1.0
     gap_s: float = 0.25
-    converged_min_samples: int = 25
     hover_velocity_std_mps: float = 0.02
     hover_velocity_time_s: float = 0.5
 
@@ -742,10 +741,9 @@ class TensionFilterParams:
             raise ValueError(
                 f"TensionFilterParams.long_history_size must be >= 8, got {self.long_history_size}"
             )
-        if self.converged_min_samples < 1 or self.noise_warmup_samples < 0:
+        if self.noise_warmup_samples < 1:
             raise ValueError(
-                "TensionFilterParams.converged_min_samples must be >= 1 and "
-                f"noise_warmup_samples >= 0, got {self.converged_min_samples} and "
+                "TensionFilterParams.noise_warmup_samples must be >= 1, got "
                 f"{self.noise_warmup_samples}"
             )
 
@@ -793,7 +791,7 @@ class TensionEstimate:
         tension_world_n: Force of the tether on the drone, world frame, N, shape (3,).
         cov_n2: Its covariance (the Kalman filter's P), N^2, shape (3, 3).
         std_n: Standard deviation per axis, ``sqrt(diag(P))``, N, shape (3,).
-        converged: True once ``converged_min_samples`` observations have been taken
+        converged: True once ``noise_warmup_samples`` observations have been taken
             since start or :meth:`TensionFilter.reset`.
         change_detected: True when this step detected a change of tension (a tug) and
             re-initialised the filter from the samples since the change.
@@ -1648,7 +1646,7 @@ class TensionFilter:
                 "tension_world_n": _ndarray(_SHAPE3, _F64, buf, 0),
                 "cov_n2": _ndarray(_SHAPE33, _F64, buf, 48),
                 "std_n": _ndarray(_SHAPE3, _F64, buf, 24),
-                "converged": samples >= self.params.converged_min_samples,
+                "converged": samples >= self.params.noise_warmup_samples,
                 "change_detected": change,
                 "samples": samples,
                 "_lazy_change_statistic": stat,

@@ -347,7 +347,7 @@ def test_first_observation_initialises_state() -> None:
 
 
 def test_converged_after_min_samples() -> None:
-    filt = TensionFilter(TensionFilterParams(converged_min_samples=10))
+    filt = TensionFilter(TensionFilterParams(noise_warmup_samples=10))
     flags = [filt.update(HOVER_TENSION_N, DT_S).converged for _ in range(12)]
     assert flags == [False] * 9 + [True] * 3
 

@@ -71,12 +71,10 @@ __all__ = [
     "calibration_from_config",
 ]
 
-MOCAP_HOLD_S = 0.3
+MOCAP_HOLD_S = slow_mod.MOCAP_HOLD_S
 """A motion-capture position stays the drone's external position for this long (telemetry
-stamp) after the frame that brought it, s. Real motion capture reaches a drone's telemetry
-at 70-116 Hz against the IMU's 100 Hz, in bursts, with gaps up to 150 ms (the realistic
-profile draws the same): without the hold, follow would switch to the tether-based position
-on every telemetry message without a fresh frame."""
+stamp) after the frame that brought it, s (:data:`groundstation.slow_accel.MOCAP_HOLD_S`,
+the one value)."""
 
 Vec3 = tuple[float, float, float]
 OnDrop = Callable[[str, str, str], None]
