@@ -1098,8 +1098,9 @@ def _render_reading(res: dict[str, Any]) -> list[str]:
             "- The step oracle's t90 is 0 by construction (the mean of the samples since a "
             "known step is unbiased from the first one); its settle time is the information "
             "limit the per-seed settle times compare with.",
-            "- Tug detection: the fast test (innovation sums, windows up to 1 s, threshold "
-            "50 times the noise level's scatter factor, 1.19 at 95 Hz), on the accelerometer "
+            "- Tug detection: the fast test (innovation sums, windows up to 1 s, its "
+            "threshold from half the filter's false-alarm rate, 51.2 at 100 Hz, times the "
+            "noise level's scatter factor, 1.19 at 95 Hz), on the accelerometer "
             "model's innovations, finds a 30 mN step at 0.5 m/s^2 near the information limit "
             "in the table; at 1-2 m/s^2 a "
             "30 mN step adds only (30 mN)^2 / r = 0.5 and 0.125 per sample (r = 2 s2 for "
@@ -1107,7 +1108,8 @@ def _render_reading(res: dict[str, Any]) -> list[str]:
             "so the long-window step test takes it (groundstation/tension.py, TensionFilter "
             "docstring): the mean of the last n samples against the mean of up to 10 s "
             "before them, n up to the window in which a 20 mN step reaches a non-centrality "
-            "of 40 (at most 8 s), with a threshold set for 0.005 false alarms per hour "
+            "of 40 (at most 8 s), with a threshold set for the other half, "
+            f"{0.5 * TensionFilterParams().false_alarms_per_h:g} false alarms per hour "
             "(noise known). Its detections follow the information limit in the table; "
             "10 s into a flight its noise estimate is young, and the youth factor (1.25 "
             "there) delays it by about that factor.",
