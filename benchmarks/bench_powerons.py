@@ -172,6 +172,40 @@ def judge(rec: Recorded, settings: Settings) -> Judged:
     return pos_err, ten_err, within
 
 
+def dwells(rec: Recorded, settings: Settings) -> list[str]:
+    """Per spot of one judged flight: the tension error's mean and RMS per world axis (mN),
+    the median published σ and the share within 2σ, as table rows: does the σ miss a bias
+    or a motion of the truth?"""
+    pipe = Pipeline(settings)
+    rows: list[tuple[float, ...]] = []
+    for m in rec.messages:
+        now = m.log_time_ns / 1e9
+        for out in pipe.handle(Sample(m.key, m.payload), now):
+            if not out.key.endswith("/estimate"):
+                continue
+            est = json.loads(out.payload)
+            tr = rec.truth.get(round(est["stamp_s"], 6))
+            if tr is not None:
+                d = np.subtract(est["tension_n"], tr["tension_n"])
+                rows.append((est["stamp_s"], *d, *est["tension_std_n"]))
+        pipe.tick(now)
+    a = np.array(rows, float).reshape(-1, 7)
+    out_rows = []
+    for lo, hi in rec.judged_from_s:
+        w = (a[:, 0] >= lo) & (a[:, 0] < hi)
+        d, sd = 1e3 * a[w, 1:4], 1e3 * a[w, 4:7]
+
+        def three(v: np.ndarray, fmt: str = "{:.1f}") -> str:
+            return " / ".join(fmt.format(x) for x in v)
+
+        out_rows.append(
+            f"| {rec.seed} | {lo:.0f}–{hi:.0f} s | {three(d.mean(axis=0))} | "
+            f"{three(np.sqrt((d**2).mean(axis=0)))} | {three(np.median(sd, axis=0), '{:.2f}')} | "
+            f"{three(100 * (np.abs(d) <= 2 * sd).mean(axis=0), '{:.0f}')} |"
+        )
+    return out_rows
+
+
 def score(parts: list[Judged]) -> Score:
     p = np.concatenate([np.asarray(a, float) for a, _, _ in parts])
     t = np.concatenate([np.asarray(b, float).reshape(-1, 3) for _, b, _ in parts])
@@ -260,6 +294,13 @@ def main(argv: list[str] | None = None) -> int:
             }
             own_full.append(judge(r, _cal_settings(full)))
         rows["told the truth: own airframe constants (slow stage on)"] = score(own_air)
+        told_rows = [
+            row
+            for r in judged
+            for row in dwells(
+                r, _cal_settings({**dict(r.errors["airframe_equivalent"]), "source": "truth"})
+            )
+        ]
         rows["told the truth: own full-model equivalent (bias known)"] = score(own_full)
 
     say("# Calibrate on some power-ons, judge others (realistic simulator)")
@@ -298,6 +339,17 @@ def main(argv: list[str] | None = None) -> int:
         "(`tension_std_n`, `position_std_m`; a position without a σ counts as outside); a "
         "consistent σ holds about 95 %."
     )
+    say("")
+    say(
+        "Told the truth (own airframe constants), per judged flight and spot: the tension "
+        "error's mean and RMS per world axis x / y / z (mN), the median published σ (mN) "
+        "and the share within 2σ (%)."
+    )
+    say("")
+    say("| power-on | judged | error mean | error RMS | median σ | within 2σ |")
+    say("| --- | --- | --- | --- | --- | --- |")
+    for row in told_rows:
+        say(row)
     say("")
     for model, text in printed.items():
         say(f"`calibrate --model {model}` printed:")
