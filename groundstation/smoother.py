@@ -193,6 +193,7 @@ def localize_smoothed(
     length_m: FloatArray,
     base_world_m: FloatArray,
     floor_z_m: FloatArray,
+    model_var_n2: FloatArray | None = None,
 ) -> tuple[FloatArray, FloatArray]:
     """Catenary positions of the smoothed tensions (azimuth from the tension itself).
 
@@ -203,6 +204,8 @@ def localize_smoothed(
         length_m: Tether length, m, shape (n,).
         base_world_m: Base exit, world, m, shape (n, 3).
         floor_z_m: Floor height, m, shape (n,).
+        model_var_n2: The calibration's misfit per world axis, N², shape (n, 3) or None
+            (``localization.try_localize``: it widens the position's covariance).
 
     Returns:
         Position (world, m) and its standard deviation (m), each shape (n, 3), NaN where
@@ -224,6 +227,7 @@ def localize_smoothed(
             length_m[idx],
             base_world_m[idx],
             floor_z_m[idx],
+            model_var_n2=None if model_var_n2 is None else model_var_n2[idx],
         )
         for i, p in zip(idx, found, strict=True):
             if p is not None:

@@ -143,7 +143,9 @@ def _telemetry(seq: int, accel_noise_mps2: np.ndarray) -> bytes:
     ).encode()
 
 
-def _replay(tmp_path: Path, name: str, noise_mps2: float) -> tuple[dict, dict]:
+def _replay(
+    tmp_path: Path, name: str, noise_mps2: float, settings: Settings | None = None
+) -> tuple[dict, dict]:
     from tests.test_recording import write_recording
 
     rng = np.random.default_rng(17)
@@ -154,7 +156,7 @@ def _replay(tmp_path: Path, name: str, noise_mps2: float) -> tuple[dict, dict]:
     ]
     src, out = tmp_path / f"{name}.mcap", tmp_path / f"{name}-out.mcap"
     write_recording(src, msgs)
-    assert run_replay_offline(Settings(), src, out) == 0
+    assert run_replay_offline(settings or Settings(), src, out) == 0
     est, smo = {}, {}
     for m in iter_messages(out):
         if m.key == "tether/cf1/estimate":
@@ -199,3 +201,29 @@ def test_replay_offline_without_smoothing_writes_none(tmp_path: Path, smooth: bo
     write_recording(src, msgs)
     replay_offline(src, out, Pipeline(Settings()), smooth=smooth)
     assert not [m for m in iter_messages(out) if m.key.endswith("estimate_smoothed")]
+
+
+def test_the_smoothed_sigma_carries_the_calibrations_misfit_as_the_live_one(
+    tmp_path: Path,
+) -> None:
+    """With ``[calibration] tension_model_std_n`` the smoothed series' tension σ is
+    ``sqrt(smoothed variance + misfit²)`` and its position σ grows with it, as the live
+    Estimate's do; the smoothed tension and position themselves do not move."""
+    from groundstation.config import load_settings
+
+    model = [0.004, 0.003, 0.005]
+    cal = {"thrust_scale": 1.0, "source": "test", "tension_model_std_n": model}
+    _, plain = _replay(tmp_path, "plain", 1.0)
+    _, wide = _replay(
+        tmp_path, "wide", 1.0, load_settings(None, {"calibration": cal}, use_env=False)
+    )
+    k = max(wide)
+    p, w = plain[k][0], wide[k][0]
+    np.testing.assert_allclose(w.tension_n, p.tension_n, atol=1e-12)
+    np.testing.assert_allclose(
+        w.tension_std_n, np.sqrt(np.square(p.tension_std_n) + np.square(model)), rtol=1e-9
+    )
+    assert w.position_m is not None and p.position_m is not None
+    np.testing.assert_allclose(w.position_m, p.position_m, atol=1e-12)
+    # A plumb tether here (the pull is vertical): its height's σ is the one to grow.
+    assert w.position_std_m[2] > 2.0 * p.position_std_m[2]

@@ -29,7 +29,8 @@ class _Epoch:
 
     trace: list[Any]  # groundstation.tension.FilterStep
     rows: list[tuple[Any, ...]] = field(default_factory=list)
-    """(trace index, log time ns, seq, stamp_s, weight, length, base, floor) per Estimate."""
+    """(trace index, log time ns, seq, stamp_s, weight, length, base, floor, model variance)
+    per Estimate (the model variance: the calibration's misfit, N² per axis, zeros if none)."""
 
 
 class SmoothingTap:
@@ -80,6 +81,7 @@ class SmoothingTap:
                 float(runtime.length_m),
                 np.asarray(runtime.base_world_m, dtype=float),
                 float(runtime.params.base.floor_z_m),
+                np.asarray(getattr(runtime, "model_var_n2", None) or (0.0, 0.0, 0.0), float),
             )
         )
 
@@ -95,6 +97,8 @@ class SmoothingTap:
                 idx = np.array([r[0] for r in epoch.rows])
                 ten = smoothed.tension_world_n[idx]
                 var = smoothed.variance_n2[idx]
+                # The calibration's misfit, as the live Estimate carries it (in the air).
+                model = np.array([r[8] for r in epoch.rows])
                 pos, pos_std = localize_smoothed(
                     ten,
                     var,
@@ -102,6 +106,7 @@ class SmoothingTap:
                     np.array([r[5] for r in epoch.rows]),
                     np.array([r[6] for r in epoch.rows]),
                     np.array([r[7] for r in epoch.rows]),
+                    model_var_n2=model,
                 )
                 written = 0
                 for j, row in enumerate(epoch.rows):
@@ -112,7 +117,7 @@ class SmoothingTap:
                         seq=row[2],
                         stamp_s=row[3],
                         tension_n=_t3(ten[j]),
-                        tension_std_n=_t3(np.sqrt(np.maximum(var[j], 0.0))),
+                        tension_std_n=_t3(np.sqrt(np.maximum(var[j], 0.0) + model[j])),
                         position_m=_t3(pos[j]) if found else None,
                         position_std_m=_t3(pos_std[j]) if found else None,
                     )
