@@ -318,7 +318,9 @@ class Estimate(_Out):
     follow: FollowInfo
     """Follow mode (see FollowInfo)."""
     position_std_m: tuple[float, float, float] | None = None
-    """(added) Per-axis standard deviation of ``position_m``."""
+    """(added) Per-axis standard deviation of ``position_m``: the tension's uncertainty (the
+    filter's, plus the calibration's misfit ``[calibration] tension_model_std_n`` in the air)
+    carried through the catenary."""
     radial_m: float | None = None
     """(added) Horizontal distance base → drone from the tether."""
     radial_interval_m: tuple[float, float] | None = None
@@ -367,7 +369,8 @@ class EstimateSmoothed(_Out):
     """Force the tether applies to the drone, world frame, newtons, from every sample of the
     regime (before and after this one)."""
     tension_std_n: tuple[float, float, float]
-    """Its standard deviation per axis, newtons."""
+    """Its standard deviation per axis, newtons (the smoother's, plus the calibration's
+    misfit ``[calibration] tension_model_std_n``, as the Estimate's)."""
     position_m: tuple[float, float, float] | None
     """Catenary position of the smoothed tension (azimuth from the tension), world, metres;
     None when it has no solution."""
