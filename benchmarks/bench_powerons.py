@@ -137,13 +137,11 @@ the three axes the published σ holds within 2σ (tension, position; a position 
 holds none)."""
 
 
-def judge(rec: Recorded, settings: Settings) -> Judged:
-    """Serve a recording (no motion capture in it) through the pipeline; per judged sample
-    the position error (m), the tension error (N, 3-vector) and the axes within 2σ."""
+def served(rec: Recorded, settings: Settings) -> list[tuple[dict[str, Any], dict[str, Any]]]:
+    """Serve a recording (no motion capture in it) through the pipeline: each Estimate in a
+    judged stretch (``rec.judged_from_s``) with the simulator's truth at its stamp."""
     pipe = Pipeline(settings)
-    pos_err: list[float] = []
-    ten_err: list[np.ndarray] = []
-    within: list[tuple[int, int]] = []
+    pairs: list[tuple[dict[str, Any], dict[str, Any]]] = []
     for m in rec.messages:
         now = m.log_time_ns / 1e9
         for out in pipe.handle(Sample(m.key, m.payload), now):
@@ -154,42 +152,45 @@ def judge(rec: Recorded, settings: Settings) -> Judged:
             if not any(a <= stamp < b for a, b in rec.judged_from_s):
                 continue
             tr = rec.truth.get(round(stamp, 6))
-            if tr is None:
-                continue
-            d_t = np.subtract(est["tension_n"], tr["tension_n"])
-            ten_err.append(d_t)
-            t_in = int(np.sum(np.abs(d_t) <= 2.0 * np.asarray(est["tension_std_n"], float)))
-            if est["position_m"] is None:
-                pos_err.append(float("inf"))
-                p_in = 0
-            else:
-                d_p = np.subtract(est["position_m"], tr["position_m"])
-                pos_err.append(float(np.linalg.norm(d_p)))
-                std = est.get("position_std_m")
-                p_in = 0 if std is None else int(np.sum(np.abs(d_p) <= 2.0 * np.asarray(std)))
-            within.append((t_in, p_in))
+            if tr is not None:
+                pairs.append((est, tr))
         pipe.tick(now)
+    return pairs
+
+
+def judge(pairs: list[tuple[dict[str, Any], dict[str, Any]]]) -> Judged:
+    """Per served sample (:func:`served`) the position error (m), the tension error (N,
+    3-vector) and the axes within 2σ."""
+    pos_err: list[float] = []
+    ten_err: list[np.ndarray] = []
+    within: list[tuple[int, int]] = []
+    for est, tr in pairs:
+        d_t = np.subtract(est["tension_n"], tr["tension_n"])
+        ten_err.append(d_t)
+        t_in = int(np.sum(np.abs(d_t) <= 2.0 * np.asarray(est["tension_std_n"], float)))
+        if est["position_m"] is None:
+            pos_err.append(float("inf"))
+            p_in = 0
+        else:
+            d_p = np.subtract(est["position_m"], tr["position_m"])
+            pos_err.append(float(np.linalg.norm(d_p)))
+            std = est.get("position_std_m")
+            p_in = 0 if std is None else int(np.sum(np.abs(d_p) <= 2.0 * np.asarray(std)))
+        within.append((t_in, p_in))
     return pos_err, ten_err, within
 
 
-def dwells(rec: Recorded, settings: Settings) -> list[str]:
-    """Per spot of one judged flight: the tension error's mean and RMS per world axis (mN),
-    the median published σ and the share within 2σ, as table rows: does the σ miss a bias
-    or a motion of the truth?"""
-    pipe = Pipeline(settings)
-    rows: list[tuple[float, ...]] = []
-    for m in rec.messages:
-        now = m.log_time_ns / 1e9
-        for out in pipe.handle(Sample(m.key, m.payload), now):
-            if not out.key.endswith("/estimate"):
-                continue
-            est = json.loads(out.payload)
-            tr = rec.truth.get(round(est["stamp_s"], 6))
-            if tr is not None:
-                d = np.subtract(est["tension_n"], tr["tension_n"])
-                rows.append((est["stamp_s"], *d, *est["tension_std_n"]))
-        pipe.tick(now)
-    a = np.array(rows, float).reshape(-1, 7)
+def dwells(rec: Recorded, pairs: list[tuple[dict[str, Any], dict[str, Any]]]) -> list[str]:
+    """Per spot of one judged flight (its served samples, :func:`served`): the tension error's
+    mean and RMS per world axis (mN), the median published σ and the share within 2σ, as
+    table rows: does the σ miss a bias or a motion of the truth?"""
+    a = np.array(
+        [
+            (est["stamp_s"], *np.subtract(est["tension_n"], tr["tension_n"]), *est["tension_std_n"])
+            for est, tr in pairs
+        ],
+        float,
+    ).reshape(-1, 7)
     out_rows = []
     for lo, hi in rec.judged_from_s:
         w = (a[:, 0] >= lo) & (a[:, 0] < hi)
@@ -275,13 +276,16 @@ def main(argv: list[str] | None = None) -> int:
         judged = [record(seed, args.noise, mocap=False, levelled=levelled) for seed in judge_seeds]
         rows: dict[str, Score | None] = {}
         for label, cfg in configs.items():
-            rows[label] = None if cfg is None else score([judge(r, cfg) for r in judged])
+            rows[label] = None if cfg is None else score([judge(served(r, cfg)) for r in judged])
         # told the truth, per judged flight
         own_air = []
         own_full = []
+        told_rows: list[str] = []
         for r in judged:
             eq_air = dict(r.errors["airframe_equivalent"])
-            own_air.append(judge(r, _cal_settings({**eq_air, "source": "truth"})))
+            told = served(r, _cal_settings({**eq_air, "source": "truth"}))
+            own_air.append(judge(told))
+            told_rows += dwells(r, told)
             eq = r.errors["calibration"]
             full = {
                 "thrust_scale": eq["thrust_scale"],
@@ -292,15 +296,8 @@ def main(argv: list[str] | None = None) -> int:
                 "accel_slow": False,
                 "source": "truth",
             }
-            own_full.append(judge(r, _cal_settings(full)))
+            own_full.append(judge(served(r, _cal_settings(full))))
         rows["told the truth: own airframe constants (slow stage on)"] = score(own_air)
-        told_rows = [
-            row
-            for r in judged
-            for row in dwells(
-                r, _cal_settings({**dict(r.errors["airframe_equivalent"]), "source": "truth"})
-            )
-        ]
         rows["told the truth: own full-model equivalent (bias known)"] = score(own_full)
 
     say("# Calibrate on some power-ons, judge others (realistic simulator)")
