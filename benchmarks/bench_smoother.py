@@ -14,6 +14,9 @@ Two kinds of data, each compared with its truth:
 Both through ``groundstation.recording.replay.replay_offline`` (what ``replay --offline`` runs).
 
 Run:  python -m benchmarks.bench_smoother [--seeds 2] [--out docs/smoother.md]
+
+With ``--out docs/smoother.md`` the figures also go to ``docs/smoother.json``
+(:mod:`benchmarks.figures`), and the page's reading below its tables, written by hand, is kept.
 """
 
 from __future__ import annotations
@@ -30,6 +33,7 @@ import numpy as np
 
 from benchmarks import bench_powerons as bp
 from benchmarks import nanobench_cli as nb
+from benchmarks.figures import AT_START, DOCS, write_figures
 from groundstation.config import load_settings
 from groundstation.pipeline import Pipeline
 from groundstation.recording.reader import copy_messages, iter_messages
@@ -141,7 +145,9 @@ def main(argv: list[str] | None = None) -> int:
     lines = [
         "# Post-flight smoothing (replay --offline)",
         "",
-        f"`python -m benchmarks.bench_smoother --seeds {args.seeds}` ({time.time() - t0:.0f} s). "
+        f"`python -m benchmarks.bench_smoother --seeds {args.seeds} --out docs/smoother.md` "
+        f"(this page and its figures, docs/smoother.json; {time.time() - t0:.0f} s at commit "
+        f"{AT_START.commit}). "
         "`replay --offline` writes, beside each Estimate, `tether/{drone}/estimate_smoothed`: "
         "the tension filter's own steps run forward and backward (filterpy's `rts_smoother`, "
         "regimes cut at resets and detected tugs; groundstation/smoother.py) and the catenary "
@@ -172,7 +178,16 @@ def main(argv: list[str] | None = None) -> int:
         lines.append(f"| {n} | {c:.1f} | {s:.1f} |")
     page = "\n".join(lines) + "\n"
     if args.out:
-        Path(args.out).write_text(page, encoding="utf-8")
+        out = Path(args.out)
+        if out.is_file():  # the reading below the tables is written by hand: keep it
+            old = out.read_text(encoding="utf-8")
+            at = old.find("\n## Reading")
+            if at >= 0:
+                page += old[at:]
+        out.write_text(page, encoding="utf-8")
+        if out.resolve() == DOCS / "smoother.md":
+            figures = {"simulated": sim, "nanobench": [[n, c, s] for n, c, s in rows]}
+            write_figures("smoother", figures, ["--seeds", str(args.seeds), "--out", args.out])
     sys.stdout.write(page)
     return 0
 

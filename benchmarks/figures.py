@@ -149,6 +149,18 @@ BENCHMARKS: dict[str, Benchmark] = {
             "benchmarks/battery_model.py",
         ),
     ),
+    "smoother": Benchmark(
+        ".venv/bin/python -m benchmarks.bench_smoother",  # --seeds 2 --out docs/smoother.md
+        (
+            *ESTIMATOR,
+            *RECORDING,
+            *SIMULATOR,
+            "benchmarks/bench_powerons.py",
+            "benchmarks/nanobench.py",
+            "benchmarks/nanobench_cli.py",
+            "benchmarks/bench_smoother.py",
+        ),
+    ),
     "realistic_benchmark": Benchmark(
         ".venv/bin/python -m benchmarks.bench_realistic",  # --tug-seeds 8
         (*ESTIMATOR, *SIMULATOR, "groundstation/bus.py", "benchmarks/bench_realistic.py"),

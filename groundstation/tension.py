@@ -57,6 +57,7 @@ __all__ = [
     "DegenerateQuaternionError",
     "DiagonalKalman",
     "FilterStep",
+    "HoverStep",
     "InvalidObservationError",
     "InvalidTimeStepError",
     "ObservationCalibration",
@@ -825,6 +826,32 @@ class TensionEstimate:
 
 
 @dataclass(frozen=True, slots=True)
+class HoverStep:
+    """The hover's part of one update step, as the trace records it for the smoother.
+
+    While the drone hovers the filter's state per world axis is (T, v)
+    (:class:`~groundstation.tension_kalman.HoverVelocity`): ``v = v_prev + d·(T_prev − h)``
+    plus noise of variance ``velocity_noise_m2ps2``, and ``0 = v`` observed with variance
+    ``rest_var_m2ps2``; a hover that begins at this step starts from v = 0 with variance
+    ``start_var_m2ps2`` (so ``v = d·(T_prev − h)`` plus noise of variance ``start_var +
+    velocity_noise``).
+    """
+
+    hover_model_n: tuple[float, float, float]
+    """h, the thrust balance ``m·g·e3 − R·u·F`` of this sample, world, N."""
+    gain_s_per_kg: float
+    """d = dt / m, s/kg."""
+    velocity_noise_m2ps2: float
+    """The velocity's process noise over this step, (m/s)^2."""
+    rest_var_m2ps2: float
+    """The variance of the observation ``v = 0``, (m/s)^2."""
+    start_var_m2ps2: float
+    """σ_v², the velocity's variance when a hover begins, (m/s)^2."""
+    started: bool
+    """The hover began at this step."""
+
+
+@dataclass(frozen=True, slots=True)
 class FilterStep:
     """One step of :class:`TensionFilter`, as its trace records it for offline smoothing.
 
@@ -849,6 +876,8 @@ class FilterStep:
     restart: int = 0
     """A change detected here: the filter restarted from the last ``restart`` updates
     (this one included), so the new regime began at the ``restart``-th last update."""
+    hover: HoverStep | None = None
+    """The hover's part of an update step (None: the drone did not hover)."""
 
 
 class TensionFilter:
@@ -1434,19 +1463,29 @@ class TensionFilter:
         # K = P- / (P- + R), x = x- + K (y - x-), Joseph P; w = (y - x-) / sqrt(S)
         w = kf.update(z, r)
         hv = self._hover_v
+        hover_step: HoverStep | None = None
         if hover_model_world_n is None or dt <= 0.0:
             hv.active = False
         else:
             # The velocity beside the tension (HoverVelocity): m dv/dt = T - h, and v = 0
             # observed with variance sigma_v^2 T_c / dt.
             vv = p.hover_velocity_std_mps * p.hover_velocity_std_mps
-            if not hv.active:
+            started = not hv.active
+            if started:
                 hv.start(vv)
             a_noise = p.thrust_noise_n / p.mass_kg  # q_v: the thrust's noise as accel.
+            accel_density = a_noise * a_noise * dt_mean
+            rest_var = vv * p.hover_velocity_time_s / dt
             hv.step(
                 kf, x_prev, a_pred, q, hover_model_world_n, r, w, dt, p.mass_kg,
-                a_noise * a_noise * dt_mean, vv * p.hover_velocity_time_s / dt,
+                accel_density, rest_var,
             )  # fmt: skip
+            if self.trace is not None:
+                h = hover_model_world_n
+                hover_step = HoverStep(
+                    (float(h[0]), float(h[1]), float(h[2])),
+                    dt / p.mass_kg, accel_density * dt, rest_var, vv, started,
+                )  # fmt: skip
         self._samples += 1
         warming = estimate_noise and noise.samples < p.noise_warmup_samples
         lazy: LazyChangeStatistic | None = None
@@ -1484,7 +1523,7 @@ class TensionFilter:
         if not warming:
             self._step.push(z)
         if self.trace is not None:
-            self._record("update", z, q, r, window if change else 0)
+            self._record("update", z, q, r, window if change else 0, hover_step)
         return self._publish(change, stat if lazy is None else lazy, scale, tau)
 
     def coast(self, dt_s: float) -> TensionEstimate | None:
@@ -1601,11 +1640,12 @@ class TensionFilter:
         q: tuple[float, float, float],
         r: tuple[float, ...] | None,
         restart: int,
+        hover: HoverStep | None = None,
     ) -> None:
         assert self.trace is not None
         kf = self._kf
         step = FilterStep(
-            kind, _tuple3(kf.x), _tuple3(kf.P), _tuple3(z), q, _tuple3(r), int(restart)
+            kind, _tuple3(kf.x), _tuple3(kf.P), _tuple3(z), q, _tuple3(r), int(restart), hover
         )
         self.trace.append(step)
 

@@ -353,25 +353,21 @@ class ChangeTest:
     def __init__(self, min_window: int, max_window_s: float, size: int, threshold: float) -> None:
         self.min_window = min_window
         self.max_window_s = max_window_s
-        self.threshold = threshold
         self.ring = _Ring(size)
-        n = np.arange(min_window, size + 1, dtype=np.float64)
-        self.inv_n = 1.0 / n  # 1 / n for the windows n = min_window .. size
-        # The radius of each window's ball, a hair smaller than sqrt(threshold n) so that
-        # rounding cannot certify a window that the exact statistic puts just above it.
-        self._radius = np.sqrt(threshold * n) * (1.0 - 1e-9) - 1e-12
-        self._radius_min = float(self._radius[0])
+        self._n = np.arange(min_window, size + 1, dtype=np.float64)  # windows min_window..size
+        self.inv_n = 1.0 / self._n
         self._anchor = (0.0, 0.0, 0.0)  # C_t0
-        self._sigma = -1.0  # the slack; < 0: no certificate
         self._moves = 0  # ring.moves when the anchor was set
+        self.set_threshold(threshold)
 
     def set_threshold(self, threshold: float) -> None:
         """A new detection threshold (the spacing moved): the certificate is dropped."""
         self.threshold = threshold
-        n = 1.0 / self.inv_n
-        self._radius = np.sqrt(threshold * n) * (1.0 - 1e-9) - 1e-12
+        # The radius of each window's ball, a hair smaller than sqrt(threshold n) so that
+        # rounding cannot certify a window that the exact statistic puts just above it.
+        self._radius = np.sqrt(threshold * self._n) * (1.0 - 1e-9) - 1e-12
         self._radius_min = float(self._radius[0])
-        self._sigma = -1.0
+        self._sigma = -1.0  # the slack; < 0: no certificate
 
     def clear(self) -> None:
         """Forgets the windows (a new regime): none can detect until they fill again."""

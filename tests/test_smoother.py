@@ -3,6 +3,7 @@ trace, and ``replay --offline``'s smoothed series end to end."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from pathlib import Path
@@ -15,7 +16,7 @@ from groundstation.messages import EstimateSmoothed
 from groundstation.recording.reader import iter_messages
 from groundstation.recording.replay import run_replay_offline
 from groundstation.smoother import segments, smooth_tension
-from groundstation.tension import FilterStep, TensionFilter
+from groundstation.tension import FilterStep, TensionFilter, TensionFilterParams
 
 ZERO = (0.0, 0.0, 0.0)
 
@@ -227,3 +228,82 @@ def test_the_smoothed_sigma_carries_the_calibrations_misfit_as_the_live_one(
     np.testing.assert_allclose(w.position_m, p.position_m, atol=1e-12)
     # A plumb tether here (the pull is vertical): its height's σ is the one to grow.
     assert w.position_std_m[2] > 2.0 * p.position_std_m[2]
+
+
+def _hover_flight(
+    seed: int, n: int, dt_s: float, filt: TensionFilter
+) -> tuple[np.ndarray, np.ndarray, list]:
+    """A hover at constant tension, fed to ``filt`` with its thrust balance: the velocity an
+    AR(1) of σ 0.02 m/s and correlation 0.5 s, ``h = T − m·dv/dt`` plus 3 mN of thrust noise,
+    the accelerometer model ``z = T`` plus 0.3 m/s² of vibration (× m). Returns the truth, the
+    causal estimates and the trace (one init, then updates)."""
+    rng = np.random.default_rng(seed)
+    m = filt.params.mass_kg
+    truth = np.array([0.012, -0.004, 0.031])
+    rho = math.exp(-dt_s / 0.5)
+    v = np.zeros(3)
+    trace = filt.start_trace()
+    ests = []
+    for _ in range(n):
+        v_new = rho * v + math.sqrt(1 - rho * rho) * 0.02 * rng.normal(size=3)
+        h = truth - m * (v_new - v) / dt_s + rng.normal(0.0, 0.003, 3)
+        v = v_new
+        z = truth + m * rng.normal(0.0, 0.3, 3)
+        ests.append(filt.update(z, dt_s, hover_model_world_n=h).tension_world_n)
+    return truth, np.array(ests), trace
+
+
+def test_the_smoother_follows_the_hovers_velocity_as_the_filter_does() -> None:
+    """While the drone hovers the causal filter's state is (T, v) with the thrust balance as
+    an input and ``v = 0`` observed (HoverVelocity); the smoother runs the same model
+    (filterpy, 6 states, the input through ``B·u``). Its last step, where smoothed equals
+    filtered, is the causal filter's state (R fixed: no rescale, which the trace does not
+    record); over the hover it is closer to the truth than the causal filter and than a
+    smoother that drops the hover's part of the trace (the tension alone, as before)."""
+    params = TensionFilterParams(estimate_noise=False, accel_noise_mps2=0.3)
+    filt = TensionFilter(params)
+    truth, ests, trace = _hover_flight(21, 3000, 0.01, filt)
+    hovering = [s.hover is not None for s in trace]
+    assert trace[0].kind == "init" and not hovering[0] and all(hovering[1:])
+    assert trace[1].hover is not None and trace[1].hover.started
+    assert not any(s.hover.started for s in trace[2:] if s.hover is not None)
+    assert not any(s.restart for s in trace)  # no change detected: one regime
+    sm = smooth_tension(trace)
+    np.testing.assert_allclose(sm.tension_world_n[-1], ests[-1], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(sm.variance_n2[-1], trace[-1].p_n2, rtol=1e-6)
+    causal_p = np.array([s.p_n2 for s in trace])
+    assert np.all(sm.variance_n2 <= causal_p * (1 + 1e-9))
+    alone = smooth_tension([dataclasses.replace(s, hover=None) for s in trace])
+    err = {
+        "causal": np.sqrt(np.mean((ests[500:] - truth) ** 2)),
+        "smoothed": np.sqrt(np.mean((sm.tension_world_n[500:] - truth) ** 2)),
+        "tension alone": np.sqrt(np.mean((alone.tension_world_n[500:] - truth) ** 2)),
+    }
+    assert err["smoothed"] < 0.8 * err["causal"], err
+    assert err["smoothed"] < 0.8 * err["tension alone"], err
+
+
+def test_a_hover_that_begins_and_ends_inside_a_regime() -> None:
+    """A hover between two stretches without one (the velocity started afresh, then
+    forgotten): the smoother's last step is still the causal filter's state, and the
+    stretches before and after the hover are smoothed as the tension alone would be where
+    the hover cannot reach them."""
+    params = TensionFilterParams(estimate_noise=False, accel_noise_mps2=0.3)
+    filt = TensionFilter(params)
+    trace = filt.start_trace()
+    rng = np.random.default_rng(4)
+    truth = np.array([0.0, 0.01, 0.02])
+    ests = []
+    for k in range(1500):
+        z = truth + 0.009 * rng.normal(size=3)
+        h = truth + rng.normal(0.0, 0.003, 3) if 500 <= k < 1000 else None
+        ests.append(filt.update(z, 0.01, hover_model_world_n=h).tension_world_n)
+    starts = [i for i, s in enumerate(trace) if s.hover is not None and s.hover.started]
+    assert starts == [500]
+    assert trace[999].hover is not None and trace[1000].hover is None
+    sm = smooth_tension(trace)
+    np.testing.assert_allclose(sm.tension_world_n[-1], ests[-1], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(sm.variance_n2[-1], trace[-1].p_n2, rtol=1e-6)
+    # the hover's information lowers the smoothed variance inside it below the causal one
+    causal_p = np.array([s.p_n2 for s in trace])
+    assert np.all(sm.variance_n2[600:900] < causal_p[600:900])
