@@ -26,6 +26,7 @@ from numpy.typing import NDArray
 
 __all__ = [
     "GRAVITY_MPS2",
+    "QUAT_MIN_NORM",
     "Rows",
     "rotations_world_body",
     "rows_from_quat_wxyz",
@@ -57,11 +58,19 @@ def rows_from_unit_quat(w: float, x: float, y: float, z: float) -> Rows:
     )
 
 
+QUAT_MIN_NORM = 1e-6
+"""A quaternion whose norm is below this cannot be normalised: the message is refused
+(``groundstation.tension.DegenerateQuaternionError``) and the rest detector skips it.
+A numerical guard, not a tunable (docs/constants.md, *Not counted*): a unit quaternion
+read with any plausible error has a norm near 1."""
+
+
 def rows_from_quat_wxyz(quat_wxyz: tuple[float, ...] | list[float]) -> Rows:
     """``R_world_body`` of a body→world ``[w, x, y, z]`` quaternion, normalised here.
 
     The caller has refused degenerate quaternions (``groundstation.tension`` raises
-    ``DegenerateQuaternionError`` for a norm below 1e-6 or a non-finite entry).
+    ``DegenerateQuaternionError`` for a norm below :data:`QUAT_MIN_NORM` or a non-finite
+    entry).
     """
     w, x, y, z = quat_wxyz
     n = math.sqrt(((w * w + x * x) + y * y) + z * z)

@@ -41,9 +41,14 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import least_squares
 
-from groundstation.attitude import GRAVITY_MPS2, rotations_world_body, rows_from_quat_wxyz
+from groundstation.attitude import (
+    GRAVITY_MPS2,
+    QUAT_MIN_NORM,
+    rotations_world_body,
+    rows_from_quat_wxyz,
+)
 from groundstation.catenary import CatenaryError, locate_with_floor, tether_force
-from groundstation.tension import thrust_axis_body
+from groundstation.tension import GAP_S, thrust_axis_body
 
 __all__ = [
     "CONVENTIONS",
@@ -241,8 +246,9 @@ class HoverCriteria:
         min_thrust_ratio: thrust at least this fraction of the weight (else on the ground).
         settle_s: samples this close to any excluded one are excluded too (transients).
         min_run_s: shortest hover run kept, s.
-        max_gap_s: a stamp gap longer than this ends a run.
         window_s: half-width of the differences for speed and acceleration, s.
+
+    A stamp gap longer than :data:`~groundstation.tension.GAP_S` ends a run.
     """
 
     max_speed_mps: float = 0.10
@@ -251,7 +257,6 @@ class HoverCriteria:
     min_thrust_ratio: float = 0.5
     settle_s: float = 1.0
     min_run_s: float = 1.0
-    max_gap_s: float = 0.25
     window_s: float = 0.1
 
 
@@ -333,7 +338,7 @@ def hover_mask(
             np.linalg.norm(np.where(have_g[:, None], g, 0.0), axis=1) <= c.max_gyro_rps
         )
         ok = _erode(t, ok, c.settle_s)
-        out[idx] = _keep_long_runs(t, ok, c.min_run_s, c.max_gap_s)
+        out[idx] = _keep_long_runs(t, ok, c.min_run_s, GAP_S)
     return out
 
 
@@ -347,14 +352,14 @@ class RestCriteria:
         max_gravity_dev_mps2: largest | |f| − g | of the window's mean (an accelerometer
             that does not read about g is not at rest, or is not calibrated at all).
         min_still_s: shortest still window, s (the issue: ≥ 1 s).
-        max_gap_s: a stamp gap longer than this restarts the window.
+
+    A stamp gap longer than :data:`~groundstation.tension.GAP_S` restarts the window.
     """
 
     max_gyro_rps: float = 0.05
     max_accel_dev_mps2: float = 0.15
     max_gravity_dev_mps2: float = 1.0
     min_still_s: float = 1.0
-    max_gap_s: float = 0.25
 
 
 def rest_mask(data: CalibrationData, criteria: RestCriteria = RestCriteria()) -> NDArray[np.bool_]:
@@ -503,14 +508,14 @@ class RestCalibrator:
         a = np.asarray(accel_body_mps2, dtype=float).reshape(3)
         q = np.asarray(quat_wxyz, dtype=float).reshape(4)
         qn = float(np.linalg.norm(q)) if np.all(np.isfinite(q)) else math.nan
-        if not (np.all(np.isfinite(a)) and qn > 1e-6 and math.isfinite(stamp_s)):
+        if not (np.all(np.isfinite(a)) and qn > QUAT_MIN_NORM and math.isfinite(stamp_s)):
             self._clear_window()
             return self._offset
         moving = False
         if gyro_rps is not None:
             g = np.asarray(gyro_rps, dtype=float).reshape(3)
             moving = not (np.all(np.isfinite(g)) and float(np.linalg.norm(g)) <= c.max_gyro_rps)
-        if self._n and (stamp_s - self._t_last > c.max_gap_s or stamp_s <= self._t_last):
+        if self._n and (stamp_s - self._t_last > GAP_S or stamp_s <= self._t_last):
             self._clear_window()
         if self._n and not moving:
             mean_a = self._first_accel + self._sum_a / self._n

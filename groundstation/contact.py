@@ -42,19 +42,20 @@ trusted, and a touch-down is noticed where it can be:
 * **Lift-off without motion capture**, either of:
 
   - *the floor carries nothing*: the floor's load ``m g - F`` (what the observation of
-    ``eq:NE_tether`` reads vertically for a drone at rest, from the same calibrated thrust
-    ``F``), smoothed over ``push_time_constant_s``, stays below ``push_free_n`` (10 mN) for
-    ``push_hold_s``. Whatever rests on the floor then, what is published as tension is
-    below that, which is the point; in the air the tether pulls down (or a hand pulls),
-    so a hovering drone whose service restarts is found in the air in 0.1 s. A thrust
-    reading low by more than the tether's downward pull (e.g. 15 % at 10 mN of pull)
-    defeats this rule; a take-off is then found by its thrust surge (the climb's
-    acceleration takes some 20 % of the weight) or by the climb;
+    ``eq:NE_tether`` reads vertically for a drone at rest, from the same calibrated thrust ``F``),
+    smoothed over ``push_time_constant_s``, stays below ``push_free_weight_ratio`` of the weight (10
+    mN at 30 g) for ``push_hold_s``. Whatever rests on the floor then, what is published as tension
+    is below that, which is the point; in the air the tether pulls down (or a hand pulls), so a
+    hovering drone whose service restarts is found in the air in 0.1 s. A thrust reading low by more
+    than the tether's downward pull (e.g. 15 % at 10 mN of pull) defeats this rule; a take-off is
+    then found by its thrust surge (the climb's acceleration takes some 20 % of the weight) or by
+    the climb;
   - *climbing*: the vertical acceleration (IMU specific force rotated to the world, minus
     gravity, minus the bias learnt at rest) integrated with a leak of
     ``speed_time_constant_s`` exceeds ``liftoff_speed_mps`` and ``climb_sigmas``
     standard deviations of its own noise, while the smoothed load is below
-    ``climb_push_max_n`` (50 mN: the floor carries less than a sixth of a 30 g drone).
+    ``climb_push_max_weight_ratio`` of the weight (50 mN at 30 g: the floor carries about a
+    sixth of the drone or less).
 
   Why the load and not the observation itself: on the floor the accelerometer adds only
   its noise to ``m g - F``, and that noise is the propellers' vibration, 1-2 m/s^2 on real
@@ -108,7 +109,8 @@ it (a drone flying below the surface it last rested on, beside a table, is not o
 
 The state starts on the ground, but until the drone has once been *certainly* on the
 ground (disarmed or below the ratio) the push rule is looser: a load below
-``climb_push_max_n`` (50 mN) instead of ``push_free_n`` for ``push_hold_s`` says the drone is
+``climb_push_max_weight_ratio`` (50 mN at 30 g) instead of ``push_free_weight_ratio`` for
+``push_hold_s`` says the drone is
 flying (``reason = "flying_at_start"``: the service (re)started while it was in the air).
 With the strict bound a hover under a tether that pulls *up* (a base above the drone, the
 paper's coin bench: 12.7 mN up) would be held on the ground forever. The price: a service
@@ -164,10 +166,11 @@ class ContactParams:
         speed_time_constant_s: Leak of that speed, s.
         climb_sigmas: Standard deviations of the leaky speed's noise (learnt on the floor)
             a climb must exceed, dimensionless.
-        climb_push_max_n: No motion capture: a climb counts only while the smoothed floor
-            load is below this, N.
-        push_free_n: No motion capture: lift-off when the smoothed floor load stays below
-            this, N ...
+        climb_push_max_weight_ratio: No motion capture: a climb counts only while the
+            smoothed floor load is below this fraction of the weight ``m·g`` (a floor load
+            scales with the weight), dimensionless.
+        push_free_weight_ratio: No motion capture: lift-off when the smoothed floor load
+            stays below this fraction of the weight, dimensionless ...
         push_hold_s: ... for this long, s.
         push_time_constant_s: Smoothing of the floor load, s.
         noise_time_constant_s: Memory of the vibration level learnt on the floor, s.
@@ -187,8 +190,8 @@ class ContactParams:
     liftoff_speed_mps: float = 0.1
     speed_time_constant_s: float = 0.25
     climb_sigmas: float = 4.0
-    climb_push_max_n: float = 0.050
-    push_free_n: float = 0.010
+    climb_push_max_weight_ratio: float = 0.17
+    push_free_weight_ratio: float = 0.034
     push_hold_s: float = 0.1
     push_time_constant_s: float = 0.1
     noise_time_constant_s: float = 1.0
@@ -211,8 +214,8 @@ class ContactParams:
         for name in (
             "liftoff_speed_mps",
             "speed_time_constant_s",
-            "climb_push_max_n",
-            "push_free_n",
+            "climb_push_max_weight_ratio",
+            "push_free_weight_ratio",
             "push_hold_s",
             "push_time_constant_s",
             "noise_time_constant_s",
@@ -459,9 +462,10 @@ def contact_step(
     push = load if push is None else push + w * (load - push)
     # Before any rest was seen the drone is most likely flying (the service started
     # mid-flight), perhaps under a tether that pulls up: a looser bound on the load.
-    push_limit_n = params.push_free_n if state.rest_seen else params.climb_push_max_n
+    climb_push_max_n = params.climb_push_max_weight_ratio * weight_n
+    push_limit_n = params.push_free_weight_ratio * weight_n if state.rest_seen else climb_push_max_n
     free_s = state.push_free_s + dt if push < push_limit_n else 0.0
-    if speed > climb_limit and push < params.climb_push_max_n:
+    if speed > climb_limit and push < climb_push_max_n:
         return evolve(state, on_ground=False, reason="climbing", climb_speed_mps=0.0)
     if push < push_limit_n and free_s >= params.push_hold_s:
         reason: Reason = "push_free" if state.rest_seen else "flying_at_start"

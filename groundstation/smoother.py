@@ -23,10 +23,12 @@ arrays, offline): it runs on the causal filter's own trace (:class:`groundstatio
 FilterStep`), i.e. the observations z, the noise R it had learnt, the process noise Q it
 chose at each step (hover, drift adaptation, coasts) and the hover's part
 (:class:`groundstation.tension.HoverStep`). Not in the trace: the rescaling of P when the
-learnt R moves by more than 1 % (the smoother's forward pass keeps the unscaled P). Where the causal filter found a change
-(a tug), the regime it restarted from began ``restart`` updates earlier: the smoother cuts
-there, so it never averages across a tug, and each regime is smoothed from an uninformative
-start (x = z, P = R). A reset (ground, silence) cuts too. docs/smoother.md measures the gain.
+learnt R moves by more than 1 % (the smoother's forward pass keeps the unscaled P).
+
+Where the causal filter found a change (a tug), the regime it restarted from began ``restart``
+updates earlier: the smoother cuts there, so it never averages across a tug, and each regime is
+smoothed from an uninformative start (x = z, P = R). A reset (ground, silence) cuts too.
+docs/smoother.md measures the gain.
 """
 
 from __future__ import annotations

@@ -29,7 +29,7 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from groundstation.attitude import GRAVITY_MPS2, Rows, rows_from_unit_quat
+from groundstation.attitude import GRAVITY_MPS2, QUAT_MIN_NORM, Rows, rows_from_unit_quat
 from groundstation.tension_change import (
     ChangeTest,
     LazyChangeStatistic,
@@ -52,6 +52,7 @@ from groundstation.thrust_model import (
 )
 
 __all__ = [
+    "GAP_S",
     "GRAVITY_MPS2",
     "NO_CALIBRATION",
     "DegenerateQuaternionError",
@@ -74,7 +75,12 @@ __all__ = [
     "thrust_axis_body",
 ]
 
-_QUAT_MIN_NORM = 1e-6
+GAP_S = 0.25
+"""A stamp gap longer than this breaks a stream's chain of samples, s: the tension
+filter's noise model and change windows (:class:`TensionFilter`), the rest detector's still
+window (:class:`~groundstation.calibration.RestCalibrator`) and a hover run of
+``calibrate`` (:class:`~groundstation.calibration.HoverCriteria`). Hand-set: 25 samples at
+100 Hz, longer than real telemetry's own gaps (motion capture's up to 150 ms)."""
 _EYE3 = np.eye(3)
 _EYE3.setflags(write=False)
 
@@ -163,7 +169,7 @@ def _unit_quaternion(quat_wxyz: ArrayLike) -> tuple[float, float, float, float]:
         ss = ((w * w + x * x) + y * y) + z * z
         if math.isfinite(ss):  # also: every entry is finite
             norm = math.sqrt(ss)
-            if norm >= _QUAT_MIN_NORM:
+            if norm >= QUAT_MIN_NORM:
                 return w / norm, x / norm, y / norm, z / norm
     # Degenerate, overflowing or an unusual type: the array code raises or copes.
     w, x, y, z = _unit_quaternion_array(quat_wxyz).tolist()
@@ -175,9 +181,9 @@ def _unit_quaternion_array(quat_wxyz: ArrayLike) -> FloatArray:
     if q.shape != (4,):
         raise DegenerateQuaternionError(f"quat_wxyz must have shape (4,), got shape {q.shape}")
     norm = float(np.sqrt(q @ q)) if np.all(np.isfinite(q)) else math.nan
-    if not (norm >= _QUAT_MIN_NORM):  # also catches nan/inf
+    if not (norm >= QUAT_MIN_NORM):  # also catches nan/inf
         raise DegenerateQuaternionError(
-            f"quat_wxyz={q.tolist()} cannot be normalised (norm {norm!r} < {_QUAT_MIN_NORM})"
+            f"quat_wxyz={q.tolist()} cannot be normalised (norm {norm!r} < {QUAT_MIN_NORM})"
         )
     out: FloatArray = q / norm
     return out
@@ -633,9 +639,12 @@ class TensionFilterParams:
         ring_size: Capacity of the change test's history, samples (1 s at 500 Hz).
         long_sizing_threshold: Non-centrality that sizes the long-window step test's
             windows (class docstring), dimensionless: its longest window is the one in
-            which a step of ``long_min_step_n``, the level before it known, reaches it
+            which a step of ``long_min_step_weight_ratio`` of the weight, the level before it
+            known, reaches it
             (``n_max = long_sizing_threshold * r / step^2`` samples).
-        long_min_step_n: The step the long-window test is sized for, N.
+        long_min_step_weight_ratio: The step the long-window test is sized for, as a
+            fraction of the weight ``m·g`` (20 mN at 30 g): with the noise variance, which
+            scales as m², the windows do not depend on the mass; dimensionless.
         long_max_window_s: Cap on the long-window test's longest window, s.
         long_reference_s: Longest stretch before a window that serves as its reference
             level in the long-window test, s.
@@ -649,8 +658,6 @@ class TensionFilterParams:
             reach, s.
         drift_exponent: Exponent of the drift adaptation, dimensionless.
         drift_memory_s: Decay of the drift adaptation once the drift is gone, s.
-        gap_s: A time step longer than this breaks the noise model's sample chain and
-            the change test's windows, s.
         hover_velocity_std_mps: σ_v, the hovering drone's velocity scatter per world
             axis, m/s: the thrust balance enters the filter through the velocity
             (:class:`~groundstation.tension_kalman.HoverVelocity`) while the caller says
@@ -674,7 +681,7 @@ class TensionFilterParams:
     change_max_window_s: float = 1.0
     ring_size: int = 512
     long_sizing_threshold: float = 40.0
-    long_min_step_n: float = 0.020
+    long_min_step_weight_ratio: float = 0.068
     long_max_window_s: float = 8.0
     long_reference_s: float = 10.0
     long_history_size: int = 4096
@@ -683,7 +690,6 @@ class TensionFilterParams:
     drift_min_time_constant_s: float = 0.1
     drift_exponent: float = 3.0
     drift_memory_s: float = 1.0
-    gap_s: float = 0.25
     hover_velocity_std_mps: float = 0.02
     hover_velocity_time_s: float = 0.5
 
@@ -696,13 +702,12 @@ class TensionFilterParams:
             "hover_time_constant_s": self.hover_time_constant_s,
             "change_max_window_s": self.change_max_window_s,
             "long_sizing_threshold": self.long_sizing_threshold,
-            "long_min_step_n": self.long_min_step_n,
+            "long_min_step_weight_ratio": self.long_min_step_weight_ratio,
             "long_max_window_s": self.long_max_window_s,
             "long_reference_s": self.long_reference_s,
             "drift_time_constant_s": self.drift_time_constant_s,
             "drift_threshold": self.drift_threshold,
             "drift_min_time_constant_s": self.drift_min_time_constant_s,
-            "gap_s": self.gap_s,
             "hover_velocity_std_mps": self.hover_velocity_std_mps,
             "hover_velocity_time_s": self.hover_velocity_time_s,
         }
@@ -1002,7 +1007,8 @@ class TensionFilter:
     innovations, so what the filter did after the step costs it nothing. A step delta
     gives non-centrality ``|delta|^2 / (r (1/n + 1/m))``. Windows
     (:meth:`step_test_design`): n from n_max / 4 to ``n_max = 40 r_max / delta_min^2``
-    (spaced by 5 %), the window in which a step of ``long_min_step_n`` = 20 mN, the level
+    (spaced by 5 %), the window in which a step of ``long_min_step_weight_ratio`` of the
+    weight (20 mN at 30 g), the level
     before it known, reaches a non-centrality of ``long_sizing_threshold`` = 40, at most
     ``long_max_window_s`` = 8 s: 0.45-1.8 s at 1 m/s^2, 1.8-7.6 s at 2 m/s^2 (100 Hz,
     r = 2 s2). The test is off while n_max lies within the fast test's 1 s (below
@@ -1069,7 +1075,7 @@ class TensionFilter:
     constant of ``drift_min_time_constant_s`` = 0.1 s, which shortens tau until the lag
     falls back to the threshold; the scale then decays with ``drift_memory_s`` = 1 s.
 
-    **Gaps and rates.** A step longer than ``gap_s`` = 0.25 s breaks the noise model's
+    **Gaps and rates.** A step longer than :data:`GAP_S` = 0.25 s breaks the noise model's
     sample chain and clears the change test's windows (a window across a gap mixes two
     regimes); the state is kept, P grows by Q times the gap, and a tension that changed
     meanwhile is found by the change test on the samples after the gap (the pipeline
@@ -1159,7 +1165,7 @@ class TensionFilter:
         self._fast_band = (math.nan, math.nan)
         self._step = StepTest(
             p.long_sizing_threshold,
-            p.long_min_step_n,
+            p.long_min_step_weight_ratio * p.mass_kg * GRAVITY_MPS2,
             0.5 * p.false_alarms_per_h,
             p.long_max_window_s,
             p.long_reference_s,
@@ -1269,7 +1275,7 @@ class TensionFilter:
 
         Consecutive calls continue one chain of differences, and the first :meth:`update`
         after them continues it too (lift-off is no jump in the noise); :meth:`reset`
-        breaks it, as does a call with ``dt_s`` 0 or longer than ``gap_s``. The state is
+        breaks it, as does a call with ``dt_s`` 0 or longer than :data:`GAP_S`. The state is
         not touched. Does nothing with ``estimate_noise=False``.
 
         Args:
@@ -1285,7 +1291,7 @@ class TensionFilter:
         dt = _check_dt(dt_s)
         if not p.estimate_noise:
             return
-        if not 0.0 < dt <= p.gap_s:
+        if not 0.0 < dt <= GAP_S:
             self._noise.break_chain()
         self._noise.push(y, dt, p.noise_time_constant_s, p.noise_warmup_samples)
 
@@ -1368,7 +1374,7 @@ class TensionFilter:
         first = not self._initialized
         if first:
             dt = 0.0
-        gap = dt > p.gap_s
+        gap = dt > GAP_S
         if not first and not gap and dt > 0.0:
             # Mean sample spacing, s (a gap is not a sample spacing).
             dt_mean = self._dt_mean
@@ -1605,8 +1611,9 @@ class TensionFilter:
     def step_test_design(self, r_n2: float, dt_s: float) -> tuple[float, float, float] | None:
         """Windows and threshold of the long-window step test at a noise level and rate.
 
-        ``n_max = long_sizing_threshold * r / long_min_step_n^2`` samples (a 20 mN step,
-        the level before it known, reaches the sizing non-centrality in n_max samples),
+        ``n_max = long_sizing_threshold * r / step^2`` samples (a step of
+        ``long_min_step_weight_ratio`` of the weight, 20 mN at 30 g, the level before it
+        known, reaches the sizing non-centrality in n_max samples),
         at most ``long_max_window_s`` and half the history; windows from n_max / 4; the
         threshold from :func:`scan_threshold` for half of ``false_alarms_per_h``. None (the
         test off) while n_max lies within the fast test's longest window
