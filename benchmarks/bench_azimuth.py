@@ -45,7 +45,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks import git_commit
+from benchmarks.figures import AT_START, DOCS, write_figures
 from groundstation.config import Settings, load_settings
 from groundstation.pipeline import Pipeline
 from groundstation.sim import Simulator
@@ -179,17 +179,51 @@ def _cell(e: Errors) -> str:
     return f"{med:.1f} / {p95:.1f}"
 
 
+def _figures(results: dict[float, dict[str, Errors]]) -> dict[str, Any]:
+    """Per row: median and p95 position error, cm, per spot and over every spot."""
+    out: dict[str, Any] = {}
+    for row, _, _ in ROWS:
+        pooled = [e for r in sorted(results) for e in results[r][row].errors_m]
+        out[row] = {
+            "all_spots_median_cm": 100 * float(np.median(pooled)) if pooled else None,
+            "all_spots_p95_cm": 100 * float(np.percentile(pooled, 95)) if pooled else None,
+            "per_spot": {
+                f"{r:g}": [
+                    100 * float(np.median(results[r][row].errors_m)),
+                    100 * float(np.percentile(results[r][row].errors_m, 95)),
+                ]
+                if results[r][row].errors_m
+                else None
+                for r in sorted(results)
+            },
+        }
+    return out
+
+
+def _quoted(fig: dict[str, Any]) -> str:
+    """One sentence that quotes the calibrated section's pooled figures (checked against
+    docs/azimuth_sources.json by tests/test_docs_numbers.py)."""
+    key = "azimuth_sources.json realistic_calibrated"
+    parts = [
+        f"{row} {fig[row]['all_spots_median_cm']:.1f}<!-- fig {key}.{row}.all_spots_median_cm -->"
+        for row, _, _ in ROWS
+        if fig[row]["all_spots_median_cm"] is not None and " " not in row
+    ]
+    return "\n\nOver every spot, median cm: " + ", ".join(parts) + ".\n"
+
+
 def render_header(profile: str, seconds: float, seed: int, quick: bool, elapsed_s: float) -> str:
     cmd = ".venv/bin/python -m benchmarks.bench_azimuth" + (" --quick" if quick else "")
     if profile != "realistic":
         cmd += f" --profile {profile}"
     profile = "realistic, then ideal" if profile == "realistic" and not quick else profile
-    commit = git_commit()
+    commit = AT_START.commit
     return "\n".join(
         [
             "# Position error per azimuth source, plumb to taut",
             "",
-            f"From `{cmd}` ({elapsed_s:.0f} s on a shared 2-core machine; commit "
+            f"From `{cmd}` (this page; the full run's figures in docs/azimuth_sources.json; "
+            f"{elapsed_s:.0f} s on a shared 2-core machine; commit "
             f"`{commit}`, Python {platform.python_version()}, numpy "
             f"{np.__version__}). The method is in the benchmark's docstring.",
             "",
@@ -294,12 +328,22 @@ def main(argv: list[str] | None = None) -> int:
             variants.append(("realistic", False, "Realistic profile, uncalibrated drone"))
     if args.profile == "ideal" or not args.quick:
         variants.append(("ideal", False, "Ideal profile (for comparison)"))
+    figures: dict[str, Any] = {}
     for profile, calibrated, title in variants:
         print(title)
         results, classes = run_table(profile, radii, seconds, args.seed, calibrated)
         if profile == "ideal":
             classes = None
-        sections.append(render_section(title, results, classes))
+        key = (
+            profile
+            if profile == "ideal"
+            else f"{profile}_{'calibrated' if calibrated else 'uncalibrated'}"
+        )
+        figures[key] = _figures(results)
+        section = render_section(title, results, classes)
+        if key == "realistic_calibrated":
+            section += _quoted(figures[key])
+        sections.append(section)
     header = render_header(args.profile, seconds, args.seed, args.quick, time.monotonic() - t0)
     text = "\n".join([header, *sections, READING])
     print(text)
@@ -307,6 +351,8 @@ def main(argv: list[str] | None = None) -> int:
         path = args.out or DOC_PATH
         path.write_text(text, encoding="utf-8")
         print(f"wrote {path}")
+        if path.resolve() == DOC_PATH.resolve() == (DOCS / "azimuth_sources.md").resolve():
+            write_figures("azimuth_sources", figures)
     return 0
 
 

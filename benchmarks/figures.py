@@ -161,6 +161,22 @@ BENCHMARKS: dict[str, Benchmark] = {
             "benchmarks/bench_smoother.py",
         ),
     ),
+    "filter_benchmark": Benchmark(
+        ".venv/bin/python -m benchmarks.bench_filter",
+        (
+            "groundstation/attitude.py",
+            "groundstation/tension.py",
+            "groundstation/tension_change.py",
+            "groundstation/tension_drift.py",
+            "groundstation/tension_kalman.py",
+            "groundstation/tension_noise.py",
+            "benchmarks/bench_filter.py",
+        ),
+    ),
+    "azimuth_sources": Benchmark(
+        ".venv/bin/python -m benchmarks.bench_azimuth",
+        (*ESTIMATOR, *SIMULATOR, "benchmarks/bench_azimuth.py"),
+    ),
     "realistic_benchmark": Benchmark(
         ".venv/bin/python -m benchmarks.bench_realistic",  # --tug-seeds 8
         (*ESTIMATOR, *SIMULATOR, "groundstation/bus.py", "benchmarks/bench_realistic.py"),
