@@ -177,6 +177,10 @@ BENCHMARKS: dict[str, Benchmark] = {
         ".venv/bin/python -m benchmarks.bench_azimuth",
         (*ESTIMATOR, *SIMULATOR, "benchmarks/bench_azimuth.py"),
     ),
+    "reel_tug": Benchmark(
+        ".venv/bin/python -m benchmarks.bench_reel_tug",  # --seeds 8 --out docs/reel_tug.md
+        (*ESTIMATOR, *SIMULATOR, "benchmarks/bench_reel_tug.py"),
+    ),
     "realistic_benchmark": Benchmark(
         ".venv/bin/python -m benchmarks.bench_realistic",  # --tug-seeds 8
         (*ESTIMATOR, *SIMULATOR, "groundstation/bus.py", "benchmarks/bench_realistic.py"),
