@@ -186,7 +186,10 @@ def main(argv: list[str] | None = None) -> int:
                 page += old[at:]
         out.write_text(page, encoding="utf-8")
         if out.resolve() == DOCS / "smoother.md":
-            figures = {"simulated": sim, "nanobench": [[n, c, s] for n, c, s in rows]}
+            figures = {
+                "simulated": {k.replace(" ", "_"): v for k, v in sim.items()},
+                "nanobench": [[n, c, s] for n, c, s in rows],
+            }
             write_figures("smoother", figures, ["--seeds", str(args.seeds), "--out", args.out])
     sys.stdout.write(page)
     return 0
