@@ -345,7 +345,13 @@ def main(argv: list[str] | None = None) -> int:
             section += _quoted(figures[key])
         sections.append(section)
     header = render_header(args.profile, seconds, args.seed, args.quick, time.monotonic() - t0)
-    text = "\n".join([header, *sections, READING])
+    text = "\n".join([header, *sections])
+    path_out = args.out or DOC_PATH
+    if path_out.is_file():  # the reading is written by hand: keep it
+        old = path_out.read_text(encoding="utf-8")
+        at = old.find(READING_MARK)
+        if at >= 0:
+            text += "\n" + old[at:]
     print(text)
     if not args.quick or args.out is not None:
         path = args.out or DOC_PATH
@@ -356,45 +362,8 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-READING = """## Reading the tables
-
-- **The tension's own quality decides most of it.** r and z come from the tension in every
-  row (the catenary, eq:posfull_radial, eq:posfull_z), and near plumb r is very sensitive to
-  H: there r ≈ a·[asinh(s2/a) + asinh((L − s2)/a)] with a = H/ω, so 15 mN of noise on H reads
-  as a drone a metre out. On the realistic profile, calibrated, the filter's reported σ now
-  matches its error to within ~20 % (the line under each table), and the `tension` row is
-  off by decimetres between r ≈ 0.2 and 0.9 m and by centimetres near taut. Uncalibrated,
-  the tension carries biases of 10–30 mN that its σ cannot know: every source is then off by
-  0.3–1.5 m, and no azimuth source repairs a wrong distance or height. Calibrate first
-  (docs/calibration.md).
-- **An azimuth from the base or from motion capture** removes the tension's direction error:
-  on the realistic profile the `reel` and `mocap (paper)` rows are well below the `tension`
-  row from r ≈ 0.35 m out. Nearer the base the reel's azimuth is lost (the tether leaves the
-  base almost vertically; the sensor's azimuth σ grows as 1/cos(elevation)) and, like the
-  tension's, the position blends to the base's xy, so the error there is about the true r
-  plus the height error; only motion capture keeps the azimuth at r = 0.1–0.2 m.
-- **`auto` is not always the best single source.** It fuses the tension's direction and the
-  reel's by their σ; where the reel has no azimuth (r ≲ 0.2 m) it takes the tension's, whose
-  σ there is optimistic, so its p95 at r = 0.2 m is the `tension` row's, and over all spots
-  its p95 is above `reel` alone. With a base sensor installed, `azimuth = "reel"` is the
-  more conservative choice close to plumb; `auto` is the default because it degrades
-  gracefully when the reel sends no angles.
-- **On the ideal profile** (the estimator's own assumptions: white noise, the catenary's
-  tether) the tension's direction is better than a 0.02 rad base sensor beyond r ≈ 0.35 m
-  (σ ≈ 0.3 mN / H), so `reel` is worse there and `auto` stays with the tension; inside
-  r ≈ 0.2 m the azimuth is unknown to both and the error is r (the blend), which motion
-  capture reduces to a few cm.
-- **The exit elevation** constrains (a, s2) independently of the drone's sensors. It helps
-  where the tension is biased (uncalibrated, near taut: 89–97 % of L) and changes little on
-  the ideal profile; with a calibrated tension on the realistic profile it makes the spots
-  near taut *worse* (compare `tension + elevation` with `tension` at r = 1.4 and 1.53 m).
-  The likely cause, not yet measured: there the lumped-mass tether's exit angle, which the
-  base sensor reads, differs from the quasi-static catenary's by more than the sensor's
-  0.02 rad σ says (its swing and stretch near the base), so the fusion weighs a model
-  error as information. Not solved here: for a calibrated drone near taut, give the elevation
-  a larger σ (the Reel's `exit_elevation_std_rad`, or `[localization]
-  exit_elevation_std_rad` where the Reel sends none), or set `elevation = false`.
-"""
+READING_MARK = "## Reading the tables"
+"""The page's reading, written by hand below the tables from this heading on: kept on a rerun."""
 
 
 if __name__ == "__main__":
