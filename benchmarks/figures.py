@@ -129,6 +129,17 @@ BENCHMARKS: dict[str, Benchmark] = {
         ".venv/bin/python -m benchmarks.nanobench_cli",  # --out docs/nanobench_cli.md
         (*ESTIMATOR, *RECORDING, "benchmarks/nanobench.py", "benchmarks/nanobench_cli.py"),
     ),
+    "nanobench_live": Benchmark(
+        ".venv/bin/python -m benchmarks.nanobench_live",  # --speed 2 --out docs/nanobench_live.md
+        (
+            *ESTIMATOR,
+            *RECORDING,
+            "groundstation/bus.py",
+            "benchmarks/nanobench.py",
+            "benchmarks/nanobench_cli.py",
+            "benchmarks/nanobench_live.py",
+        ),
+    ),
     "attitude_source": Benchmark(
         ".venv/bin/python -m benchmarks.attitude_source",  # --out docs/attitude_source.md
         (

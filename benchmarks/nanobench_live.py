@@ -24,7 +24,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from benchmarks.figures import git_commit
+from benchmarks.figures import AT_START, DOCS, write_figures
 from benchmarks.nanobench_cli import DATA, DAYS, Judged, calibrate, check_data, judge, load, score
 from benchmarks.service_rig import free_port
 
@@ -98,6 +98,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--speed", type=float, default=2.0, help="replay speed (2)")
     ap.add_argument("--flights", help="held-out flights, comma-separated (all six)")
     ap.add_argument(
+        "--out", help="write the markdown page here (docs/nanobench_live.md: and its figures)"
+    )
+    ap.add_argument(
         "--data",
         type=Path,
         default=DATA,
@@ -131,31 +134,60 @@ def main(argv: list[str] | None = None) -> int:
                     file=sys.stderr,
                     flush=True,
                 )
-    print("# NanoBench served live (real untethered flights, separate processes)\n")
-    print(
-        f"`python -m benchmarks.nanobench_live --speed {args.speed:g}` (this page, "
-        f"{time.time() - t0:.0f} s at commit {git_commit()}; data: ../shared/data/nanobench): "
-        "router + serve --headless + record + replay as separate "
-        "processes over TCP on 127.0.0.1; calibration per held-out day as in "
-        "docs/nanobench_cli.md (airframe + slow accelerometer, the default, with its "
-        "configuration's motor-voltage battery model).\n"
-    )
-    print("| held-out day | flight | live median abs T mN | answered | airborne | offline mN |")
-    print("| --- | --- | ---: | ---: | ---: | ---: |")
-    for day, off, live in rows:
-        print(
-            f"| {day} | {live.flight} | {live.median_abs_t_mn:.1f} | {100 * live.answered:.1f} % "
-            f"| {100 * live.airborne_not_on_ground:.1f} % | {off.median_abs_t_mn:.1f} |"
-        )
     meds = sorted(r[2].median_abs_t_mn for r in rows)
     mid = len(meds) // 2
     median = meds[mid] if len(meds) % 2 else 0.5 * (meds[mid - 1] + meds[mid])
-    print(f"\nLive: median over flights {median:.1f} mN, worst {max(meds):.1f}.")
-    print(
-        "\nAnswered: Estimates recorded per Telemetry served; airborne: airborne rows (motors "
+    lines = [
+        "# NanoBench served live (real untethered flights, separate processes)",
+        "",
+        f"`python -m benchmarks.nanobench_live --speed {args.speed:g} --out "
+        f"docs/nanobench_live.md` (this page and its figures, docs/nanobench_live.json; "
+        f"{time.time() - t0:.0f} s at commit {AT_START.commit}; data: "
+        "../shared/data/nanobench): router + serve --headless + record + replay as separate "
+        "processes over TCP on 127.0.0.1; calibration per held-out day as in "
+        "docs/nanobench_cli.md (airframe + slow accelerometer, the default, with its "
+        "configuration's motor-voltage battery model).",
+        "",
+        "| held-out day | flight | live median abs T mN | answered | airborne | offline mN |",
+        "| --- | --- | ---: | ---: | ---: | ---: |",
+    ]
+    for day, off, live in rows:
+        lines.append(
+            f"| {day} | {live.flight} | {live.median_abs_t_mn:.1f} | {100 * live.answered:.1f} % "
+            f"| {100 * live.airborne_not_on_ground:.1f} % | {off.median_abs_t_mn:.1f} |"
+        )
+    lines += [
+        "",
+        f"Live: median over flights {median:.1f}<!-- fig nanobench_live.json median_mn --> mN, "
+        f"worst {max(meds):.1f}<!-- fig nanobench_live.json worst_mn -->.",
+        "",
+        "Answered: Estimates recorded per Telemetry served; airborne: airborne rows (motors "
         "on, Vicon z > 0.25 m) with an Estimate not `on_ground`; offline: `replay --offline` "
-        "on the same recording and calibration (docs/nanobench_cli.md's measure)."
-    )
+        "on the same recording and calibration (docs/nanobench_cli.md's measure).",
+    ]
+    page = "\n".join(lines) + "\n"
+    sys.stdout.write(page)
+    if args.out:
+        Path(args.out).write_text(page, encoding="utf-8")
+        if Path(args.out).resolve() == DOCS / "nanobench_live.md" and args.flights is None:
+            figures = {
+                "median_mn": median,
+                "worst_mn": max(meds),
+                "flights": [
+                    [
+                        day,
+                        live.flight,
+                        live.median_abs_t_mn,
+                        off.median_abs_t_mn,
+                        live.answered,
+                        live.airborne_not_on_ground,
+                    ]
+                    for day, off, live in rows
+                ],
+            }
+            write_figures(
+                "nanobench_live", figures, ["--speed", f"{args.speed:g}", "--out", args.out]
+            )
     return 0
 
 
