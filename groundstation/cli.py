@@ -1074,7 +1074,8 @@ def build_parser() -> argparse.ArgumentParser:
         default="airframe",
         help="airframe (default): the airframe's constants (thrust scale, battery term, thrust "
         "axis, rotor drag) across flights, each power-on's accelerometer offsets printed and "
-        "not written; full: the earlier accelerometer-based fit (bias written, --fit-tether)",
+        "not written; full: the earlier accelerometer-based fit (bias written, --fit-tether; "
+        "1.5-17x the default's position error on the realistic simulator, docs/calibration.md)",
     )
     p.add_argument(
         "--fit-tether",
