@@ -1075,7 +1075,8 @@ def build_parser() -> argparse.ArgumentParser:
         help="airframe (default): the airframe's constants (thrust scale, battery term, thrust "
         "axis, rotor drag) across flights, each power-on's accelerometer offsets printed and "
         "not written; full: the earlier accelerometer-based fit (bias written, --fit-tether; "
-        "1.5-17x the default's position error on the realistic simulator, docs/calibration.md)",
+        "worse than the default in 9 of 10 cases on the realistic simulator, up to 12x: "
+        "docs/calibration.md)",
     )
     p.add_argument(
         "--fit-tether",
