@@ -1189,6 +1189,8 @@ class TensionFilter:
         self._youth_floor = (math.nan, 1.0)  # (dt_mean, the tests' youth floor at it)
         self.trace: list[FilterStep] | None = None
         """Every step from :meth:`start_trace` on (None: not recorded, the default)."""
+        self._restart_pending = 0
+        """A :meth:`new_hover` restart the next update's trace step records (its updates)."""
         self.reset()
 
     # -- state -------------------------------------------------------------------------
@@ -1230,13 +1232,30 @@ class TensionFilter:
         self._new_regime()
         self._last: TensionEstimate | None = None
 
-    def new_hover(self) -> None:
+    def new_hover(self, window_s: float) -> None:
         """A hover began after a manoeuvre: the tension is constant from here on, and what
-        the filter averaged before belongs to another one. P is raised to one sample's R
-        at least (the next samples then average from here, as after a restart, with the
-        estimate so far as their prior), and the change and drift windows start again."""
+        the filter averaged before belongs to another one.
+
+        The new regime starts from the mean of the observations over the hover test's own
+        window (``window_s``: the span the test found quasi-static, so of this tension),
+        P = R / n, as a detected change restarts the filter; the next samples average on
+        from there. Fewer than ``change_min_window`` observations in it: P is raised to one
+        sample's R (the estimate so far counts as one sample). Either way the change and
+        drift windows start again.
+
+        Args:
+            window_s: The hover test's window, s (``slow_accel.HOVER_MEAN_S``).
+        """
         r = self._r_prev
         if not self._initialized or r is None:
+            return
+        n = self._change.ring.count
+        dt_mean = self._dt_mean
+        if dt_mean == dt_mean and dt_mean > 0.0:
+            n = min(n, int(window_s / dt_mean))
+        if n >= self.params.change_min_window:
+            self._restart(self._change.mean_of_window(n), n, r)
+            self._restart_pending = n + 1  # the trace: the regime began n updates ago
             return
         P = self._kf.P
         self._kf.P = [max(P[0], r[0]), max(P[1], r[1]), max(P[2], r[2])]
@@ -1529,7 +1548,9 @@ class TensionFilter:
         if not warming:
             self._step.push(z)
         if self.trace is not None:
-            self._record("update", z, q, r, window if change else 0, hover_step)
+            restart = window if change else self._restart_pending
+            self._record("update", z, q, r, restart, hover_step)
+        self._restart_pending = 0
         return self._publish(change, stat if lazy is None else lazy, scale, tau)
 
     def coast(self, dt_s: float) -> TensionEstimate | None:

@@ -367,39 +367,59 @@ def test_coast_grows_covariance_with_elapsed_time() -> None:
     np.testing.assert_allclose(est.tension_world_n, HOVER_TENSION_N, atol=1e-15)
 
 
-def test_a_new_hover_averages_from_its_start() -> None:
-    """After ``new_hover`` the filter weighs the new hover's samples as a restart would
-    (x tends to their mean, with the old estimate as a one-sample prior), where the hover
-    filter (tau >= 6 s) would still hold most of the old tension after 1 s; the noise
-    estimate is kept, and P never shrinks."""
+def test_a_new_hover_starts_from_the_hover_windows_mean() -> None:
+    """A hover begins after a manoeuvre that moved the tension (1 s at the new tension, the
+    span the hover test vouches for): ``new_hover`` restarts the filter from the mean of
+    that window, P = R / n, so the estimate is at the new tension at once, where the hover
+    filter (tau >= 6 s) still holds most of the old one; one sample's noise does not move it
+    (it moved by half of it when new_hover counted the estimate as one sample)."""
     params = TensionFilterParams(false_alarms_per_h=0.0)  # no change test: the rule alone
     rng = np.random.default_rng(5)
     sigma_n = MASS_KG * 0.8
     new_n = HOVER_TENSION_N + np.array([0.006, -0.004, 0.003])
+    n_window = int(1.0 / DT_S)
 
-    def run(restart: bool) -> np.ndarray:
+    def run(restart: bool) -> tuple[np.ndarray, np.ndarray, float]:
         filt = TensionFilter(params)
         for _ in range(5000):  # 20 s at the old tension: converged, long memory
-            est = filt.update(HOVER_TENSION_N + rng.normal(0.0, sigma_n, 3), DT_S)
-        p_before = np.diag(est.cov_n2).copy()
+            filt.update(HOVER_TENSION_N + rng.normal(0.0, sigma_n, 3), DT_S)
+        window = new_n + rng.normal(0.0, sigma_n, (n_window, 3))
+        for z in window:  # the manoeuvre's last second, at the new tension
+            filt.update(z, DT_S)
         if restart:
-            filt.new_hover()
-            est = filt.update(new_n + rng.normal(0.0, sigma_n, 3), DT_S)
-            assert np.all(np.diag(est.cov_n2) > p_before), "P raised to about one sample's R"
-        for _ in range(250):  # 1 s at the new tension
-            est = filt.update(new_n + rng.normal(0.0, sigma_n, 3), DT_S)
-        return np.asarray(est.tension_world_n) - new_n
+            filt.new_hover(1.0)
+        est = filt.update(new_n + rng.normal(0.0, sigma_n, 3), DT_S)
+        r = float(np.mean(filt.noise_model()[2]))
+        return np.asarray(est.tension_world_n) - new_n, np.diag(est.cov_n2), r
 
-    err_restart = run(True)
-    err_hover = run(False)
+    err_restart, p_restart, r = run(True)
+    err_hover, _, _ = run(False)
     step = float(np.linalg.norm(new_n - HOVER_TENSION_N))
     assert float(np.linalg.norm(err_restart)) < 0.25 * step
     assert float(np.linalg.norm(err_hover)) > 0.5 * step
+    # P = R / n of the window, then one more update: about R / (n + 1)
+    assert np.all(p_restart < 2.0 * r / n_window) and np.all(p_restart > 0.3 * r / n_window)
+
+
+def test_a_new_hover_without_a_window_counts_the_estimate_as_one_sample() -> None:
+    """Right after a restart the change ring holds fewer than ``change_min_window``
+    observations: P is raised to one sample's R instead (the next samples then average
+    from the estimate so far), and P never shrinks."""
+    filt = TensionFilter(TensionFilterParams(false_alarms_per_h=0.0))
+    rng = np.random.default_rng(2)
+    for _ in range(2000):
+        est = filt.update(HOVER_TENSION_N + rng.normal(0.0, MASS_KG * 0.8, 3), DT_S)
+    filt.reset()
+    est = filt.update(HOVER_TENSION_N + rng.normal(0.0, MASS_KG * 0.8, 3), DT_S)
+    p_before = np.diag(est.cov_n2).copy()
+    filt.new_hover(1.0)
+    est = filt.update(HOVER_TENSION_N + rng.normal(0.0, MASS_KG * 0.8, 3), DT_S)
+    assert np.all(np.diag(est.cov_n2) >= 0.4 * p_before)
 
 
 def test_new_hover_before_the_first_sample_does_nothing() -> None:
     filt = TensionFilter()
-    filt.new_hover()
+    filt.new_hover(1.0)
     assert not filt.initialized
 
 

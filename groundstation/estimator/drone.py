@@ -469,7 +469,7 @@ class DroneEstimator:
                 if was_hovering:
                     self.changes_at_hover_end = detections
                 elif detections != self.changes_at_hover_end:
-                    self.filter.new_hover()
+                    self.filter.new_hover(slow_mod.HOVER_MEAN_S)
         filtered = self.filter_control.step(
             on_ground=on_ground,
             contact_reason=contact.reason,
