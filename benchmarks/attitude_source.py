@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.figures import AT_START, DOCS, write_figures
+from benchmarks.figures import AT_START, DOCS, kept_reading, write_figures
 from benchmarks.nanobench_cli import (
     AIR_MIN_Z_M,
     CONFIG,
@@ -212,11 +212,7 @@ def main(argv: list[str] | None = None) -> int:
     print(text)
     if args.out:
         out = Path(args.out)
-        if out.is_file():  # the analysis below the table is written by hand: keep it
-            old = out.read_text(encoding="utf-8")
-            at = old.find("\n## ")
-            if at >= 0:
-                text += old[at:]
+        text += kept_reading(out, "\n## ")  # the analysis below the table
         out.write_text(text, encoding="utf-8")
         if out.resolve() == DOCS / "attitude_source.md":
             write_figures("attitude_source", figures, ["--out", "docs/attitude_source.md"])

@@ -45,7 +45,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.figures import AT_START, DOCS, write_figures
+from benchmarks.figures import AT_START, DOCS, kept_reading, write_figures
 from groundstation.config import Settings, load_settings
 from groundstation.pipeline import Pipeline
 from groundstation.sim import Simulator
@@ -346,12 +346,7 @@ def main(argv: list[str] | None = None) -> int:
         sections.append(section)
     header = render_header(args.profile, seconds, args.seed, args.quick, time.monotonic() - t0)
     text = "\n".join([header, *sections])
-    path_out = args.out or DOC_PATH
-    if path_out.is_file():  # the reading is written by hand: keep it
-        old = path_out.read_text(encoding="utf-8")
-        at = old.find(READING_MARK)
-        if at >= 0:
-            text += "\n" + old[at:]
+    text += kept_reading(args.out or DOC_PATH, READING_MARK)
     print(text)
     if not args.quick or args.out is not None:
         path = args.out or DOC_PATH
@@ -362,7 +357,7 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-READING_MARK = "## Reading the tables"
+READING_MARK = "\n## Reading the tables"
 """The page's reading, written by hand below the tables from this heading on: kept on a rerun."""
 
 

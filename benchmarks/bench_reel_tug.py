@@ -46,7 +46,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.figures import AT_START, DOCS, write_figures
+from benchmarks.figures import AT_START, DOCS, kept_reading, write_figures
 from groundstation.config import Settings, load_settings
 from groundstation.pipeline import Pipeline
 from groundstation.sim import SCENARIOS, Scenario, Simulator, Waypoint
@@ -291,11 +291,7 @@ def main(argv: list[str] | None = None) -> int:
     page = "\n".join(lines) + "\n"
     if args.out:
         out = Path(args.out)
-        if out.is_file():  # the reading below the table is written by hand: keep it
-            old = out.read_text(encoding="utf-8")
-            at = old.find("\n## ")
-            if at >= 0:
-                page += old[at:]
+        page += kept_reading(out, "\n## ")  # the reading below the table
         out.write_text(page, encoding="utf-8")
         if out.resolve() == DOCS / "reel_tug.md":
             write_figures("reel_tug", figures, ["--seeds", str(args.seeds), "--out", args.out])

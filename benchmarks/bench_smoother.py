@@ -33,7 +33,7 @@ import numpy as np
 
 from benchmarks import bench_powerons as bp
 from benchmarks import nanobench_cli as nb
-from benchmarks.figures import AT_START, DOCS, write_figures
+from benchmarks.figures import AT_START, DOCS, kept_reading, write_figures
 from groundstation.config import load_settings
 from groundstation.pipeline import Pipeline
 from groundstation.recording.reader import copy_messages, iter_messages
@@ -179,11 +179,7 @@ def main(argv: list[str] | None = None) -> int:
     page = "\n".join(lines) + "\n"
     if args.out:
         out = Path(args.out)
-        if out.is_file():  # the reading below the tables is written by hand: keep it
-            old = out.read_text(encoding="utf-8")
-            at = old.find("\n## Reading")
-            if at >= 0:
-                page += old[at:]
+        page += kept_reading(out, "\n## Reading")  # the reading below the tables
         out.write_text(page, encoding="utf-8")
         if out.resolve() == DOCS / "smoother.md":
             figures = {

@@ -289,6 +289,21 @@ def measured_hashes(measures: tuple[str, ...]) -> dict[str, str]:
     return out
 
 
+def kept_reading(page: Path, mark: str) -> str:
+    """The part of an existing page written by hand, from ``mark`` on ("" if none): a
+    benchmark that writes its page's tables appends it, so a rerun keeps the reading.
+
+    Args:
+        page: the page the benchmark is about to write.
+        mark: where the hand-written part begins, e.g. ``"\n## Reading"``.
+    """
+    if not page.is_file():
+        return ""
+    old = page.read_text(encoding="utf-8")
+    at = old.find(mark)
+    return old[at:] if at >= 0 else ""
+
+
 def figures_path(page: str) -> Path:
     return DOCS / f"{page}.json"
 
