@@ -127,6 +127,7 @@ from typing import Literal
 
 from groundstation.attitude import GRAVITY_MPS2, Rows, rows_from_quat_wxyz
 from groundstation.frozen import evolve
+from groundstation.tension_change import YOUTH_SIGMAS
 
 __all__ = [
     "ContactParams",
@@ -449,8 +450,10 @@ def contact_step(
     climb_limit = math.inf  # no climb is judged before the vibration is known
     if noise is not None and n_noise > 0:
         # Var(a) = kappa s_d (the long-run variance), times a mean of n squares' youth
-        # factor 1 + 3 sqrt(2 / n) (its relative standard deviation is sqrt(2 / n)).
-        var_a = params.noise_long_run_ratio * noise * (1.0 + 3.0 * math.sqrt(2.0 / n_noise))
+        # factor 1 + 3 sqrt(2 / n) (its relative standard deviation is sqrt(2 / n);
+        # tension_change.YOUTH_SIGMAS, the change tests' bound).
+        youth = 1.0 + YOUTH_SIGMAS * math.sqrt(2.0 / n_noise)
+        var_a = params.noise_long_run_ratio * noise * youth
         climb_limit = max(
             params.liftoff_speed_mps, params.climb_sigmas * math.sqrt(var_a * speed_gain)
         )

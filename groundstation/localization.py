@@ -95,6 +95,15 @@ _ndarray = np.ndarray
 _N = 3  # state dimension of the unscented transform
 _SIGMA_SCALE = math.sqrt(_N)  # sqrt(n + kappa), kappa = 0
 _SIGMA_WEIGHT = 1.0 / (2 * _N)
+_SIGMA_SCALE_2D = math.sqrt(2.0)  # the elevation fusion's: sqrt(n + kappa), n = 2, kappa = 0
+_SIGMA_WEIGHT_2D = 1.0 / (2 * 2)  # 1 / (2 n), n = 2
+PLUMB_BLEND_FULL = 0.5
+"""The plumb blend is full while the azimuth's standard deviation is at most this over
+``plumb_k`` rad (half the determined limit ``1 / plumb_k``); the tension-free
+localization takes the tension's direction only below the same limit."""
+PLUMB_BLEND_NONE = 2.0
+"""The plumb blend is zero from an azimuth standard deviation of this over ``plumb_k`` rad
+(twice the determined limit)."""
 
 
 @dataclass(frozen=True)
@@ -710,7 +719,7 @@ def _try_localize(
     # a plumb threshold (a fixed threshold did, near r = 0.2 m). Not rho = exp(-std^2 / 2),
     # the mean of a wrapped normal: it would bias every determined estimate a little, and
     # the tension's linearised std (sideways sigma / H) says too little when H ~ sigma.
-    rho = _blend(std_beta, 0.5 / plumb_k, 2.0 / plumb_k)
+    rho = _blend(std_beta, PLUMB_BLEND_FULL / plumb_k, PLUMB_BLEND_NONE / plumb_k)
     ux, uy = math.cos(beta), math.sin(beta)
     vx, vy = -uy, ux
     # Covariance with the azimuth known (cov_det): the unscented transform over the
@@ -853,7 +862,7 @@ def _localize_tension_free(
     var_side = uy_t * uy_t * cxx - 2.0 * ux_t * uy_t * cxy + ux_t * ux_t * cyy
     std_t = sqrt(0.0 if var_side < 0.0 else var_side) / horizontal_n  # max(var_side, 0.0)
     # rho = 1 (std <= 1 / (2 k)), which implies a determined azimuth (std <= 1 / k).
-    if not (0.0 < std_t <= 0.5 / plumb_k):
+    if not (0.0 < std_t <= PLUMB_BLEND_FULL / plumb_k):
         return None
     beta_t = math.atan2(uy_t + 0.0, ux_t)
     beta = beta_t + 0.0 / 1.0
@@ -999,7 +1008,7 @@ def _free_stats(
     l00 = math.sqrt(max(paa, 0.0))
     l10 = pas / l00 if l00 > 0.0 else 0.0
     l11 = math.sqrt(max(pss - l10 * l10, 0.0))
-    k = math.sqrt(2.0)  # sqrt(n + kappa), n = 2, kappa = 0
+    k = _SIGMA_SCALE_2D  # sqrt(n + kappa), n = 2, kappa = 0
     da = [0.0, k * l00, 0.0, -k * l00, 0.0]
     ds = [0.0, k * l10, k * l11, -k * l10, -k * l11]
     a_pts = [abs(a + d) for d in da]  # H = omega |a| >= 0
@@ -1015,7 +1024,7 @@ def _free_stats(
     if not (_all_finite(r_l) and _all_finite(z_l)):
         return None
     r0, z0 = r_l[0], z_l[0]
-    w = 0.25  # 1 / (2 n)
+    w = _SIGMA_WEIGHT_2D  # 1 / (2 n)
     var_r = w * sum((ri - r0) ** 2 for ri in r_l[1:])
     cov_rz = w * sum((ri - r0) * (zi - z0) for ri, zi in zip(r_l[1:], z_l[1:], strict=True))
     var_z = w * sum((zi - z0) ** 2 for zi in z_l[1:])
@@ -1281,7 +1290,7 @@ def _localize_arrays_body(
     beta = np.array(list(map(math.atan2, np.sin(beta).tolist(), np.cos(beta).tolist())))
     std_beta = std_t / math.sqrt(1.0)
     determined = std_beta <= 1.0 / plumb_k
-    rho = _blend_array(std_beta, 0.5 / plumb_k, 2.0 / plumb_k)
+    rho = _blend_array(std_beta, PLUMB_BLEND_FULL / plumb_k, PLUMB_BLEND_NONE / plumb_k)
     ux, uy = np.cos(beta), np.sin(beta)
     vx, vy = -uy, ux
     w_t = (std_beta / std_t) ** 2

@@ -59,6 +59,13 @@ Vec3 = tuple[float, float, float]
 _ZERO3: Vec3 = (0.0, 0.0, 0.0)
 HOVER_MEAN_S = 1.0
 """The hover test's mean acceleration window, s."""
+HOVER_SPEED_LEAK_S = 2.0
+"""Without motion capture the hover test's speed is the corrected acceleration's leaky
+integral with this time constant, s (twice ``HOVER_MEAN_S``: it forgets the integral's
+drift, keeps a manoeuvre of a second or two)."""
+VIBRATION_MEAN_S = 2.0
+"""Memory of the vibration variance around the 1 s mean that scales the hover test's
+thresholds (``SlowAccelParams.quasi_static_sigmas``), s."""
 MOCAP_HOLD_S = 0.3
 """Motion capture stays in use for this long (telemetry stamp) after the frame that brought
 it, s: the estimator's external position (``estimator.drone``) and the slow stage's
@@ -365,13 +372,13 @@ def slow_accel_step(
     else:
         # awx.. is this sample's corrected world acceleration (computed above).
         ox, oy, oz = st.regime_velocity_world_mps
-        leak2 = math.exp(-dt_s / 2.0)
+        leak2 = math.exp(-dt_s / HOVER_SPEED_LEAK_S)
         rv = (ox * leak2 + awx * dt_s, oy * leak2 + awy * dt_s, oz * leak2 + awz * dt_s)
     vx, vy, vz = rv
     # The vibration around the 1 s mean (per axis): the mean's standard deviation is the
     # vibration's times sqrt(k / (2 − k)) for an exponential mean of gain k over white noise.
     dx, dy, dz = ex - a1[0], ey - a1[1], ez - a1[2]
-    kv = min(dt_s / 2.0, 1.0)
+    kv = min(dt_s / VIBRATION_MEAN_S, 1.0)
     var = st.vibration_var_mps4
     var += kv * ((dx * dx + dy * dy + dz * dz) / 3.0 - var)
     limit1 = params.quasi_static_accel_mps2**2

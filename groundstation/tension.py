@@ -31,6 +31,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from groundstation.attitude import GRAVITY_MPS2, QUAT_MIN_NORM, Rows, rows_from_unit_quat
 from groundstation.tension_change import (
+    YOUTH_FADE_SAMPLES,
     ChangeTest,
     LazyChangeStatistic,
     StepTest,
@@ -81,6 +82,14 @@ filter's noise model and change windows (:class:`TensionFilter`), the rest detec
 window (:class:`~groundstation.calibration.RestCalibrator`) and a hover run of
 ``calibrate`` (:class:`~groundstation.calibration.HoverCriteria`). Hand-set: 25 samples at
 100 Hz, longer than real telemetry's own gaps (motion capture's up to 150 ms)."""
+SPACING_CAP_RATIO = 4.0
+"""A sample spacing enters the filter's mean spacing capped at this multiple of the mean
+(a late sample does not drag the mean that sets Q and the change tests' windows)."""
+SPACING_GAIN = 0.02
+"""Gain of the mean sample spacing's exponential average (a memory of ~50 samples)."""
+RESCALE_TOLERANCE = 0.01
+"""P is rescaled to a revised noise R only once R has moved by more than this fraction
+(a cost saving: P proportional to R to within 1 %)."""
 _EYE3 = np.eye(3)
 _EYE3.setflags(write=False)
 
@@ -1400,8 +1409,9 @@ class TensionFilter:
             if dt_mean != dt_mean:
                 self._dt_mean = dt
             else:
-                capped = 4.0 * dt_mean if 4.0 * dt_mean < dt else dt  # min(dt, 4 dt_mean)
-                self._dt_mean = dt_mean + 0.02 * (capped - dt_mean)
+                cap = SPACING_CAP_RATIO * dt_mean
+                capped = cap if cap < dt else dt  # min(dt, 4 dt_mean)
+                self._dt_mean = dt_mean + SPACING_GAIN * (capped - dt_mean)
         if gap:
             self._new_regime()  # the state stays; P grows by Q dt below
         noise = self._noise
@@ -1437,7 +1447,8 @@ class TensionFilter:
             # otherwise the first samples, weighed with the prior noise, would be held as
             # precise as that prior says. Applied once R has moved by 1 % (cost).
             d0, d1, d2 = r0 / r_prev[0], r1 / r_prev[1], r2 / r_prev[2]
-            if abs(d0 - 1.0) > 0.01 or abs(d1 - 1.0) > 0.01 or abs(d2 - 1.0) > 0.01:
+            tol = RESCALE_TOLERANCE
+            if abs(d0 - 1.0) > tol or abs(d1 - 1.0) > tol or abs(d2 - 1.0) > tol:
                 kf.rescale([d0, d1, d2])
                 if self._hover_v.active:
                     self._hover_v.rescale([d0, d1, d2])
@@ -1447,7 +1458,7 @@ class TensionFilter:
         # The youth factor of the drift statistic, >= 1; the change tests' never falls
         # below the noise estimate's own scatter once warm (level_scatter_factor).
         k = noise.samples
-        youth = youth_factor(k) if estimate_noise and k < 1000 else 1.0
+        youth = youth_factor(k) if estimate_noise and k < YOUTH_FADE_SAMPLES else 1.0
         test_youth = youth
         spacing = self._dt_mean
         if estimate_noise and spacing == spacing and spacing > 0.0:

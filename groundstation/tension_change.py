@@ -85,6 +85,37 @@ def scan_threshold(
     return h
 
 
+YOUTH_SIGMAS = 3.0
+"""Standard errors of a young noise estimate the change tests allow for (the upper bound
+``1 + 3 sqrt(2 / k)`` of a k-sample mean square, whose relative standard deviation is
+sqrt(2 / k)); the contact stage's floor vibration uses the same bound."""
+YOUTH_FADE_SAMPLES = 1000
+"""Noise samples over which the youth factor fades out linearly (10 s at 100 Hz); from then
+on :func:`level_scatter_factor` is the floor."""
+SCATTER_SIGMAS = 2.0
+"""Standard errors of the warm noise estimate (its level and kappa) the change tests allow
+for (:func:`level_scatter_factor`, :func:`step_youth_factor`)."""
+STEP_YOUTH_MAX = 1.8
+"""Cap of kappa's youth factor in the step test, about 2.65 / 1.5: measured vibration's
+kappa (2.5-2.65) over the prior ``NoiseEstimate.KAPPA_PRIOR``, the most a young kappa can be
+low by."""
+STEP_WINDOW_SPACING = 1.05
+"""The step test's window lengths grow by this ratio (a step k samples old is seen by a
+window within 2.5 % of k: at most 2.5 % of its statistic lost)."""
+STEP_HISTORY_FRACTION = 0.5
+"""The step test's longest window is at most this fraction of its history (the rest is
+reference)."""
+STEP_SHORTEST_FRACTION = 0.25
+"""The step test's shortest window, as a fraction of its longest: its threshold's scan
+covers [n_max / 4, n_max]."""
+STEP_THRESHOLD_BINS = 50.0
+"""The step test's threshold is recomputed when log(n_max) or log(dt) moves by 1 / 50 (a
+threshold moves by well under 1 % within a bin)."""
+STEP_EVAL_FRACTION = 0.05
+"""The step test runs every this fraction of its shortest window (a detection at most 5 %
+of that window late)."""
+
+
 def youth_factor(noise_samples: int) -> float:
     """Variance factor of the change tests while the noise estimate is young, >= 1.
 
@@ -99,8 +130,9 @@ def youth_factor(noise_samples: int) -> float:
         noise_samples: Differences the noise estimate has taken, k.
     """
     k = noise_samples
-    if k < 1000:
-        return 1.0 + 3.0 * math.sqrt(2.0 / max(k, 1)) * (1.0 - k / 1000.0)
+    if k < YOUTH_FADE_SAMPLES:
+        fade = 1.0 - k / YOUTH_FADE_SAMPLES
+        return 1.0 + YOUTH_SIGMAS * math.sqrt(2.0 / max(k, 1)) * fade
     return 1.0
 
 
@@ -127,7 +159,7 @@ def level_scatter_factor(memory_samples: float) -> float:
     allowed for, as :func:`step_youth_factor` allows for kappa's while it is young. 1.17 at
     ~95 Hz with the 5 s memory."""
     k = max(2.0 * memory_samples - 1.0, 1.0)
-    return 1.0 + 2.0 * math.sqrt(2.0 / k + _KAPPA_VAR_PER_BLOCK / _KAPPA_BLOCKS)
+    return 1.0 + SCATTER_SIGMAS * math.sqrt(2.0 / k + _KAPPA_VAR_PER_BLOCK / _KAPPA_BLOCKS)
 
 
 def step_youth_factor(youth: float, blocks: int) -> float:
@@ -146,11 +178,11 @@ def step_youth_factor(youth: float, blocks: int) -> float:
     """
     if blocks >= _KAPPA_BLOCKS:
         return youth
-    excess = 2.0 * (
+    excess = SCATTER_SIGMAS * (
         math.sqrt(_KAPPA_VAR_PER_BLOCK / max(blocks, 1))
         - math.sqrt(_KAPPA_VAR_PER_BLOCK / _KAPPA_BLOCKS)
     )
-    return youth * min(1.0 + excess, 1.8)
+    return youth * min(1.0 + excess, STEP_YOUTH_MAX)
 
 
 class _Ring:
@@ -538,7 +570,9 @@ class StepTest:
         # factor 4 of length instead of every integer.
         grid = [1]
         while grid[-1] < history_size - 1:
-            grid.append(min(max(grid[-1] + 1, round(grid[-1] * 1.05)), history_size - 1))
+            grid.append(
+                min(max(grid[-1] + 1, round(grid[-1] * STEP_WINDOW_SPACING)), history_size - 1)
+            )
         self._grid = np.array(grid, dtype=np.intp)
         self._grid.setflags(write=False)
         self._grid_list = grid
@@ -574,16 +608,17 @@ class StepTest:
         n_max = min(
             self.sizing_threshold * r_n2 / (self.min_step_n * self.min_step_n),
             self.max_window_s / dt_s,
-            0.5 * self.history_size,
+            STEP_HISTORY_FRACTION * self.history_size,
         )
         if n_max <= n_fast:
             return None
         # The threshold moves with log(n_max): recomputed once n_max or dt moves by 1 %.
-        key = (round(50.0 * math.log(n_max)), round(50.0 * math.log(dt_s)))
+        bins = STEP_THRESHOLD_BINS
+        key = (round(bins * math.log(n_max)), round(bins * math.log(dt_s)))
         if self._threshold_cache[0] != key:
-            h = scan_threshold(self.false_alarms_per_h, 0.25 * n_max, n_max, dt_s)
+            h = scan_threshold(self.false_alarms_per_h, STEP_SHORTEST_FRACTION * n_max, n_max, dt_s)
             self._threshold_cache = (key, h)
-        return 0.25 * n_max, n_max, self._threshold_cache[1]
+        return STEP_SHORTEST_FRACTION * n_max, n_max, self._threshold_cache[1]
 
     def statistic(
         self,
@@ -629,7 +664,7 @@ class StepTest:
         if self._countdown > 0:
             self._countdown -= 1
             return 0.0, 0, [], threshold
-        self._countdown = int(0.05 * n_lo) - 1
+        self._countdown = int(STEP_EVAL_FRACTION * n_lo) - 1
         if noise is not None:
             q0, q1, q2 = noise.long_run_slow()
             r0, r1, r2 = max(r0, q0), max(r1, q1), max(r2, q2)

@@ -13,6 +13,10 @@ import math
 
 __all__ = ["DriftAdaptation"]
 
+SCALE_SNAP = 1e-3
+"""A process-noise scale within this of 1 is taken as 1 (Q within 0.1 % of the hover one:
+the decayed adaptation ends instead of fading for ever)."""
+
 
 class DriftAdaptation:
     """Innovation-bias average and the process-noise scale it drives.
@@ -112,7 +116,7 @@ class DriftAdaptation:
             self._decay_cache = (dt, decay)
         decay = self._decay_cache[1]
         scale = max(inst, 1.0 + (self.scale - 1.0) * decay)
-        if scale < 1.0 + 1e-3:
+        if scale < 1.0 + SCALE_SNAP:
             scale = 1.0
         self.scale = scale
         # Down to min_time_constant_s, never below it (nor above 1).

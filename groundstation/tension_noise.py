@@ -17,6 +17,16 @@ __all__ = ["MIN_NOISE_VAR_N2", "NoiseEstimate", "NoiseStatus", "per_sample"]
 MIN_NOISE_VAR_N2 = 1e-10
 """Floor of every noise variance, N^2 (10 uN per sample): keeps S = P- + R positive definite
 on a stream that repeats one value."""
+WINSOR_RATIO = 16.0
+"""Once warm, a squared difference (or a block ratio) enters its mean capped at this many
+times that mean (4 standard deviations of a Gaussian difference): a tug's one large
+difference moves the noise level by a few per mille, not by half."""
+KAPPA_MIN = 0.5
+"""Floor of kappa = r / s_d (half of white noise's 1): an anti-correlated stretch cannot
+read the long-run variance as nothing."""
+BLOCK_MIN_SAMPLES = 3
+"""A noise block ends after ``NoiseEstimate.BLOCK_S`` and at least this many samples (a
+block mean of one or two samples at a low rate says little of the noise's shape)."""
 
 
 class NoiseEstimate:
@@ -119,18 +129,18 @@ class NoiseEstimate:
             b0, b1, b2 = d1s
             if self.samples > warm:
                 f0, f1, f2 = e0, e1, e2
-                if e0 > 16.0 * a0:
-                    e0 = 16.0 * a0
-                if e1 > 16.0 * a1:
-                    e1 = 16.0 * a1
-                if e2 > 16.0 * a2:
-                    e2 = 16.0 * a2
-                if f0 > 16.0 * b0:
-                    f0 = 16.0 * b0
-                if f1 > 16.0 * b1:
-                    f1 = 16.0 * b1
-                if f2 > 16.0 * b2:
-                    f2 = 16.0 * b2
+                if e0 > WINSOR_RATIO * a0:
+                    e0 = WINSOR_RATIO * a0
+                if e1 > WINSOR_RATIO * a1:
+                    e1 = WINSOR_RATIO * a1
+                if e2 > WINSOR_RATIO * a2:
+                    e2 = WINSOR_RATIO * a2
+                if f0 > WINSOR_RATIO * b0:
+                    f0 = WINSOR_RATIO * b0
+                if f1 > WINSOR_RATIO * b1:
+                    f1 = WINSOR_RATIO * b1
+                if f2 > WINSOR_RATIO * b2:
+                    f2 = WINSOR_RATIO * b2
             else:
                 f0, f1, f2 = e0, e1, e2
             # 2 s_d <- 2 s_d + alpha (e - 2 s_d), fast and slow
@@ -149,7 +159,7 @@ class NoiseEstimate:
         bq[1] += y1 * y1
         bq[2] += y2 * y2
         self.block_n += 1
-        if self.block_t >= self.BLOCK_S and self.block_n >= 3:
+        if self.block_t >= self.BLOCK_S and self.block_n >= BLOCK_MIN_SAMPLES:
             self._end_block(time_constant_s)
         return self.long_run()
 
@@ -171,13 +181,13 @@ class NoiseEstimate:
             self.blocks += 1
             beta = max(
                 1.0 / (self.blocks + self.KAPPA_PRIOR_BLOCKS),
-                self.BLOCK_S / (6.0 * time_constant_s),
+                self.BLOCK_S / (self.SLOW * time_constant_s),
             )
             ratio = 0.0
             for i in range(3):
                 sd = 0.5 * self.d1[i]
                 e = (m0[i] - 2.0 * m1[i] + m2[i]) ** 2 / weight / sd if sd > 0.0 else 1.0
-                ratio += min(e, 16.0 * self.kappa) / 3.0
+                ratio += min(e, WINSOR_RATIO * self.kappa) / 3.0
             self.kappa += beta * (ratio - self.kappa)
             del self.means[0]
         self.block_sum = [0.0, 0.0, 0.0]
@@ -187,13 +197,13 @@ class NoiseEstimate:
 
     def long_run_slow(self) -> tuple[float, float, float]:
         """The long-run variance with the level averaged ``SLOW`` times as long, N^2."""
-        k = max(self.kappa, 0.5)
+        k = max(self.kappa, KAPPA_MIN)
         v0, v1, v2 = (max(0.5 * d * k, MIN_NOISE_VAR_N2) for d in self.d1_slow)
         return v0, v1, v2
 
     def long_run(self) -> tuple[float, float, float]:
         """The long-run variance ``r = s_d kappa`` per axis (floored), N^2: the filter's R."""
-        k = max(self.kappa, 0.5)
+        k = max(self.kappa, KAPPA_MIN)
         floor = MIN_NOISE_VAR_N2
         a0, a1, a2 = self.d1
         # s_d = E[(y_t - y_(t-1))^2] / 2; r = max(s_d k, floor), in max's order
