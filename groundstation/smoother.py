@@ -122,7 +122,9 @@ def segments(trace: Sequence[FilterStep]) -> list[Segment]:
             updates.append(i)
         if step.kind == "update" and step.restart > 0 and start is not None:
             n = step.restart
-            cut = updates[-n] if n <= len(updates) else start
+            # (a regime that began before this segment: from its first update, which is not
+            # the segment's first step where that is a merged state, kind "start")
+            cut = updates[-n] if n <= len(updates) else (updates[0] if updates else start)
             if cut > start:
                 close(cut)
                 start, begin, prior = cut, "diffuse", None

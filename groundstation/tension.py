@@ -41,7 +41,7 @@ from groundstation.tension_change import (
 )
 from groundstation.tension_change import _Ring as _Ring
 from groundstation.tension_drift import DriftAdaptation
-from groundstation.tension_kalman import DiagonalKalman, HoverVelocity
+from groundstation.tension_kalman import DiagonalKalman, HoverVelocity, MovingTension
 from groundstation.tension_noise import NoiseEstimate, NoiseStatus
 from groundstation.thrust_model import (
     MOTORS,
@@ -869,9 +869,12 @@ class HoverStep:
 class FilterStep:
     """One step of :class:`TensionFilter`, as its trace records it for offline smoothing.
 
-    ``kind``: ``"start"`` (the trace began on a running filter: ``x_n``, ``p_n2`` its
-    state), ``"reset"`` (the regime ends; ``x_n``, ``p_n2`` the prior the next update starts
-    from, or None), ``"init"`` (first sample after a reset without prior: x = z, P = R),
+    ``kind``: ``"start"`` (the trace began on a running filter, or the filter merged its
+    two hypotheses after a change into its state,
+    :class:`~groundstation.tension_kalman.MovingTension`: ``x_n``, ``p_n2`` that state,
+    from which the next update predicts), ``"reset"`` (the regime ends; ``x_n``, ``p_n2``
+    the prior the next update starts from, or None), ``"init"`` (first sample after a
+    reset without prior: x = z, P = R),
     ``"update"`` (x- = x, P- = P + Q, then the update with z and R; Q = 0 right after a
     reset with a prior) or ``"coast"`` (the prediction alone).
     """
@@ -1064,6 +1067,26 @@ class TensionFilter:
     estimate is the mean of every post-tug sample and the detection delay costs nothing;
     the gain then decays by itself to the hover gain as P shrinks.
 
+    **After a change: is the tension still moving?** The restart is the best estimate if
+    the tension stays where it jumped; a tug often does not (the reel runs for a tenth of a
+    second, the drone answers the pull, the tether swings: in the estimator issue's reel tug
+    the truth relaxes by ~20 mN over half a second after the jump, and a mean since the
+    change lags it by 7 mN for that long). So a second hypothesis runs beside the restarted
+    filter (:class:`~groundstation.tension_kalman.MovingTension`): a random walk whose time
+    constant starts at the detection window's span (the data said the tension moved on that
+    scale) and relaxes to the hover's as the drift adaptation's raised noise does
+    (``drift_memory_s``, never below ``drift_min_time_constant_s``). Both are filtered
+    from the same restart; each scores its one-step predictive likelihood, and the
+    estimate (and its P) is their posterior mixture from even odds: a step that stays is
+    won by the constant model (its weight below 0.2 within a second, the 30 mN step still
+    settles as before, tests/test_tension.py), a tension that keeps moving by the other
+    within a few tenths of a second (tests/test_moving_tension.py: the error 0.1-1 s after
+    the change about half the mean-since-the-change's). No new constant: the window is
+    the detection's, the relaxation the drift adaptation's. A new hover (the tension is
+    constant from there), a gap or a coast ends it; once relaxed to the hover's time
+    constant (or its weight below 1e-9) the filter takes the mixture as its state, and the
+    trace marks it for the smoother (a ``start`` step).
+
     **The 30 mN tug target and the rate.** "Within 10 % (3 mN) in 0.3 s" is an
     information limit before it is a filter property: 0.3 s holds 0.3 / dt samples, and
     even the mean of exactly the post-step samples (the change time known) has
@@ -1200,6 +1223,10 @@ class TensionFilter:
         """Every step from :meth:`start_trace` on (None: not recorded, the default)."""
         self._restart_pending = 0
         """A :meth:`new_hover` restart the next update's trace step records (its updates)."""
+        self._moving: MovingTension | None = None
+        """After a detected change, the hypothesis that the tension still moves."""
+        self._merged: tuple[list[float], list[float]] | None = None
+        """The state the filter took from the two hypotheses, for the next trace step."""
         self.reset()
 
     # -- state -------------------------------------------------------------------------
@@ -1235,6 +1262,7 @@ class TensionFilter:
         self._initialized = False
         self._samples = 0
         self._r_prev: tuple[float, ...] | None = None
+        self._merged = None
         if self.trace is not None:
             prior = self._prior if self._prior is not None else (None, None)
             self.trace.append(FilterStep("reset", _tuple3(prior[0]), _tuple3(prior[1])))
@@ -1258,6 +1286,7 @@ class TensionFilter:
         r = self._r_prev
         if not self._initialized or r is None:
             return
+        self._moving = None  # the tension is constant from here on
         n = self._change.ring.count
         dt_mean = self._dt_mean
         if dt_mean == dt_mean and dt_mean > 0.0:
@@ -1287,6 +1316,7 @@ class TensionFilter:
         self._change.clear()
         self._step.clear()
         self._hover_v.active = False
+        self._moving = None
 
     def learn_noise(self, tension_obs_world_n: ArrayLike, dt_s: float) -> None:
         """Learns the observation noise from a sample whose mean is no tension.
@@ -1522,6 +1552,16 @@ class TensionFilter:
                     (float(h[0]), float(h[1]), float(h[2])),
                     dt / p.mass_kg, accel_density * dt, rest_var, vv, started,
                 )  # fmt: skip
+        moving = self._moving
+        mixed: tuple[list[float], list[float]] | None = None
+        if moving is not None and dt > 0.0:
+            # The tension as still moving since the last change, beside the filter's own
+            # (MovingTension): the estimate is their posterior mixture until the two agree.
+            mixed = moving.mixture(kf) if moving.step(z, r, dt, dt_mean, tau, a_pred, w) else None
+            if mixed is None:
+                kf.set(*moving.mixture(kf))
+                self._moving = None
+                self._merged = (list(kf.x), list(kf.P))
         self._samples += 1
         warming = estimate_noise and noise.samples < p.noise_warmup_samples
         lazy: LazyChangeStatistic | None = None
@@ -1544,6 +1584,7 @@ class TensionFilter:
         if change:
             # Restart from the observations since the change (x = their mean, P = R / n).
             self._restart(self._change.mean_of_window(window), window, r)
+            self._start_moving(window, tau_hover)
         else:
             step_stat, window, mean, h_step = self._step.statistic(
                 z, r, self._dt_mean, test_youth, noise if estimate_noise else None
@@ -1551,6 +1592,7 @@ class TensionFilter:
             change = step_stat > h_step
             if change:
                 self._restart(mean, window, r)
+                self._start_moving(window, tau_hover)
             # On the fast test's scale: a detection is a statistic above its threshold.
             if lazy is not None:
                 lazy.other = step_stat * (h_fast / h_step)
@@ -1558,11 +1600,13 @@ class TensionFilter:
                 stat = max(stat, step_stat * (h_fast / h_step))
         if not warming:
             self._step.push(z)
+        if change:
+            mixed = None
         if self.trace is not None:
             restart = window if change else self._restart_pending
-            self._record("update", z, q, r, restart, hover_step)
+            self._record("update", z, q, r, restart, hover_step, mixed)
         self._restart_pending = 0
-        return self._publish(change, stat if lazy is None else lazy, scale, tau)
+        return self._publish(change, stat if lazy is None else lazy, scale, tau, mixed)
 
     def coast(self, dt_s: float) -> TensionEstimate | None:
         """One filter step without an observation (ground contact, dropped sample).
@@ -1593,6 +1637,7 @@ class TensionFilter:
         )
         self._kf.predict(q)  # P = P + Q
         self._hover_v.active = False  # no observation: the hover's velocity is not followed
+        self._moving = None
         if self.trace is not None:
             self._record("coast", None, q, None, 0)
         return self._publish(False, 0.0, 1.0, tau)
@@ -1667,10 +1712,27 @@ class TensionFilter:
         sums (and the one before them, its baseline) as the start of its next reference.
         """
         self._kf.set(mean_n, [r[0] / window, r[1] / window, r[2] / window])  # P = R / n
+        self._merged = None  # the restart starts the regime (and the smoother's segment)
         self._hover_v.active = False
         self._change.clear()
         self._step.restart(window)
         self._drift.clear()
+
+    def _start_moving(self, window: int, tau_hover: float) -> None:
+        """After a detected change ``window`` samples ago: the hypothesis that the tension
+        still moves on that time scale joins the filter's own (:class:`MovingTension`),
+        from the same restarted state. Not while the window spans a hover time constant
+        or more (the two would be one model)."""
+        dt_mean = self._dt_mean
+        if not (dt_mean == dt_mean and dt_mean > 0.0):
+            return
+        window_s = window * dt_mean
+        if window_s < tau_hover:
+            p = self.params
+            kf = self._kf
+            self._moving = MovingTension(
+                kf.x, kf.P, window_s, tau_hover, p.drift_memory_s, p.drift_min_time_constant_s
+            )
 
     def _record(
         self,
@@ -1680,20 +1742,32 @@ class TensionFilter:
         r: tuple[float, ...] | None,
         restart: int,
         hover: HoverStep | None = None,
+        mixed: tuple[list[float], list[float]] | None = None,
     ) -> None:
         assert self.trace is not None
-        kf = self._kf
+        x, P = (self._kf.x, self._kf.P) if mixed is None else mixed
         step = FilterStep(
-            kind, _tuple3(kf.x), _tuple3(kf.P), _tuple3(z), q, _tuple3(r), int(restart), hover
+            kind, _tuple3(x), _tuple3(P), _tuple3(z), q, _tuple3(r), int(restart), hover
         )
         self.trace.append(step)
+        merged = self._merged
+        if merged is not None:
+            # The filter took the two hypotheses' mixture as its state in this step: the
+            # smoother's next segment starts from it (kind "start").
+            self.trace.append(FilterStep("start", _tuple3(merged[0]), _tuple3(merged[1])))
+            self._merged = None
 
     def _publish(
-        self, change: bool, stat: float | LazyChangeStatistic, scale: float, tau: float
+        self,
+        change: bool,
+        stat: float | LazyChangeStatistic,
+        scale: float,
+        tau: float,
+        mixed: tuple[list[float], list[float]] | None = None,
     ) -> TensionEstimate:
         kf = self._kf
-        x0, x1, x2 = kf.x
-        p00, p11, p22 = kf.P
+        x0, x1, x2 = kf.x if mixed is None else mixed[0]
+        p00, p11, p22 = kf.P if mixed is None else mixed[1]
         noise_std: tuple[float, float, float] | NoiseStatus
         noise_rho: tuple[float, float, float] | NoiseStatus
         if self.params.estimate_noise:

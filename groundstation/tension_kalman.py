@@ -13,7 +13,12 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-__all__ = ["DiagonalKalman", "HoverVelocity"]
+__all__ = ["MOVING_MIN_LOG_ODDS", "DiagonalKalman", "HoverVelocity", "MovingTension"]
+
+MOVING_MIN_LOG_ODDS = -20.7
+"""Below this log likelihood ratio (a weight under 1e-9) the moving hypothesis has lost: it
+is dropped, which moves the estimate by under 1e-9 of the two hypotheses' difference (a
+numerical guard: it ends the hypothesis' work, not a decision)."""
 
 
 class DiagonalKalman:
@@ -220,3 +225,121 @@ def _hover_axis(
     c -= kv * c
     v -= kv * v
     return x, P, v, b_new, c
+
+
+class MovingTension:
+    """After a detected change: a second hypothesis, the tension still moving, weighed
+    against the filter's own (constant since the change) by the data.
+
+    A change test finds a change ``n`` samples after it (``eq:sysk1`` with a jump) and the
+    filter restarts from the mean of those samples, which is the best estimate while the
+    tension stays where it jumped. A tug is often not a step: the tether is reeled for a
+    tenth of a second, the drone's controller answers the pull, the tether swings, and the
+    truth moves for another half second. Neither model is right in general, so both run:
+
+    * the filter's own, ``Q`` the hover's (``constant``), and
+    * this one, a random walk whose time constant starts at the detection window's span
+      (``n·dt``: the data said the tension moved on that scale) and relaxes to the hover's
+      as the drift adaptation's raised noise does (scale decaying with ``memory_s``, time
+      constant never below ``min_time_constant_s``).
+
+    Both are Kalman filters on the same observations from the same restart (a static
+    multiple-model estimator: two models, no switching between them). Each scores its own
+    one-step predictive likelihood ``N(ν; 0, S)`` per axis, and the published estimate is
+    their posterior mixture: weight ``σ(L)`` on this one, L the accumulated log likelihood
+    ratio, from even odds at the change (neither favoured); covariance the mixture's, spread
+    included. On a step the constant model's innovations are the smaller and L falls; on a
+    tension that keeps moving its innovations grow and L rises within a few samples. When
+    this model's time constant has relaxed to the filter's own the two are one model, and
+    the filter takes the mixture as its state (:meth:`mixture`).
+
+    Attributes:
+        kf: This hypothesis's filter.
+        scale: Its process-noise scale over the hover's, decaying.
+        log_odds: L, the log likelihood ratio of this hypothesis over the constant one.
+    """
+
+    __slots__ = ("kf", "log_odds", "memory_s", "min_time_constant_s", "scale", "tau_hover_s")
+
+    def __init__(
+        self,
+        x_n: Sequence[float],
+        p_n2: Sequence[float],
+        window_s: float,
+        tau_hover_s: float,
+        memory_s: float,
+        min_time_constant_s: float,
+    ) -> None:
+        self.kf = DiagonalKalman()
+        self.kf.set(x_n, p_n2)
+        self.tau_hover_s = tau_hover_s
+        self.scale = (tau_hover_s / window_s) ** 2
+        self.memory_s = memory_s
+        self.min_time_constant_s = min_time_constant_s
+        self.log_odds = 0.0
+
+    def step(
+        self,
+        z_n: list[float] | tuple[float, ...],
+        r_n2: list[float] | tuple[float, ...],
+        dt_s: float,
+        dt_mean_s: float,
+        tau_s: float,
+        constant_pred_p_n2: Sequence[float],
+        constant_w: Sequence[float],
+    ) -> bool:
+        """One step beside the constant model's; False at the step its time constant has
+        relaxed to the constant model's (the two are one model from then on: merge them) or
+        its weight has fallen below 1e-9 (:data:`MOVING_MIN_LOG_ODDS`).
+
+        Args:
+            z_n: The observation, world, N.
+            r_n2: The observation noise R per axis, N^2.
+            dt_s: Time since the previous step, s (> 0).
+            dt_mean_s: The mean sample spacing, s.
+            tau_s: The constant model's time constant this step, s.
+            constant_pred_p_n2: The constant model's P- this step, N^2.
+            constant_w: Its whitened innovation ``ν / sqrt(S)`` this step.
+        """
+        scale = 1.0 + (self.scale - 1.0) * math.exp(-dt_s / self.memory_s)
+        self.scale = scale
+        tau = self.tau_hover_s / math.sqrt(scale)
+        tau = tau if tau > self.min_time_constant_s else self.min_time_constant_s
+        same = tau >= tau_s
+        if same:
+            tau = tau_s  # relaxed to the constant model's: this is the last step
+        c = dt_mean_s / (tau * tau) * dt_s  # q = r dt_mean / tau^2 per second
+        kf = self.kf
+        kf.predict([r_n2[0] * c, r_n2[1] * c, r_n2[2] * c])
+        pred = kf.P
+        w = kf.update(z_n, r_n2)
+        log = math.log
+        lo = self.log_odds
+        for i in range(3):
+            # log N(nu_a; 0, S_a) - log N(nu_c; 0, S_c), with nu / sqrt(S) = w
+            s_c = constant_pred_p_n2[i] + r_n2[i]
+            s_a = pred[i] + r_n2[i]
+            lo += 0.5 * (constant_w[i] * constant_w[i] - w[i] * w[i] + log(s_c / s_a))
+        self.log_odds = lo
+        return not same and lo > MOVING_MIN_LOG_ODDS
+
+    def weight(self) -> float:
+        """The posterior probability of this hypothesis, ``σ(L)``."""
+        lo = self.log_odds
+        if lo >= 0.0:
+            return 1.0 / (1.0 + math.exp(-lo))
+        e = math.exp(lo)
+        return e / (1.0 + e)
+
+    def mixture(self, constant: DiagonalKalman) -> tuple[list[float], list[float]]:
+        """The posterior mixture of the two: ``(x, diag P)``, P with the spread of the means."""
+        wa = self.weight()
+        wc = 1.0 - wa
+        xa, pa = self.kf.x, self.kf.P
+        xc, pc = constant.x, constant.P
+        x = [wc * xc[i] + wa * xa[i] for i in range(3)]
+        p = [
+            wc * (pc[i] + (xc[i] - x[i]) ** 2) + wa * (pa[i] + (xa[i] - x[i]) ** 2)
+            for i in range(3)
+        ]
+        return x, p

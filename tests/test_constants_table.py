@@ -51,6 +51,7 @@ GUARDS = {
     "attitude.QUAT_MIN_NORM",
     "localization.MIN_HORIZONTAL_N",
     "tension_noise.MIN_NOISE_VAR_N2",
+    "tension_kalman.MOVING_MIN_LOG_ODDS",
 }
 """Public numeric constants that change a result only for degenerate input or at rounding
 level: listed under the page's *Not counted* (each by name), not in the table."""

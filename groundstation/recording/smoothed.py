@@ -64,6 +64,8 @@ class SmoothingTap:
         if len(ests) != 1 or not epoch.trace:
             return
         i = len(epoch.trace) - 1
+        if epoch.trace[i].kind == "start" and i > 0:
+            i -= 1  # the step's own record precedes a segment start it made (a merge)
         if epoch.trace[i].kind not in ("init", "update", "coast"):
             return
         if len(epoch.rows) and epoch.rows[-1][0] == i:
