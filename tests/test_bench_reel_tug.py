@@ -1,0 +1,44 @@
+"""The reel-tug benchmark's own parts: its criterion and its told-the-noise baseline."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from benchmarks.bench_reel_tug import TUG_S, t90, told_the_noise
+
+
+def _flight(seed: int, moving: bool) -> dict[str, np.ndarray]:
+    dt = 0.004
+    t = np.arange(int((TUG_S + 3.0) / dt)) * dt
+    true = np.tile([-0.014, 0.0, -0.046], (len(t), 1))
+    after = t >= TUG_S
+    true[after] += [-0.030, 0.0, 0.0]
+    if moving:
+        true[after, 0] += 0.015 * (1.0 - np.exp(-(t[after] - TUG_S) / 0.2))
+    rng = np.random.default_rng(seed)
+    obs = true + rng.normal(0.0, 0.009, true.shape)
+    return {"t_s": t, "true_n": true, "obs_n": obs, "est_n": true.copy()}
+
+
+def test_told_the_noise_detects_a_step_at_once_and_follows_it() -> None:
+    for seed in range(3):
+        f = _flight(seed, moving=False)
+        est, detection_s = told_the_noise(f, 0.5)
+        assert detection_s is not None and 0.0 <= detection_s <= 0.05
+        err = np.linalg.norm(est - f["true_n"], axis=1)
+        assert t90(f["t_s"], err, 0.030) is not None
+        before = f["t_s"] < TUG_S - 1.0
+        assert np.allclose(est[before], f["true_n"][before])  # the level it was told
+
+
+def test_a_short_time_constant_follows_a_moving_truth_better() -> None:
+    errs = {}
+    for tau in (0.1, 2.0):
+        rms = []
+        for seed in range(3):
+            f = _flight(seed, moving=True)
+            est, _ = told_the_noise(f, tau)
+            w = (f["t_s"] >= TUG_S + 0.1) & (f["t_s"] < TUG_S + 1.0)
+            rms.append(np.sqrt(np.mean(np.sum((est[w] - f["true_n"][w]) ** 2, axis=1))))
+        errs[tau] = float(np.median(rms))
+    assert errs[0.1] < 0.7 * errs[2.0], errs
