@@ -1482,6 +1482,8 @@ class TensionFilter:
                 kf.rescale([d0, d1, d2])
                 if self._hover_v.active:
                     self._hover_v.rescale([d0, d1, d2])
+                if self._moving is not None:
+                    self._moving.kf.rescale([d0, d1, d2])
                 self._r_prev = r
         else:
             self._r_prev = r
