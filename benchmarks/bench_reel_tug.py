@@ -29,7 +29,7 @@ estimator told the step's time could do; it cannot follow a truth that keeps mov
 the estimator issue's own baseline, "an estimator told the noise" (:func:`told_the_noise`):
 a GLR test for a change of mean told the true noise and the true level before the tug, at
 the service's false-alarm rate, then a random-walk Kalman filter from its detection, run
-with each time constant of ``ORACLE_TAUS_S`` and reported at the best one (by median t90,
+with each time constant of ``told_noise.TAUS_S`` and reported at the best one (by median t90,
 chosen in hindsight: a bound the service, which is told neither, is not expected to beat).
 
     python -m benchmarks.bench_reel_tug [--seeds 8] [--out docs/reel_tug.md]
@@ -52,11 +52,11 @@ from typing import Any
 import numpy as np
 
 from benchmarks.figures import AT_START, DOCS, kept_reading, write_figures
+from benchmarks.told_noise import TAUS_S, glr_random_walk
 from groundstation.config import Settings, load_settings
 from groundstation.pipeline import Pipeline
 from groundstation.sim import SCENARIOS, Scenario, Simulator, Waypoint
 from groundstation.tension import observe_tension
-from groundstation.tension_change import scan_threshold
 
 DRONE = "cf1"
 SPOT_M = (1.0, 0.0, 1.0)
@@ -214,55 +214,11 @@ def first_within(t_s: np.ndarray, err_n: np.ndarray, jump_n: float) -> float | N
     return float(t_s[after][0] - TUG_S) if after.any() else None
 
 
-GLR_MAX_WINDOW_S = 1.0
-"""The told-the-noise detector's longest window, s (the fast test's)."""
-ORACLE_TAUS_S = (0.05, 0.1, 0.2, 0.3, 0.5, 1.0, 2.0)
-"""Time constants the told-the-noise random-walk filter is run with; the best (by median
-t90 over the seeds) is reported, chosen in hindsight."""
-
-
 def told_the_noise(f: dict[str, np.ndarray], tau_s: float) -> tuple[np.ndarray, float | None]:
-    """The estimator issue's 'estimator told the noise': a GLR test for a change of mean in
-    any direction, told the true noise (the observations' variance about the truth before
-    the tug, per axis) and the true level before it, at the service's false-alarm rate
-    (0.005 per hour, the windows up to ``GLR_MAX_WINDOW_S``); from its detection a
-    random-walk Kalman filter with time constant ``tau_s`` (Q = r·dt²/τ² per sample, as the
-    service), started from the detecting window's mean with P = r/n. Before detection: the
-    truth's level before the tug. Returns the estimates and the detection time (from
-    ``TUG_S``), None if none."""
-    t, obs, true = f["t_s"], f["obs_n"], f["true_n"]
-    before = (t >= TUG_S - 2.0) & (t < TUG_S)
-    level = true[before].mean(axis=0)
-    r = ((obs[before] - true[before]) ** 2).mean(axis=0)
-    dt = float(np.median(np.diff(t)))
-    n_max = int(GLR_MAX_WINDOW_S / dt)
-    h = scan_threshold(0.005, 1.0, float(n_max), dt)
-    est = np.tile(level, (len(t), 1))
-    w = (obs - level) / np.sqrt(r)  # whitened about the known level
-    cum = np.vstack([np.zeros(3), np.cumsum(w, axis=0)])
-    start = int(np.searchsorted(t, TUG_S - 1.0))
-    k_det, n_det = None, 0
-    for k in range(start, len(t)):
-        n = np.arange(1, min(n_max, k + 1) + 1)
-        sums = cum[k + 1] - cum[k + 1 - n]
-        stat = (sums**2).sum(axis=1) / n
-        j = int(np.argmax(stat))
-        if stat[j] > h:
-            k_det, n_det = k, int(n[j])
-            break
-    if k_det is None:
-        return est, None
-    x = obs[k_det + 1 - n_det : k_det + 1].mean(axis=0)
-    p = r / n_det
-    q = r * dt * dt / (tau_s * tau_s)  # q = r dt_mean / tau^2 per second, times dt
-    est[k_det] = x
-    for k in range(k_det + 1, len(t)):
-        p = p + q
-        gain = p / (p + r)
-        x = x + gain * (obs[k] - x)
-        p = (1.0 - gain) * p
-        est[k] = x
-    return est, float(t[k_det] - TUG_S)
+    """The estimator issue's "estimator told the noise" on this flight
+    (:func:`benchmarks.told_noise.glr_random_walk`, the change at ``TUG_S``): estimates and
+    its detection time from ``TUG_S`` (None: none)."""
+    return glr_random_walk(f["t_s"], f["obs_n"], f["true_n"], TUG_S, tau_s)
 
 
 def judge(f: dict[str, np.ndarray]) -> dict[str, Any]:
@@ -279,7 +235,7 @@ def judge(f: dict[str, np.ndarray]) -> dict[str, Any]:
     err_oracle = np.linalg.norm(oracle - true, axis=1)
     told: dict[str, float | None] = {}
     detection_s = None
-    for tau in ORACLE_TAUS_S:
+    for tau in TAUS_S:
         est_t, detection_s = told_the_noise(f, tau)
         told[f"{tau:g}"] = t90(t, np.linalg.norm(est_t - true, axis=1), jump)
     return {

@@ -190,11 +190,17 @@ BENCHMARKS: dict[str, Benchmark] = {
     ),
     "reel_tug": Benchmark(
         ".venv/bin/python -m benchmarks.bench_reel_tug",  # --seeds 8 --out docs/reel_tug.md
-        (*ESTIMATOR, *SIMULATOR, "benchmarks/bench_reel_tug.py"),
+        (*ESTIMATOR, *SIMULATOR, "benchmarks/bench_reel_tug.py", "benchmarks/told_noise.py"),
     ),
     "realistic_benchmark": Benchmark(
         ".venv/bin/python -m benchmarks.bench_realistic",  # --tug-seeds 8
-        (*ESTIMATOR, *SIMULATOR, "groundstation/bus.py", "benchmarks/bench_realistic.py"),
+        (
+            *ESTIMATOR,
+            *SIMULATOR,
+            "groundstation/bus.py",
+            "benchmarks/bench_realistic.py",
+            "benchmarks/told_noise.py",
+        ),
     ),
     "results_envelope": Benchmark(
         ".venv/bin/python -m benchmarks.results",  # or --only envelope
@@ -203,6 +209,7 @@ BENCHMARKS: dict[str, Benchmark] = {
             *SIMULATOR,
             "groundstation/bus.py",
             "benchmarks/bench_realistic.py",
+            "benchmarks/told_noise.py",
             "benchmarks/results.py",
             "benchmarks/results_envelope.py",
             "benchmarks/results_paper.py",

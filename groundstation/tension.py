@@ -1563,7 +1563,8 @@ class TensionFilter:
             if mixed is None:
                 kf.set(*moving.mixture(kf))
                 self._moving = None
-                self._merged = (list(kf.x), list(kf.P))
+                if self.trace is not None:
+                    self._merged = (list(kf.x), list(kf.P))
         self._samples += 1
         warming = estimate_noise and noise.samples < p.noise_warmup_samples
         lazy: LazyChangeStatistic | None = None
