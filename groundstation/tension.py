@@ -1724,8 +1724,9 @@ class TensionFilter:
     def _start_moving(self, window: int, tau_hover: float) -> None:
         """After a detected change ``window`` samples ago: the hypothesis that the tension
         still moves on that time scale joins the filter's own (:class:`MovingTension`),
-        from the same restarted state. Not while the window spans a hover time constant
-        or more (the two would be one model)."""
+        from the same restarted state, at even odds, or at the odds it had where it was
+        winning when this change was found. Not while the window spans a hover time
+        constant or more (the two would be one model)."""
         dt_mean = self._dt_mean
         if not (dt_mean == dt_mean and dt_mean > 0.0):
             return
@@ -1733,9 +1734,15 @@ class TensionFilter:
         if window_s < tau_hover:
             p = self.params
             kf = self._kf
+            prev = self._moving
             self._moving = MovingTension(
                 kf.x, kf.P, window_s, tau_hover, p.drift_memory_s, p.drift_min_time_constant_s
             )
+            if prev is not None and prev.log_odds > 0.0:
+                # A change found while the tension was shown to move: that evidence stands
+                # (a new change is no evidence against motion); after a constant stretch the
+                # two start again at even odds.
+                self._moving.log_odds = prev.log_odds
 
     def _record(
         self,
