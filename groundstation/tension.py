@@ -1077,7 +1077,8 @@ class TensionFilter:
     scale) and relaxes to the hover's as the drift adaptation's raised noise does
     (``drift_memory_s``, never below ``drift_min_time_constant_s``). Both are filtered
     from the same restart; each scores its one-step predictive likelihood, and the
-    estimate (and its P) is their posterior mixture from even odds: a step that stays is
+    estimate (and its P) is their posterior mixture from even odds (a change found while
+    the moving hypothesis was winning keeps its odds): a step that stays is
     won by the constant model (its weight below 0.2 within a second, the 30 mN step still
     settles as before, tests/test_tension.py), a tension that keeps moving by the other
     within a few tenths of a second (tests/test_moving_tension.py: the error 0.1-1 s after

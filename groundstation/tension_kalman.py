@@ -247,7 +247,8 @@ class MovingTension:
     multiple-model estimator: two models, no switching between them). Each scores its own
     one-step predictive likelihood ``N(ν; 0, S)`` per axis, and the published estimate is
     their posterior mixture: weight ``σ(L)`` on this one, L the accumulated log likelihood
-    ratio, from even odds at the change (neither favoured); covariance the mixture's, spread
+    ratio, from even odds at the change (neither favoured; the filter carries the odds over
+    to a change found while this hypothesis was winning); covariance the mixture's, spread
     included. On a step the constant model's innovations are the smaller and L falls; on a
     tension that keeps moving its innovations grow and L rises within a few samples. When
     this model's time constant has relaxed to the filter's own the two are one model, and
