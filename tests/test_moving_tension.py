@@ -179,3 +179,20 @@ def test_a_change_found_across_a_merge_is_smoothed_from_its_first_update() -> No
     sm = smooth_tension(trace)
     updates = [i for i, s in enumerate(trace) if s.kind in ("init", "update")]
     assert np.all(np.isfinite(sm.tension_world_n[updates]))
+
+
+def test_a_new_change_keeps_the_odds_of_a_winning_moving_hypothesis() -> None:
+    """A change found while the tension was shown to move keeps that evidence; after a
+    constant stretch (the constant model winning) the new hypothesis starts at even odds."""
+    filt = TensionFilter()
+    rng = np.random.default_rng(5)
+    for _ in range(400):
+        filt.update(HOVER_TENSION_N + rng.normal(0.0, 0.009, 3), DT_S)
+    filt._start_moving(4, 6.0)
+    assert filt._moving is not None and filt._moving.log_odds == 0.0
+    filt._moving.log_odds = 3.0
+    filt._start_moving(4, 6.0)
+    assert filt._moving.log_odds == 3.0
+    filt._moving.log_odds = -3.0
+    filt._start_moving(4, 6.0)
+    assert filt._moving.log_odds == 0.0
