@@ -42,3 +42,16 @@ def test_a_short_time_constant_follows_a_moving_truth_better() -> None:
             rms.append(np.sqrt(np.mean(np.sum((est[w] - f["true_n"][w]) ** 2, axis=1))))
         errs[tau] = float(np.median(rms))
     assert errs[0.1] < 0.7 * errs[2.0], errs
+
+
+def test_the_reel_tug_meets_the_issue_target_on_three_seeds() -> None:
+    """The estimator issue's reel tug on the ideal profile (docs/reel_tug.md has 8 seeds:
+    every one within 0.58 s, median 0.43 s; 0.81 s before the after-change hypothesis, when
+    these three read 0.86, 0.56 and 1.07 s): the median of three seeds within the issue's
+    0.6 s, the pre-tug error within its 1.5 mN."""
+    from benchmarks.bench_reel_tug import PRE_TUG_TARGET_N, T90_TARGET_S, fly, judge
+
+    runs = [judge(fly("ideal", seed)) for seed in (700, 701, 702)]
+    t90s = sorted(9.0 if r["t90_s"] is None else r["t90_s"] for r in runs)
+    assert t90s[1] <= T90_TARGET_S, runs
+    assert all(r["pre_tug_error_mn"] <= 1e3 * PRE_TUG_TARGET_N for r in runs), runs
