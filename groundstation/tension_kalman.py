@@ -302,7 +302,9 @@ class MovingTension:
             constant_pred_p_n2: The constant model's P- this step, N^2.
             constant_w: Its whitened innovation ``ν / sqrt(S)`` this step.
         """
-        scale = 1.0 + (self.scale - 1.0) * math.exp(-dt_s / self.memory_s)
+        memory = self.memory_s
+        decay = math.exp(-dt_s / memory) if memory > 0.0 else 0.0  # no memory: relaxed at once
+        scale = 1.0 + (self.scale - 1.0) * decay
         self.scale = scale
         tau = self.tau_hover_s / math.sqrt(scale)
         tau = tau if tau > self.min_time_constant_s else self.min_time_constant_s

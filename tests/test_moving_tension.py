@@ -196,3 +196,18 @@ def test_a_new_change_keeps_the_odds_of_a_winning_moving_hypothesis() -> None:
     filt._moving.log_odds = -3.0
     filt._start_moving(4, 6.0)
     assert filt._moving.log_odds == 0.0
+
+
+def test_a_drift_memory_of_zero_relaxes_the_hypothesis_at_once() -> None:
+    """``drift_memory_s = 0`` is a valid parameter (the raised noise ends at once): a moving
+    hypothesis then merges at its first step (none lives two), with no division by zero."""
+    from groundstation.tension import TensionFilterParams
+
+    n = int((CHANGE_S + 1.0) / DT_S)
+    est, _, weight = _run(
+        _truth(n, moving=True), 2, TensionFilter(TensionFilterParams(drift_memory_s=0.0))
+    )
+    assert np.all(np.isfinite(est))
+    alive = np.isfinite(np.array(weight))
+    assert alive.any(), "no change started a hypothesis"
+    assert not np.any(alive[1:] & alive[:-1]), "a hypothesis outlived its first step"
