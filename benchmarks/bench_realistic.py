@@ -63,7 +63,7 @@ import numpy as np
 
 from benchmarks import git_commit
 from benchmarks.figures import write_figures
-from benchmarks.told_noise import TAUS_S, glr_random_walk
+from benchmarks.told_noise import TAUS_S, glr_random_walk, long_run_variance_n2
 from groundstation.bus import Sample
 from groundstation.config import CalibrationSection, Settings, load_settings
 from groundstation.evaluation import closed_loop
@@ -291,14 +291,6 @@ def fly(
         est_tension_std_n=np.array([r[5] for r in rows], dtype=float),
         est_pos_std_m=np.array([r[6] if r[6] is not None else nan3 for r in rows], dtype=float),
     )
-
-
-def long_run_variance_n2(err_n: np.ndarray, block: int = 25) -> np.ndarray:
-    """Long-run variance per axis of an error sequence (N^2): ``block x Var(block means)``."""
-    n = (len(err_n) // block) * block
-    means = err_n[:n].reshape(-1, block, 3).mean(axis=1)
-    out: np.ndarray = block * means.var(axis=0, ddof=1)
-    return out
 
 
 def oracle_estimates(f: Flight, tau_s: float, r_n2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

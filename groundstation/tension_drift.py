@@ -11,11 +11,20 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["DriftAdaptation"]
+__all__ = ["DriftAdaptation", "relaxed_scale"]
 
 SCALE_SNAP = 1e-3
 """A process-noise scale within this of 1 is taken as 1 (Q within 0.1 % of the hover one:
 the decayed adaptation ends instead of fading for ever)."""
+
+
+def relaxed_scale(scale: float, dt_s: float, memory_s: float) -> float:
+    """A process-noise scale relaxed toward 1 over ``dt_s``: ``1 + (scale − 1)·exp(−dt/memory)``
+    (no memory, ``memory_s`` 0: 1 at once). The drift adaptation's raised noise decays so, and
+    so does the after-change hypothesis' (``tension_kalman.MovingTension``)."""
+    if memory_s > 0.0:
+        return 1.0 + (scale - 1.0) * math.exp(-dt_s / memory_s)
+    return 1.0
 
 
 class DriftAdaptation:
@@ -39,7 +48,6 @@ class DriftAdaptation:
 
     __slots__ = (
         "_beta_cache",
-        "_decay_cache",
         "bias",
         "bias_var",
         "exponent",
@@ -64,7 +72,6 @@ class DriftAdaptation:
         self.min_time_constant_s = min_time_constant_s
         self.memory_s = memory_s
         self._beta_cache = (math.nan, math.nan)
-        self._decay_cache = (math.nan, math.nan)
         self.bias = (0.0, 0.0, 0.0)  # b, EWMA of whitened innovations
         self.bias_var = 0.0  # Var(b) per axis at no drift
         self.scale = 1.0
@@ -111,11 +118,8 @@ class DriftAdaptation:
             ratio = d / self.threshold
             if ratio > 1.0:
                 inst = ratio**self.exponent
-        if self._decay_cache[0] != dt:
-            decay = math.exp(-dt / self.memory_s) if self.memory_s > 0 else 0.0
-            self._decay_cache = (dt, decay)
-        decay = self._decay_cache[1]
-        scale = max(inst, 1.0 + (self.scale - 1.0) * decay)
+        relaxed = relaxed_scale(self.scale, dt, self.memory_s)
+        scale = max(inst, relaxed)
         if scale < 1.0 + SCALE_SNAP:
             scale = 1.0
         self.scale = scale

@@ -13,6 +13,8 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
+from groundstation.tension_drift import relaxed_scale
+
 __all__ = ["MOVING_MIN_LOG_ODDS", "DiagonalKalman", "HoverVelocity", "MovingTension"]
 
 MOVING_MIN_LOG_ODDS = -20.7
@@ -302,9 +304,7 @@ class MovingTension:
             constant_pred_p_n2: The constant model's P- this step, N^2.
             constant_w: Its whitened innovation ``ν / sqrt(S)`` this step.
         """
-        memory = self.memory_s
-        decay = math.exp(-dt_s / memory) if memory > 0.0 else 0.0  # no memory: relaxed at once
-        scale = 1.0 + (self.scale - 1.0) * decay
+        scale = relaxed_scale(self.scale, dt_s, self.memory_s)  # no memory: relaxed at once
         self.scale = scale
         tau = self.tau_hover_s / math.sqrt(scale)
         tau = tau if tau > self.min_time_constant_s else self.min_time_constant_s
