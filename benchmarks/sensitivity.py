@@ -1,0 +1,458 @@
+"""Which hand-set constants the figures depend on: each one at half and at twice its value.
+
+``python -m benchmarks.sensitivity [--shard I/N] [--work DIR] [--out docs/sensitivity.md]``
+
+The issue that asks for one estimator with its parameters from data counts the tunables on
+the per-message path (docs/constants.md: the one table). Before a value is replaced by a fit
+or a derivation it helps to know whether the results depend on it at all. This runs every
+**hand-set** row of docs/constants.md at ×½ and ×2 (a switch flipped; a count rounded, at
+least 1) with everything else at its default and measures a small set of figures in the same
+deterministic flights each time:
+
+* **Estimator rows** (all but the contact family below):
+  NanoBench, the six shared flights cross-day (calibrated with ``calibrate --untethered`` on
+  the other days once, with the defaults; served by ``replay --offline`` with the value
+  changed): median and worst of the flight medians of |T| (mN, truth zero) and the share
+  within 2σ (median over the flights); the reel tug of ``benchmarks.bench_reel_tug`` (ideal
+  profile, seeds 700–702): median t90 (s) and pre-tug error (mN); the realistic simulator at
+  1 m/s², calibration = truth (``benchmarks.bench_realistic``): a 20 s hover at the paper's
+  spots 0 and 4 (seed 500): position median and p95 (cm), tension RMS (mN), tension within
+  2σ; its 30 mN tug (seeds 600, 601): t90 of the seed-averaged change (s).
+* **Contact rows** (``ContactParams``, ``RestCriteria``, the lift-off prior, the gap and
+  hold times, the warm-up): NanoBench's median of |T| and the least share of airborne rows not
+  flagged on the ground; the simulator's ``takeoff_ramp`` (ideal and realistic, seed 10, no
+  motion capture, uncalibrated): share of Estimates whose ``on_ground`` differs from the
+  truth, lift-off seen after the truth's (s), tension RMS error over the 2 s after lift-off
+  (mN); ``tug_landing`` (ideal, seed 10): ``on_ground`` mismatch.
+
+How a value is changed: a field of ``TensionFilterParams``, ``SlowAccelParams``,
+``ContactParams`` or ``RestCriteria`` is scaled after the instance is built (whatever the
+configuration gave it); a module constant is rebound in its module and in every
+``groundstation`` module that imported it by name; a class constant on its class. A value
+captured when a module was imported (a default argument, a constant computed from another)
+is not reached that way: a row whose figures are all exactly the baseline's says so ("no
+figure moved"), which means either that nothing these flights do depends on it or that the
+change did not reach the code; the page does not tell the two apart.
+
+Takes about 25 s per variant (~170 variants): ``--shard 0/2`` and ``--shard 1/2`` in two
+processes share the work; results are kept per variant in ``--work`` (``results.jsonl``),
+so a run resumes; the last run (or ``--render``) writes the page from them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import math
+import re
+import statistics
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from benchmarks import REPO, git_commit
+
+CLASSES = {
+    "TensionFilterParams": "groundstation.tension",
+    "SlowAccelParams": "groundstation.slow_accel",
+    "ContactParams": "groundstation.contact",
+    "RestCriteria": "groundstation.calibration",
+}
+"""The parameter classes of docs/constants.md and their modules."""
+
+CONTACT_ROWS = frozenset(
+    {
+        "estimator.filter_control.LIFTOFF_PRIOR_STD_N",
+        "tension.GAP_S",
+        "estimator.gate.MAX_GAP_S",
+        "slow_accel.MOCAP_HOLD_S",
+        "TensionFilterParams.noise_warmup_samples",
+    }
+)
+"""Rows judged on the contact figures besides ``ContactParams.*`` and ``RestCriteria.*``."""
+
+FACTORS = (0.5, 2.0)
+
+ROW = re.compile(r"^\| `([^`]+)` \| [^|]+ \| [^|]* \| [^|]* \| ([\w-]+) \|")
+
+
+def hand_set_rows(constants_md: Path = REPO / "docs" / "constants.md") -> list[str]:
+    """The names of docs/constants.md's hand-set rows, in the table's order."""
+    names = []
+    for line in constants_md.read_text(encoding="utf-8").splitlines():
+        m = ROW.match(line)
+        if m and m.group(2) == "hand-set":
+            names.append(m.group(1))
+    return names
+
+
+def is_contact(name: str) -> bool:
+    return name.split(".")[0] in ("ContactParams", "RestCriteria") or name in CONTACT_ROWS
+
+
+def scaled(value: Any, factor: float) -> Any:
+    """``value`` times ``factor``: a bool flipped, an int rounded (at least 1), a tuple per
+    element."""
+    if isinstance(value, bool):
+        return not value
+    if isinstance(value, int):
+        return max(1, round(value * factor))
+    if isinstance(value, tuple):
+        return tuple(x * factor for x in value)
+    return value * factor
+
+
+def patch(name: str, factor: float) -> list[Callable[[], None]]:
+    """Change the constant ``name`` (a docs/constants.md row) by ``factor``; the undo steps."""
+    parts = name.split(".")
+    undo: list[Callable[[], None]] = []
+    if parts[0] in CLASSES:
+        cls = getattr(importlib.import_module(CLASSES[parts[0]]), parts[0])
+        field = parts[1]
+        original_init = cls.__init__
+
+        def init(self: Any, *args: Any, **kwargs: Any) -> None:
+            original_init(self, *args, **kwargs)
+            object.__setattr__(self, field, scaled(getattr(self, field), factor))
+
+        cls.__init__ = init
+        undo.append(lambda: setattr(cls, "__init__", original_init))
+        return undo
+    attr = parts[-1]
+    try:
+        module = importlib.import_module("groundstation." + ".".join(parts[:-1]))
+        owner: Any = module
+    except ModuleNotFoundError:
+        module = importlib.import_module("groundstation." + ".".join(parts[:-2]))
+        owner = getattr(module, parts[-2])
+    original = getattr(owner, attr)
+    new = scaled(original, factor)
+    setattr(owner, attr, new)
+    undo.append(lambda: setattr(owner, attr, original))
+    if owner is module:
+        for mod_name, mod in list(sys.modules.items()):
+            if (
+                mod_name.startswith("groundstation")
+                and mod is not module
+                and getattr(mod, attr, None) is original
+            ):
+                setattr(mod, attr, new)
+                undo.append(lambda mod=mod: setattr(mod, attr, original))
+    return undo
+
+
+class Figures:
+    """The flights, loaded and calibrated once, and the figures measured on them."""
+
+    def __init__(self, work: Path, data: Path) -> None:
+        from benchmarks import nanobench_cli as nc
+
+        self.nc = nc
+        self.work = work
+        work.mkdir(parents=True, exist_ok=True)
+        self.flights = {n: nc.load(n, data) for n in nc.DAYS}
+        self.calibration = {}
+        for day in sorted(set(nc.DAYS.values())):
+            train = [f for n, f in self.flights.items() if nc.DAYS[n] != day]
+            self.calibration[day], _ = nc.calibrate(train, work, f"day{day}", [])
+
+    def _nanobench(self) -> list[Any]:
+        nc = self.nc
+        return [
+            nc.judge(f, self.calibration[nc.DAYS[n]], self.work) for n, f in self.flights.items()
+        ]
+
+    def estimator(self) -> dict[str, float | None]:
+        from benchmarks import bench_realistic as br
+        from benchmarks import bench_reel_tug as rt
+
+        out: dict[str, float | None] = {}
+        judged = self._nanobench()
+        out["nb_median_mn"] = statistics.median(j.median_abs_t_mn for j in judged)
+        out["nb_worst_mn"] = max(j.median_abs_t_mn for j in judged)
+        out["nb_within_2_sigma"] = statistics.median(j.within_2_sigma for j in judged)
+        tugs = [rt.judge(rt.fly("ideal", seed)) for seed in (700, 701, 702)]
+        out["reel_t90_s"] = rt._median([j["t90_s"] for j in tugs])
+        out["reel_pre_tug_mn"] = statistics.median(j["pre_tug_error_mn"] for j in tugs)
+        hover = br.hover(1.0, [0, 4], 20.0, [500])
+        out["hover_median_cm"] = 100.0 * hover["ours_median_m"]
+        out["hover_p95_cm"] = 100.0 * hover["ours_p95_m"]
+        out["hover_tension_rms_mn"] = 1e3 * hover["ours_tension_rms_n"]
+        out["hover_within_2_sigma"] = hover["tension_within_2_sigma"]
+        out["tug_t90_s"] = br.tug(1.0, [600, 601])["t90_s"]
+        return out
+
+    def contact(self) -> dict[str, float | None]:
+        out: dict[str, float | None] = {}
+        judged = self._nanobench()
+        out["nb_median_mn"] = statistics.median(j.median_abs_t_mn for j in judged)
+        out["nb_airborne_min"] = min(j.airborne_not_on_ground for j in judged)
+        for profile in ("ideal", "realistic"):
+            for key, value in _ground_run(profile, "takeoff_ramp", 10.0).items():
+                out[f"{profile}_takeoff_{key}"] = value
+        out["landing_mismatch"] = _ground_run("ideal", "tug_landing", 16.0)["mismatch"]
+        return out
+
+
+def _ground_run(profile: str, scenario: str, seconds: float) -> dict[str, float | None]:
+    """``on_ground`` against the truth in one closed-loop flight (seed 10, no mocap)."""
+    from groundstation.config import load_settings
+    from groundstation.evaluation import closed_loop
+
+    settings = load_settings(
+        None, {"sim": {"profile": profile, "seed": 10, "mocap": False}}, use_env=False
+    )
+    run, _, _ = closed_loop(settings, scenario, seconds)
+    est = run.estimates
+    truth = [run.truth_at(e["stamp_s"]) for e in est]
+    t = np.array([e["stamp_s"] for e in est])
+    ground_est = np.array([e["on_ground"] for e in est], dtype=bool)
+    ground_true = np.array([x["on_ground"] for x in truth], dtype=bool)
+    err = np.linalg.norm(
+        np.array([e["tension_n"] for e in est]) - np.array([x["tension_n"] for x in truth]), axis=1
+    )
+    lift_true = float(t[np.argmax(~ground_true)]) if (~ground_true).any() else math.nan
+    lift_est = float(t[np.argmax(~ground_est)]) if (~ground_est).any() else math.nan
+    after = ~ground_true & ~ground_est & (t > lift_true) & (t < lift_true + 2.0)
+    return {
+        "mismatch": float(np.mean(ground_est != ground_true)),
+        "lift_delay_s": lift_est - lift_true,
+        "error_2s_mn": 1e3 * float(np.sqrt(np.mean(err[after] ** 2))) if after.any() else None,
+    }
+
+
+def jobs(names: list[str]) -> list[tuple[str, float]]:
+    """Every (row, factor) to run, the two baselines first; a switch once."""
+    out: list[tuple[str, float]] = [("baseline", 1.0), ("baseline contact", 1.0)]
+    for name in names:
+        for factor in FACTORS:
+            out.append((name, factor))
+            if factor == FACTORS[0] and _is_switch(name):
+                break
+    return out
+
+
+def _is_switch(name: str) -> bool:
+    return name in ("TensionFilterParams.estimate_noise", "SlowAccelParams.hover")
+
+
+def run(shard: int, shards: int, work: Path, data: Path) -> None:
+    results = work / "results.jsonl"
+    done = set()
+    if results.exists():
+        for line in results.read_text(encoding="utf-8").splitlines():
+            d = json.loads(line)
+            done.add((d["name"], d["factor"]))
+    todo = [
+        job
+        for k, job in enumerate(jobs(hand_set_rows()))
+        if k % shards == shard and job not in done
+    ]
+    if not todo:
+        return
+    commit = git_commit()  # the code this process imported (a commit made later is not it)
+    figures = Figures(work / f"shard{shard}", data)
+    for name, factor in todo:
+        t0 = time.perf_counter()
+        undo: list[Callable[[], None]] = []
+        contact = name == "baseline contact" or is_contact(name)
+        try:
+            if not name.startswith("baseline"):
+                undo = patch(name, factor)
+            measured = figures.contact() if contact else figures.estimator()
+            error = None
+        except Exception as exc:  # a value out of its valid range: reported
+            measured, error = {}, f"{type(exc).__name__}: {exc}"[:300]
+        finally:
+            for step in reversed(undo):
+                step()
+        record = {
+            "name": name,
+            "factor": factor,
+            "family": "contact" if contact else "estimator",
+            "error": error,
+            "wall_s": round(time.perf_counter() - t0, 1),
+            "commit": commit,
+            **measured,
+        }
+        with results.open("a", encoding="utf-8") as fh:
+            fh.write(json.dumps(record) + "\n")
+        print(f"{name} ×{factor:g}: {error or measured}", flush=True)
+
+
+ESTIMATOR_COLUMNS = (
+    ("nb_median_mn", "NB median mN", 1),
+    ("nb_worst_mn", "NB worst mN", 1),
+    ("nb_within_2_sigma", "NB in 2σ", "%"),
+    ("reel_t90_s", "reel t90 s", 2),
+    ("reel_pre_tug_mn", "reel pre mN", 2),
+    ("hover_median_cm", "hover med cm", 2),
+    ("hover_p95_cm", "hover p95 cm", 2),
+    ("hover_tension_rms_mn", "hover RMS mN", 3),
+    ("hover_within_2_sigma", "hover in 2σ", "%"),
+    ("tug_t90_s", "tug t90 s", 2),
+)
+CONTACT_COLUMNS = (
+    ("nb_median_mn", "NB median mN", 1),
+    ("nb_airborne_min", "NB airborne min", "%"),
+    ("ideal_takeoff_mismatch", "ideal ground mismatch", "%"),
+    ("ideal_takeoff_lift_delay_s", "ideal lift-off lag s", 3),
+    ("ideal_takeoff_error_2s_mn", "ideal 2 s error mN", 1),
+    ("realistic_takeoff_mismatch", "realistic ground mismatch", "%"),
+    ("realistic_takeoff_lift_delay_s", "realistic lift-off lag s", 3),
+    ("realistic_takeoff_error_2s_mn", "realistic 2 s error mN", 1),
+    ("landing_mismatch", "landing ground mismatch", "%"),
+)
+
+MOVED = 0.10
+"""A figure "moved" when it changed by more than 10 % of the baseline's (for a share: by
+more than 1 point; for a time: by more than 10 % or 0.02 s, whichever is larger). A reading
+threshold for this page, not a value of the estimator."""
+
+
+def _moved(key: str, value: Any, base: Any) -> bool:
+    if value is None or base is None:
+        return value is not base
+    if key.endswith("within_2_sigma") or key.endswith("mismatch") or key.endswith("min"):
+        return abs(value - base) > 0.01
+    if key.endswith("_s"):
+        return abs(value - base) > max(MOVED * abs(base), 0.02)
+    return abs(value - base) > MOVED * abs(base)
+
+
+def _fmt(value: Any, how: Any) -> str:
+    if value is None:
+        return "never"
+    if how == "%":
+        return f"{100.0 * value:.0f} %"
+    return f"{value:.{how}f}"
+
+
+def render(work: Path, out: Path) -> None:
+    records = [
+        json.loads(line)
+        for line in (work / "results.jsonl").read_text(encoding="utf-8").splitlines()
+    ]
+    by = {(r["name"], r["factor"]): r for r in records}
+    commits = sorted({r["commit"] for r in records})
+    names = hand_set_rows()
+    lines = [
+        "# Which hand-set constants the figures depend on",
+        "",
+        f"`python -m benchmarks.sensitivity --out docs/sensitivity.md` (at commit "
+        f"{', '.join(commits)}; {len(records)} runs, "
+        f"{sum(r['wall_s'] for r in records) / 60:.0f} min of CPU). Every **hand-set** row of "
+        "docs/constants.md at ×½ and ×2 (a switch flipped once), all else at its default, "
+        "in the same deterministic flights; benchmarks/sensitivity.py says which flights and "
+        "how a value is changed. A diagnosis: this page is not held to the code by the docs "
+        "check (it takes an hour to run); rerun it before relying on a row.",
+        "",
+    ]
+    summary: list[str] = []
+    for family, columns, base_name in (
+        ("estimator", ESTIMATOR_COLUMNS, "baseline"),
+        ("contact", CONTACT_COLUMNS, "baseline contact"),
+    ):
+        base = by.get((base_name, 1.0))
+        if base is None:
+            continue
+        rows_here = [n for n in names if is_contact(n) == (family == "contact")]
+        head = "| row | × | " + " | ".join(c[1] for c in columns) + " | moved |"
+        table = [head, "|" + " --- |" * (len(columns) + 3)]
+        table.append(
+            "| **baseline** | 1 | "
+            + " | ".join(_fmt(base.get(k), how) for k, _, how in columns)
+            + " | |"
+        )
+        moved_rows, still_rows, silent_rows, failed_rows = [], [], [], []
+        for name in rows_here:
+            any_moved, all_same, failed = False, True, False
+            for factor in FACTORS:
+                r = by.get((name, factor))
+                if r is None:
+                    continue
+                if r["error"]:
+                    failed = True
+                    table.append(f"| `{name}` | {factor:g} | refused: {r['error']} |")
+                    continue
+                moved = [label for k, label, _ in columns if _moved(k, r.get(k), base.get(k))]
+                any_moved |= bool(moved)
+                all_same &= all(r.get(k) == base.get(k) for k, _, _ in columns)
+                cells = " | ".join(_fmt(r.get(k), how) for k, _, how in columns)
+                table.append(
+                    f"| `{name}` | {'flip' if _is_switch(name) else f'{factor:g}'} | {cells} | "
+                    f"{', '.join(moved) or '-'} |"
+                )
+            if failed and not any_moved:
+                failed_rows.append(name)
+            elif any_moved:
+                moved_rows.append(name)
+            elif all_same:
+                silent_rows.append(name)
+            else:
+                still_rows.append(name)
+        lines += [f"## {family.capitalize()} rows ({len(rows_here)})", "", *table, ""]
+        summary += [
+            f"- **{family}**: {len(rows_here)} rows. A figure moved (beyond the reading "
+            f"threshold below) at ×½ or ×2 for **{len(moved_rows)}**: "
+            + (", ".join(f"`{n}`" for n in moved_rows) or "none")
+            + f". Figures changed, none beyond the threshold, for {len(still_rows)}: "
+            + (", ".join(f"`{n}`" for n in still_rows) or "none")
+            + f". No figure changed at all for {len(silent_rows)}: "
+            + (", ".join(f"`{n}`" for n in silent_rows) or "none")
+            + (
+                f". Refused (the value out of its valid range) for {len(failed_rows)}: "
+                + ", ".join(f"`{n}`" for n in failed_rows)
+                if failed_rows
+                else ""
+            )
+            + "."
+        ]
+    head_end = 4
+    lines[head_end:head_end] = [
+        "## Summary",
+        "",
+        *summary,
+        "",
+        "Moved: a figure changed by more than 10 % of the baseline's (a share by more than "
+        '1 point; a time by more than 10 % or 0.02 s). "No figure changed" means these '
+        "flights do not depend on the value *or* the change did not reach the code (a value "
+        "captured at import); the page cannot tell the two apart. A row that moves nothing "
+        "here may still matter in a regime these flights do not visit (a gap, a late "
+        "sample, a motor spin-down): what it guards is in docs/constants.md.",
+        "",
+    ]
+    tmp = out.with_suffix(out.suffix + ".tmp")
+    tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    tmp.replace(out)
+    print(f"wrote {out}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--shard", default="0/1", help="I/N: run every N-th variant from I (0/1)")
+    ap.add_argument("--work", default="/tmp/groundstation-sensitivity", help="results kept here")
+    ap.add_argument("--data", default=None, help="the NanoBench directory (nanobench_cli's)")
+    ap.add_argument("--out", help="write the markdown page here (after the run)")
+    ap.add_argument("--render", action="store_true", help="only write the page from --work")
+    args = ap.parse_args(argv)
+    from benchmarks import nanobench_cli as nc
+
+    work = Path(args.work)
+    work.mkdir(parents=True, exist_ok=True)
+    if not args.render:
+        data = Path(args.data) if args.data else nc.DATA
+        shard, shards = (int(x) for x in args.shard.split("/"))
+        run(shard, shards, work, data)
+    if args.out:
+        render(work, Path(args.out))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
