@@ -150,18 +150,26 @@ class Figures:
     """The flights, loaded and calibrated once, and the figures measured on them."""
 
     def __init__(self, work: Path, data: Path) -> None:
+        self.work = work
+        self.data = data
+        self.calibration: dict[str, Path] = {}
+        self.flights: dict[str, Any] = {}
+
+    def _calibrated(self) -> None:
+        """The NanoBench flights loaded and calibrated cross-day, once (when first needed)."""
         from benchmarks import nanobench_cli as nc
 
         self.nc = nc
-        self.work = work
-        work.mkdir(parents=True, exist_ok=True)
-        self.flights = {n: nc.load(n, data) for n in nc.DAYS}
-        self.calibration = {}
+        if self.calibration:
+            return
+        self.work.mkdir(parents=True, exist_ok=True)
+        self.flights = {n: nc.load(n, self.data) for n in nc.DAYS}
         for day in sorted(set(nc.DAYS.values())):
             train = [f for n, f in self.flights.items() if nc.DAYS[n] != day]
-            self.calibration[day], _ = nc.calibrate(train, work, f"day{day}", [])
+            self.calibration[day], _ = nc.calibrate(train, self.work, f"day{day}", [])
 
     def _nanobench(self) -> list[Any]:
+        self._calibrated()
         nc = self.nc
         return [
             nc.judge(f, self.calibration[nc.DAYS[n]], self.work) for n, f in self.flights.items()
@@ -281,7 +289,7 @@ def run(shard: int, shards: int, work: Path, data: Path, family: str | None = No
     if not todo:
         return
     commit = git_commit()  # the code this process imported (a commit made later is not it)
-    figures = Figures(work / f"shard{shard}", data)
+    figures = Figures(work / f"shard{shard}-{family or 'all'}", data)
     measure = {"estimator": figures.estimator, "contact": figures.contact, "noisy": figures.noisy}
     for family, name, factor in todo:
         t0 = time.perf_counter()
