@@ -280,24 +280,22 @@ def run(shard: int, shards: int, work: Path, data: Path, family: str | None = No
     if results.exists():
         for line in results.read_text(encoding="utf-8").splitlines():
             d = json.loads(line)
-            done.add((d["name"], d["factor"]))
-    todo = [
-        job
-        for k, job in enumerate(jobs(hand_set_rows()))
-        if k % shards == shard and job not in done
-    ]
+            name = "baseline" if d["name"].startswith("baseline") else d["name"]
+            done.add((d["family"], name, d["factor"]))
+    every = [j for j in jobs(hand_set_rows()) if family is None or j[0] == family]
+    todo = [job for k, job in enumerate(every) if k % shards == shard and job not in done]
     if not todo:
         return
     commit = git_commit()  # the code this process imported (a commit made later is not it)
     figures = Figures(work / f"shard{shard}-{family or 'all'}", data)
     measure = {"estimator": figures.estimator, "contact": figures.contact, "noisy": figures.noisy}
-    for family, name, factor in todo:
+    for kind, name, factor in todo:
         t0 = time.perf_counter()
         undo: list[Callable[[], None]] = []
         try:
             if name != "baseline":
                 undo = patch(name, factor)
-            measured = measure[family]()
+            measured = measure[kind]()
             error = None
         except Exception as exc:  # a value out of its valid range: reported
             measured, error = {}, f"{type(exc).__name__}: {exc}"[:300]
@@ -307,7 +305,7 @@ def run(shard: int, shards: int, work: Path, data: Path, family: str | None = No
         record = {
             "name": name,
             "factor": factor,
-            "family": family,
+            "family": kind,
             "error": error,
             "wall_s": round(time.perf_counter() - t0, 1),
             "commit": commit,
@@ -315,7 +313,7 @@ def run(shard: int, shards: int, work: Path, data: Path, family: str | None = No
         }
         with results.open("a", encoding="utf-8") as fh:
             fh.write(json.dumps(record) + "\n")
-        print(f"{family}: {name} ×{factor:g}: {error or measured}", flush=True)
+        print(f"{kind}: {name} ×{factor:g}: {error or measured}", flush=True)
 
 
 ESTIMATOR_COLUMNS = (
