@@ -42,6 +42,7 @@ so a run resumes; the last run (or ``--render``) writes the page from them.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import importlib
 import json
 import math
@@ -107,6 +108,36 @@ def scaled(value: Any, factor: float) -> Any:
     return value * factor
 
 
+def _functions() -> list[Any]:
+    """Every function (and method) defined in a ``groundstation`` module."""
+    seen: dict[int, Any] = {}
+    for mod_name, mod in list(sys.modules.items()):
+        if not mod_name.startswith("groundstation"):
+            continue
+        for value in list(vars(mod).values()):
+            members = vars(value).values() if isinstance(value, type) else [value]
+            for f in members:
+                f = getattr(f, "__func__", f)
+                if callable(f) and hasattr(f, "__defaults__"):
+                    seen[id(f)] = f
+    return list(seen.values())
+
+
+def _rebind_defaults(match: Callable[[Any], bool], new: Callable[[Any], Any]) -> list[Any]:
+    """Default arguments for which ``match`` holds get ``new(value)``; the undo steps."""
+    undo: list[Callable[[], None]] = []
+    for f in _functions():
+        defaults = f.__defaults__
+        if defaults and any(match(d) for d in defaults):
+            f.__defaults__ = tuple(new(d) if match(d) else d for d in defaults)
+            undo.append(lambda f=f, d=defaults: setattr(f, "__defaults__", d))
+        kw = f.__kwdefaults__
+        if kw and any(match(d) for d in kw.values()):
+            f.__kwdefaults__ = {k: new(d) if match(d) else d for k, d in kw.items()}
+            undo.append(lambda f=f, d=kw: setattr(f, "__kwdefaults__", d))
+    return undo
+
+
 def patch(name: str, factor: float) -> list[Callable[[], None]]:
     """Change the constant ``name`` (a docs/constants.md row) by ``factor``; the undo steps."""
     parts = name.split(".")
@@ -120,6 +151,12 @@ def patch(name: str, factor: float) -> list[Callable[[], None]]:
             original_init(self, *args, **kwargs)
             object.__setattr__(self, field, scaled(getattr(self, field), factor))
 
+        # An instance made when a module was imported (a default argument) is replaced by
+        # one with the value changed (made before the patched __init__ would scale it again).
+        undo += _rebind_defaults(
+            lambda d: isinstance(d, cls),
+            lambda d: dataclasses.replace(d, **{field: scaled(getattr(d, field), factor)}),
+        )
         cls.__init__ = init
         undo.append(lambda: setattr(cls, "__init__", original_init))
         return undo
@@ -143,6 +180,8 @@ def patch(name: str, factor: float) -> list[Callable[[], None]]:
             ):
                 setattr(mod, attr, new)
                 undo.append(lambda mod=mod: setattr(mod, attr, original))
+    if isinstance(original, float | tuple):  # (an int may be a cached small-int object)
+        undo += _rebind_defaults(lambda d: d is original, lambda d: new)
     return undo
 
 
@@ -411,8 +450,11 @@ def render(work: Path, out: Path) -> None:
             + " | ".join(_fmt(base.get(k), how) for k, _, how in columns)
             + " | |"
         )
-        moved_rows, still_rows, silent_rows, failed_rows = [], [], [], []
+        moved_rows, still_rows, silent_rows, failed_rows, missing = [], [], [], [], []
         for name in rows_here:
+            if not any((family, name, f) in by for f in FACTORS):
+                missing.append(name)
+                continue
             any_moved, all_same, failed = False, True, False
             for factor in FACTORS:
                 r = by.get((family, name, factor))
@@ -453,6 +495,7 @@ def render(work: Path, out: Path) -> None:
                 if failed_rows
                 else ""
             )
+            + (f". Not run (yet) for {len(missing)}" if missing else "")
             + "."
         ]
     head_end = 4
