@@ -49,3 +49,52 @@ def test_demo_moves_off_a_busy_default_dashboard_port_loudly(
         assert f"on port {moved.web.port} instead" in caplog.text
         with pytest.raises(cli.PortInUse, match=f"127.0.0.1:{port} is in use"):
             cli._demo_web_port(argparse.Namespace(web_port=port), settings)
+
+
+def test_stopping_a_child_that_ignores_sigterm_kills_it_without_raising() -> None:
+    """``serve`` stops its dashboard / Foxglove child with SIGTERM, then SIGKILL; a child that
+    does not go (ignores SIGTERM, or a busy machine) must not turn the service's exit into a
+    traceback with status 1 (it did, seen in CI under load)."""
+    import subprocess
+    import sys
+
+    from groundstation import cli
+
+    code = (
+        "import signal, time; signal.signal(signal.SIGTERM, signal.SIG_IGN); "
+        "print(1, flush=True); time.sleep(60)"
+    )
+    with subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE) as child:
+        assert child.stdout is not None and child.stdout.readline()  # SIGTERM ignored now
+        cli._stop_child(child, timeout_s=0.2)
+        assert child.returncode == -9  # killed
+
+
+def test_stopping_a_child_that_outlives_the_kill_wait_warns_and_returns(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    import subprocess
+
+    from groundstation import cli
+
+    class Stuck:
+        pid = 4242
+        killed = False
+
+        def poll(self) -> None:
+            return None
+
+        def send_signal(self, sig: int) -> None:
+            pass
+
+        def kill(self) -> None:
+            self.killed = True
+
+        def wait(self, timeout: float) -> None:
+            raise subprocess.TimeoutExpired("child", timeout)
+
+    stuck = Stuck()
+    with caplog.at_level("WARNING", logger="groundstation"):
+        cli._stop_child(stuck, timeout_s=0.01)
+    assert stuck.killed
+    assert "4242" in caplog.text and "SIGKILL" in caplog.text
