@@ -1169,7 +1169,9 @@ def test_a_lost_ground_station_holds_then_lands_the_drone_rather_than_dropping_i
     assert phases[phases.index("flying") :] == ["flying", "holding", "landing", "idle"]
     assert h.status[-1]["motors_off"] and "silent" in h.status[-1]["landing_reason"]
     # The descent, from the firmware's own track: 0.4 m -> 0.1 m at the landing rate.
-    track = [(t, z) for t, _, _, z in fw.track if t > t_kill]
+    # list(): one C-level copy under the GIL (the fake firmware's thread still appends;
+    # iterating the deque itself raised "deque mutated during iteration" in CI).
+    track = [(t, z) for t, _, _, z in list(fw.track) if t > t_kill]
     t_hi = next(t for t, z in track if z < 0.4)
     t_lo = next(t for t, z in track if z < 0.1)
     # Never faster than asked (a drop is what this guards against); on a loaded host the
@@ -1269,7 +1271,7 @@ def test_setpoints_beyond_the_tether_or_too_fast_are_refused_and_the_drone_stays
     wait_for(lambda: h.status[-1]["dropped_setpoints"].get("too_fast", 0) > 0, "refusal reported")
     fw = link.firmware
     fw.advance()
-    farthest = max(math.dist(BASE_M, p[1:]) for p in fw.track)
+    farthest = max(math.dist(BASE_M, p[1:]) for p in list(fw.track))
     assert farthest <= limit_m + 1e-6, f"the drone went {farthest:.3f} m from the base"
     sent = [a[:3] for n_, a in link.commands if n_ == "send_position_setpoint"]
     assert all(math.dist(BASE_M, p) <= limit_m + 1e-9 for p in sent)
