@@ -37,8 +37,7 @@ capture. The accelerometer noise level is set per experiment; the pipeline is *n
   detection after the pull began, per seed; its **information limit** is the time at which
   the step's samples hold a non-centrality ``n step^2 / r`` (r the true long-run noise
   variance along the pull, measured in the same flights before the pull) equal to the
-  threshold of the test that applies at that noise (the step test's, set for
-  its half of ``false_alarms_per_h``; the fast test's where the step test is off): a detector
+  change test's threshold at that spacing (set for ``false_alarms_per_h``): a detector
   with that false-alarm rate finds
   the step about half the time by then, with the level before it known exactly.
 * **Uncalibrated envelope**: one error class on at a time (vibration at 1.0 m/s^2 on in
@@ -571,10 +570,9 @@ def tug(noise: float, seeds: list[int]) -> dict[str, Any]:
     step_n = float(np.mean(mean_true[grid > 0.5]))
     # Information limit of detection: the time at which n samples of the step hold a
     # non-centrality n step^2 / r (level before it known, r the true long-run variance
-    # along the pull) equal to the step test's threshold: detected about half the time.
+    # along the pull) equal to the change test's threshold: detected about half the time.
     r_mean, dt_mean = float(np.mean(r_along)), float(np.mean(dt_means))
-    design = TensionFilter().step_test_design(r_mean, dt_mean)
-    h = TensionFilter().fast_threshold(dt_mean) if design is None else design[2]
+    h = TensionFilter().fast_threshold(dt_mean)
     info_s = h * r_mean / step_n**2 * dt_mean
     ok_delays = [x for x in delays if x is not None]
     told_t90 = {tau: _first(grid, np.mean(told_ch[tau], axis=0), target) for tau in TAUS_S}
@@ -930,11 +928,9 @@ def _render_tug(res: dict[str, Any]) -> list[str]:
         "observations since the step, its time known. Detection: the first change detection "
         "after the pull began, per seed ('-': none in the 5 s), and its median; information "
         "limit: the time at which the step's samples, the level before it known, hold a "
-        "non-centrality n step^2 / r equal to the threshold h of the test that applies at "
-        "that noise (column h: the step test's, set for "
-        f"{0.5 * TensionFilterParams().false_alarms_per_h:g} false alarms per hour, half of "
-        "the filter's; the fast test's where the step test is off; r the true long-run "
-        "noise variance along the pull, measured in the same flights): a test at that "
+        "non-centrality n step^2 / r equal to the change test's threshold h (column h, set "
+        f"for {TensionFilterParams().false_alarms_per_h:g} false alarms per hour; r the true "
+        "long-run noise variance along the pull, measured in the same flights): a test at that "
         "false-alarm rate detects the step about half the time by then.",
         "",
         "| accel noise | seeds | t90 ours / oracle | t90 told the noise (best τ) | settle ours / "
@@ -1118,21 +1114,19 @@ def _render_reading(res: dict[str, Any]) -> list[str]:
             "- The step oracle's t90 is 0 by construction (the mean of the samples since a "
             "known step is unbiased from the first one); its settle time is the information "
             "limit the per-seed settle times compare with.",
-            "- Tug detection: the fast test (innovation sums, windows up to 1 s, its "
-            "threshold from half the filter's false-alarm rate, 51.2 at 100 Hz, times the "
-            "noise level's scatter factor, 1.19 at 95 Hz), on the accelerometer "
-            "model's innovations, finds a 30 mN step at 0.5 m/s^2 near the information limit "
-            "in the table; at 1-2 m/s^2 a "
-            "30 mN step adds only (30 mN)^2 / r = 0.5 and 0.125 per sample (r = 2 s2 for "
-            "this noise), and the filter absorbs part of it before the threshold is reached, "
-            "so the long-window step test takes it (groundstation/tension.py, TensionFilter "
-            "docstring): the mean of the last n samples against the mean of up to 10 s "
-            "before them, n up to the window in which a 20 mN step reaches a non-centrality "
-            "of 40 (at most 8 s), with a threshold set for the other half, "
-            f"{0.5 * TensionFilterParams().false_alarms_per_h:g} false alarms per hour "
-            "(noise known). Its detections follow the information limit in the table; "
-            "10 s into a flight its noise estimate is young, and the youth factor (1.25 "
-            "there) delays it by about that factor.",
+            "- Tug detection: the change test (innovation sums, its threshold from the "
+            f"filter's false-alarm rate, {TensionFilterParams().false_alarms_per_h:g} per hour "
+            "(noise known), 49.7 at 100 Hz, times the noise level's scatter factor, 1.19 at "
+            "95 Hz), on the accelerometer model's innovations, finds a 30 mN step at 0.5 m/s^2 "
+            "near the information limit in the table. Its longest window is where a 20 mN "
+            "step reaches the threshold at the measured noise (at most 8 s; groundstation/"
+            "tension.py, TensionFilter docstring). At 1-2 m/s^2 a 30 mN step adds only "
+            "(30 mN)^2 / r = 0.5 and 0.125 per sample (r = 2 s2 for this noise), and in a "
+            "hover the thrust balance, fused through the velocity state, takes part of the "
+            "step in before the threshold is reached, so the innovations no longer show it: "
+            "fewer detections there, while the t90 is the estimate's whichever way it "
+            "followed. 10 s into a flight the noise estimate is young, and the youth factor "
+            "(1.25 there) delays a detection by about that factor.",
         ]
     if "follow" in res:
         rows = res["follow"]
@@ -1179,8 +1173,9 @@ def _render_reading(res: dict[str, Any]) -> list[str]:
             "- (Measured before the slow stage.) The hover time constant against "
             "the tug (measured with `--only tug --levels L "
             "--tug-seeds 8 --fixed-tau` at b70b80a: the same flights with the earlier fixed 6"
-            " s): detections are the step test's and do not depend on it (the same first dete"
-            "ctions per seed at 2 m/s^2). t90 at 1 m/s^2 was 2.34 s with 6 s against 1.98 s n"
+            " s): detections were those of a long-window step test the filter had then, and did "
+            "not depend on it (the same first detections per seed at 2 m/s^2). t90 at 1 m/s^2 "
+            "was 2.34 s with 6 s against 1.98 s n"
             "ow; at 2 m/s^2 **3.67 s with 6 s, beyond the 5 s pull now**: in the seeds with n"
             "o detection within the pull the estimate follows the step only at the hover gain"
             ", and a 40 s memory takes 30 mN in more slowly than 6 s. That is the price of th"

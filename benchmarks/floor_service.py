@@ -17,7 +17,7 @@ steps no implementation can skip:
   ~20 µs, which the floor of the earlier pages of docs/service_profile.md used);
 * the Estimate encoded (``messages.encode_estimate``) and published.
 
-Everything else the service does is left out: no noise learning, no change or step test,
+Everything else the service does is left out: no noise learning, no change test,
 no drift adaptation, no contact state, no localization (``position_m`` null), no follow, no
 reel, no status. So this is a lower bound on the cost per message of *any* estimator that
 keeps the contract and steps a Kalman filter once per message: the load benchmarks

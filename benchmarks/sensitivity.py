@@ -37,8 +37,7 @@ change did not reach the code; the page does not tell the two apart.
 Takes about 25 s per estimator or contact variant and 13 s per 2 m/s² one (295 runs, about
 an hour on two processes): ``--shard 0/2`` and ``--shard 1/2`` share the work; results are
 kept per run in ``--work`` (``results.jsonl``), so a run resumes; ``--render`` writes the
-page from them. ``--ablate-step-test`` runs the step test on and off (the page's last
-section).
+page from them.
 """
 
 from __future__ import annotations
@@ -286,87 +285,6 @@ def _ground_run(profile: str, scenario: str, seconds: float) -> dict[str, float 
     }
 
 
-ABLATION_SEEDS = tuple(range(300, 308))
-"""The realistic benchmark's tug seeds (``bench_realistic --tug-seeds 8``)."""
-
-
-def ablate_step_test(work: Path) -> None:
-    """The step test on (as shipped) and off (its design always None: the fast test alone,
-    at its own half of ``false_alarms_per_h``), in the realistic benchmark's tug (8 seeds,
-    0.5 / 0.8 / 1 / 2 m/s²), its move (4 seeds, 0.5 / 1 / 2 m/s²) and the reel tug (8
-    seeds): written to ``ablation.json`` in ``work``."""
-    from benchmarks import bench_realistic as br
-    from benchmarks import bench_reel_tug as rt
-    from groundstation import tension_change as tc
-
-    out: dict[str, Any] = {"commit": git_commit()}
-    design = tc.StepTest.design
-    for label in ("on", "off"):
-        if label == "off":
-            tc.StepTest.design = lambda self, *a, **k: None  # type: ignore[method-assign]
-        try:
-            res: dict[str, Any] = {}
-            for noise in (0.5, 0.8, 1.0, 2.0):
-                g = br.tug(noise, list(ABLATION_SEEDS))
-                res[f"tug {noise:g}"] = {
-                    "t90_s": g["t90_s"],
-                    "settle_median_s": g["settle_median_s"],
-                    "detected": sum(x is not None for x in g["first_detection_s"]),
-                }
-            for noise in (0.5, 1.0, 2.0):
-                res[f"move {noise:g}"] = br.move(noise, [900, 901, 902, 903])["median_lag_s"]
-            tugs = [rt.judge(rt.fly("ideal", seed)) for seed in range(700, 708)]
-            res["reel t90_s"] = rt._median([j["t90_s"] for j in tugs])
-        finally:
-            tc.StepTest.design = design  # type: ignore[method-assign]
-        out[label] = res
-        print(label, res, flush=True)
-    tmp = work / "ablation.json.tmp"
-    tmp.write_text(json.dumps(out, indent=1), encoding="utf-8")
-    tmp.replace(work / "ablation.json")
-
-
-def _render_ablation(work: Path) -> list[str]:
-    path = work / "ablation.json"
-    if not path.exists():
-        return []
-    a = json.loads(path.read_text(encoding="utf-8"))
-    on, off = a["on"], a["off"]
-
-    def s(v: Any) -> str:
-        return "never" if v is None else f"{v:.2f}"
-
-    lines = [
-        "## The step test, on and off",
-        "",
-        f"`python -m benchmarks.sensitivity --ablate-step-test` (at commit {a['commit']}). The "
-        "step test's constants moved no figure above; here the test itself is switched off "
-        "(its design always None: the fast test alone, at its own half of the false-alarm "
-        "rate) in the realistic benchmark's 30 mN tug (seeds 300–307, t90 of the "
-        "seed-averaged change, the median settle, how many seeds had a detection within the "
-        "5 s pull), its move between two spots (seeds 900–903, the estimate's median lag "
-        "behind the truth, s) and the reel tug (ideal profile, seeds 700–707, median t90).",
-        "",
-        "| flight | step test on | off |",
-        "| --- | --- | --- |",
-    ]
-    for key in on:
-        if key.startswith("tug"):
-            cell = [
-                f"t90 {s(r['t90_s'])} s, settle {s(r['settle_median_s'])} s, "
-                f"{r['detected']} of {len(ABLATION_SEEDS)} detected"
-                for r in (on[key], off[key])
-            ]
-        else:
-            cell = [f"{s(on[key])} s", f"{s(off[key])} s"]
-        lines.append(
-            f"| {key} m/s² | {cell[0]} | {cell[1]} |"
-            if key[0] in "tm"
-            else f"| {key} | {cell[0]} | {cell[1]} |"
-        )
-    return [*lines, ""]
-
-
 def jobs(names: list[str]) -> list[tuple[str, str, float]]:
     """Every (family, row, factor) to run, the baselines first; a switch once. Estimator
     rows run twice: at 1 m/s² with NanoBench and the reel tug (``estimator``), and at the
@@ -599,7 +517,6 @@ def render(work: Path, out: Path) -> None:
         "sample, a motor spin-down): what it guards is in docs/constants.md.",
         "",
     ]
-    lines += _render_ablation(work)
     tmp = out.with_suffix(out.suffix + ".tmp")
     tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")
     tmp.replace(out)
@@ -614,17 +531,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", help="write the markdown page here (after the run)")
     ap.add_argument("--render", action="store_true", help="only write the page from --work")
     ap.add_argument("--family", choices=("estimator", "noisy", "contact"), help="only these")
-    ap.add_argument(
-        "--ablate-step-test", action="store_true", help="the step test on and off (6 min)"
-    )
     args = ap.parse_args(argv)
     from benchmarks import nanobench_cli as nc
 
     work = Path(args.work)
     work.mkdir(parents=True, exist_ok=True)
-    if args.ablate_step_test:
-        ablate_step_test(work)
-    elif not args.render:
+    if not args.render:
         data = Path(args.data) if args.data else nc.DATA
         shard, shards = (int(x) for x in args.shard.split("/"))
         run(shard, shards, work, data, args.family)

@@ -20,7 +20,8 @@ from groundstation.tension_change import scan_threshold
 FALSE_ALARMS_PER_H = 0.005
 """The service's rate (``TensionFilterParams.false_alarms_per_h``)."""
 MAX_WINDOW_S = 1.0
-"""The detector's longest window, s (the service's fast test's)."""
+"""The detector's longest window, s (the service's change test's when this baseline was
+set; kept, so that its figures compare across pages)."""
 TAUS_S = (0.05, 0.1, 0.2, 0.3, 0.5, 1.0, 2.0)
 """Time constants of the random-walk filter the benchmarks try, s."""
 BLOCK = 25

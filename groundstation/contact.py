@@ -451,7 +451,7 @@ def contact_step(
     if noise is not None and n_noise > 0:
         # Var(a) = kappa s_d (the long-run variance), times a mean of n squares' youth
         # factor 1 + 3 sqrt(2 / n) (its relative standard deviation is sqrt(2 / n);
-        # tension_change.YOUTH_SIGMAS, the change tests' bound).
+        # tension_change.YOUTH_SIGMAS, the change test's bound).
         youth = 1.0 + YOUTH_SIGMAS * math.sqrt(2.0 / n_noise)
         var_a = params.noise_long_run_ratio * noise * youth
         climb_limit = max(

@@ -34,7 +34,6 @@ from groundstation.tension_change import (
     YOUTH_FADE_SAMPLES,
     ChangeTest,
     LazyChangeStatistic,
-    StepTest,
     level_scatter_factor,
     scan_threshold,
     youth_factor,
@@ -84,7 +83,7 @@ window (:class:`~groundstation.calibration.RestCalibrator`) and a hover run of
 100 Hz, longer than real telemetry's own gaps (motion capture's up to 150 ms)."""
 SPACING_CAP_RATIO = 4.0
 """A sample spacing enters the filter's mean spacing capped at this multiple of the mean
-(a late sample does not drag the mean that sets Q and the change tests' windows)."""
+(a late sample does not drag the mean that sets Q and the change test's windows)."""
 SPACING_GAIN = 0.02
 """Gain of the mean sample spacing's exponential average (a memory of ~50 samples)."""
 RESCALE_TOLERANCE = 0.01
@@ -638,27 +637,22 @@ class TensionFilterParams:
             noise), within [``hover_time_constant_s``, ``hover_max_time_constant_s``]:
             longer memory where the noise is larger. 0: tau = ``hover_time_constant_s``.
         hover_max_time_constant_s: Longest time constant at hover, s.
-        false_alarms_per_h: False detections per hour of hover the two change tests
-            together are set for, 1/h: each test's threshold is derived from half of it
-            (:func:`~groundstation.tension_change.scan_threshold` over the test's own
-            windows at the measured sample spacing); 0: no change test. The tests' one knob.
+        false_alarms_per_h: False detections per hour of hover the change test is set
+            for, 1/h: its threshold is derived from it
+            (:func:`~groundstation.tension_change.scan_threshold` over the test's
+            windows at the measured sample spacing); 0: no change test. The test's one knob.
         change_min_window: Shortest window of the change test, samples (a single outlier
             cannot trigger a detection).
-        change_max_window_s: Longest window of the change test, s.
-        ring_size: Capacity of the change test's history, samples (1 s at 500 Hz).
-        long_sizing_threshold: Non-centrality that sizes the long-window step test's
-            windows (class docstring), dimensionless: its longest window is the one in
-            which a step of ``long_min_step_weight_ratio`` of the weight, the level before it
-            known, reaches it
-            (``n_max = long_sizing_threshold * r / step^2`` samples).
-        long_min_step_weight_ratio: The step the long-window test is sized for, as a
-            fraction of the weight ``m·g`` (20 mN at 30 g): with the noise variance, which
-            scales as m², the windows do not depend on the mass; dimensionless.
-        long_max_window_s: Cap on the long-window test's longest window, s.
-        long_reference_s: Longest stretch before a window that serves as its reference
-            level in the long-window test, s.
-        long_history_size: Capacity of the long-window test's history, samples (8 s at
-            500 Hz; the longest window is at most half of it).
+        change_min_step_weight_ratio: The smallest step the change test's windows are
+            sized for, as a fraction of the weight ``m·g`` (20 mN at 30 g), dimensionless:
+            its longest window is the one in which that step's samples reach the threshold,
+            ``h·r / step²`` samples (class docstring). With the noise variance r, which
+            scales as m², the windows do not depend on the mass.
+        change_max_window_s: Cap on the change test's longest window, s: long enough for
+            a 30 mN step at 2 m/s^2 of vibration, 100 Hz, to reach the threshold (~4 s at
+            the information limit, class docstring).
+        ring_size: Capacity of the change test's history, samples (8 s at 512 Hz; every
+            window it holds is certified, :class:`~groundstation.tension_change.ChangeTest`).
         drift_time_constant_s: Time constant of the innovation-bias average that drives
             the drift adaptation, s.
         drift_threshold: Level of the normalised innovation-bias statistic (chi-square,
@@ -687,13 +681,9 @@ class TensionFilterParams:
     hover_max_time_constant_s: float = 40.0
     false_alarms_per_h: float = 0.005
     change_min_window: int = 4
-    change_max_window_s: float = 1.0
-    ring_size: int = 512
-    long_sizing_threshold: float = 40.0
-    long_min_step_weight_ratio: float = 0.068
-    long_max_window_s: float = 8.0
-    long_reference_s: float = 10.0
-    long_history_size: int = 4096
+    change_min_step_weight_ratio: float = 0.068
+    change_max_window_s: float = 8.0
+    ring_size: int = 4096
     drift_time_constant_s: float = 0.5
     drift_threshold: float = 9.0
     drift_min_time_constant_s: float = 0.1
@@ -709,11 +699,8 @@ class TensionFilterParams:
             "noise_time_constant_s": self.noise_time_constant_s,
             "noise_prior_samples": self.noise_prior_samples,
             "hover_time_constant_s": self.hover_time_constant_s,
+            "change_min_step_weight_ratio": self.change_min_step_weight_ratio,
             "change_max_window_s": self.change_max_window_s,
-            "long_sizing_threshold": self.long_sizing_threshold,
-            "long_min_step_weight_ratio": self.long_min_step_weight_ratio,
-            "long_max_window_s": self.long_max_window_s,
-            "long_reference_s": self.long_reference_s,
             "drift_time_constant_s": self.drift_time_constant_s,
             "drift_threshold": self.drift_threshold,
             "drift_min_time_constant_s": self.drift_min_time_constant_s,
@@ -751,10 +738,6 @@ class TensionFilterParams:
             raise ValueError(
                 "TensionFilterParams needs 1 <= change_min_window <= ring_size, got "
                 f"{self.change_min_window} and {self.ring_size}"
-            )
-        if self.long_history_size < 8:
-            raise ValueError(
-                f"TensionFilterParams.long_history_size must be >= 8, got {self.long_history_size}"
             )
         if self.noise_warmup_samples < 1:
             raise ValueError(
@@ -811,11 +794,9 @@ class TensionEstimate:
         change_detected: True when this step detected a change of tension (a tug) and
             re-initialised the filter from the samples since the change.
         samples: Observations taken since start or reset.
-        change_statistic: Largest windowed chi-square statistic of this step: the fast
-            test's, or the step test's times the fast test's threshold over its own
-            when larger, so that either is a detection above the fast test's threshold
-            (:attr:`TensionFilter.change_threshold`)
-            (dimensionless; the step test's is 0 on the samples it is not evaluated).
+        change_statistic: Largest windowed chi-square statistic of this step's change
+            test, dimensionless: a detection is a value above
+            :attr:`TensionFilter.change_threshold`.
         process_noise_scale: Factor on the process noise applied this step by the drift
             adaptation (1 at hover).
         noise_std_n: Estimated observation noise std per world axis and sample, N,
@@ -909,9 +890,8 @@ class TensionFilter:
       :class:`~groundstation.tension_noise.NoiseEstimate`;
     * the process noise Q's drift adaptation:
       :class:`~groundstation.tension_drift.DriftAdaptation`;
-    * the change tests that restart the filter after a tug, and their thresholds:
+    * the change test that restarts the filter after a tug, and its threshold:
       :class:`~groundstation.tension_change.ChangeTest`,
-      :class:`~groundstation.tension_change.StepTest`,
       :func:`~groundstation.tension_change.scan_threshold`.
 
     The design, its reasoning and its numbers follow.
@@ -937,7 +917,7 @@ class TensionFilter:
     samples; as R is revised, P is rescaled with it (P is proportional to R when Q is and P0
     = R), so the first samples are not held as precise as a wrong prior says. Fed R = the
     per-sample variance instead, the filter would report a P 1.86-2.0 times too small and
-    its change test would read its threshold of 50 as 25-27 on long windows.
+    its change test would read its threshold of ~50 as 25-27 on long windows.
 
     **The hover's thrust balance** (``update(hover_model_world_n=...)``). While the caller
     says the drone hovers, the drone's velocity joins the state on each axis,
@@ -980,7 +960,7 @@ class TensionFilter:
     **Tug detection (GLR on whitened innovations).** Each innovation nu is whitened by
     the Cholesky factor of S = P- + R, so that at constant tension w ~ N(0, I). A step
     Delta k samples ago shifts the mean of the last k whitened innovations. For every
-    window n in [change_min_window, min(history, change_max_window_s / dt_mean)] the
+    window n in [``change_min_window``, n_max] (below) the
     statistic ``|sum of the last n w|^2 / n`` is chi-square with 3 dof under no change
     when the noise is white, and *smaller* for positively correlated noise on short
     windows, since R is the long-run variance: a window of n samples counts as its
@@ -989,76 +969,39 @@ class TensionFilter:
     error (``1 + 3 sqrt(2 / k)`` after k samples, fading by 1000), and never by less than
     the warm estimate's own scatter allows for
     (:func:`~groundstation.tension_change.level_scatter_factor`, 1.17 at ~95 Hz: without
-    it the thresholds below, set for a known noise, fired 4 times in 90 h of simulated
-    hover), both tests alike; and the test waits for
+    it thresholds set for a known noise fired 4 times in 90 h of simulated hover); and
+    the test waits for
     ``noise_warmup_samples`` = 30 samples (0.3 s at 100 Hz) whose innovations were
     whitened with a noise of a few samples. The largest statistic is compared with
-    the threshold :func:`~groundstation.tension_change.scan_threshold` gives for half of
-    ``false_alarms_per_h`` (0.0025/h) over the windows [``change_min_window``, 1 s] at the
-    measured spacing (the Brownian scan approximation of the crossing rate of a sliding
-    chi-square scan: 51.2 at 100 Hz, 53.2 at 250 Hz; before a spacing is known, at the
-    rate that fills the ring in 1 s, the highest; the hand-set 50 it replaces was 0.005/h
-    at 100 Hz). The false detections are counted in docs/step_test_benchmark.md. A 30 mN
-    step is detected a few samples after it at 0.3 m/s^2 and 250 Hz (non-centrality
-    ~10 per sample). At 1 and 2 m/s^2, 100 Hz and r = 2 s2 the same step adds only 0.5
-    and 0.125 per sample, 1 s and 4 s of samples to reach ~50, and meanwhile the hover
-    filter (tau >= 6 s) and the drift adaptation take part of the step into the state,
-    which the innovations then no longer show: this test alone detected it in 1 of 4
-    flights at 1 m/s^2 and 0 of 4 at 2 m/s^2 (t90 3.3 s and never, realistic simulator).
+    the threshold h that :func:`~groundstation.tension_change.scan_threshold` gives for
+    ``false_alarms_per_h`` (0.005/h) over the windows [``change_min_window``,
+    ``change_max_window_s`` = 8 s] at the measured spacing (the Brownian scan
+    approximation of the crossing rate of a sliding chi-square scan: 49.7 at 100 Hz,
+    51.7 at 250 Hz; before a spacing is known, at the rate that fills the ring in 8 s,
+    the highest). The rate per sample goes as ``1/n_lo - 1/n_hi``: long windows add few
+    independent looks, so 8 s costs a threshold 0.1 above a 1 s test's. The false
+    detections are counted in docs/change_test_benchmark.md.
 
-    **Slow steps: the long-window step test**
-    (:class:`~groundstation.tension_change.StepTest`). For every window of the last n
-    samples, their mean against the mean of the m samples before them (m up to
-    ``long_reference_s`` = 10 s, within the regime), per world axis::
-
-        d_n = zbar_post - zbar_pre,    G_n = sum_i d_n,i^2 / (r_i (1/n + 1/m))
-
-    a two-sample GLR for a step at unknown time (chi-square, 3 dof, under no change; with
-    r the long-run variance a window of correlated noise has at most that variance, so
-    vibration makes it err toward silence). It reads the observations, not the
-    innovations, so what the filter did after the step costs it nothing. A step delta
-    gives non-centrality ``|delta|^2 / (r (1/n + 1/m))``. Windows
-    (:meth:`step_test_design`): n from n_max / 4 to ``n_max = 40 r_max / delta_min^2``
-    (spaced by 5 %), the window in which a step of ``long_min_step_weight_ratio`` of the
-    weight (20 mN at 30 g), the level
-    before it known, reaches a non-centrality of ``long_sizing_threshold`` = 40, at most
-    ``long_max_window_s`` = 8 s: 0.45-1.8 s at 1 m/s^2, 1.8-7.6 s at 2 m/s^2 (100 Hz,
-    r = 2 s2). The test is off while n_max lies within the fast test's 1 s (below
-    ~0.75 m/s^2 at 100 Hz; ~8 samples on the ideal profile, whose results it therefore
-    leaves bit for bit as they were). r is the larger of the 5 s level and a 30 s one
-    (the 5 s level's +-6 % scatter reads as evidence on long windows; the 30 s one lags a
-    rise), and the statistic is divided by the fast test's youth factor and by one for
-    kappa's youth (:func:`~groundstation.tension_change.step_youth_factor`). It is evaluated
-    every n_lo / 20 samples (every 9 at 2 m/s^2: a detection at most 5 % of the shortest
-    window late, at a tenth of the cost). On detection the filter restarts as after the
-    fast test (x = the window's mean, P = R / n).
-
-    *Threshold, for a false-alarm rate* (:func:`scan_threshold`). A sliding chi-square
-    scan over windows [n0, n1] crosses h at about
-    ``h^(d/2) e^(-h/2) / (2^(d/2) Gamma(d/2)) * (h/2) * (1/n0 - 1/n1)`` per sample
-    (d = 3, the Brownian scan approximation, noise known), so h is set per noise level
-    for its half of ``false_alarms_per_h`` (0.0025 per hour; at 0.005 per hour it was
-    43.5 at 1 m/s^2 and 40.4 at 2 m/s^2: longer windows, fewer independent looks); one
-    fixed h = 32 would be 0.7 per hour at 1 m/s^2. The on-line noise estimate adds its
-    scatter and bias (at the end of a 10 min hover it reads r at 0.74-1.11 of the truth,
-    median 0.90-0.98 per case, below on the realistic simulator's mix), which fattens the
-    tail beyond the formula's, so the margin was measured
-    (docs/step_test_benchmark.md, ``python -m benchmarks.bench_step_test``: the filter
-    alone, not told the noise, jittered ~94 Hz): in 12 hovers of 10 min per case, at 1
-    and 2 m/s^2, white + AR(0.6) (lag-1 0.2, the realistic simulator's) and AR(1)
-    rho = 0.3, no detection in 8 h; the largest statistic of a flight, on the fast test's
-    scale (then 50 = detection), was 24-43 (median per case 30-36).
-
-    *Information limit.* With the level before the step known exactly, a GLR at threshold
-    h detects a step delta about half the time once ``n delta^2 / r = h``: for 30 mN at
-    1 m/s^2 (delta^2 / r = 0.5 per sample) after 87 samples, 0.9 s, and at 2 m/s^2
-    (0.125) after 323, 3.4 s; with m = 1000 samples (10 s) of reference,
-    ``n delta^2 / (r (1 + n/m)) = h`` gives 0.95 s and 4.8 s. That is the price of the
-    false-alarm rate: any detector that fires on noise this rarely needs this much data.
-    Measured after 40 s of hover (same benchmark, 12 steps per case): median 0.76-0.82 s
-    at 1 m/s^2 and 3.5-3.6 s at 2 m/s^2, 1 of 48 not detected within 9.5 s (an r read
-    low shortens them). In the first minute the youth
-    factors (1.25 after 10 s) delay it further.
+    *The longest window, from the noise.* With the level before it known exactly, a GLR
+    at threshold h detects a step delta about half the time once ``n delta^2 / r = h``
+    (the information limit): a 30 mN step at 0.3 m/s^2 and 250 Hz (non-centrality ~10 per
+    sample) within a few samples, at 1 and 2 m/s^2, 100 Hz, r = 2 s2 (0.5 and 0.125 per
+    sample) after ~100 and ~400 samples, 1 s and 4 s: any detector that fires on noise as
+    rarely needs that much data. So the longest window is where the smallest step of
+    interest, ``change_min_step_weight_ratio`` of the weight (20 mN at 30 g), reaches the
+    threshold as applied: ``n_max = h youth r_max / step^2`` samples (r_max the largest
+    axis's long-run variance), at most ``change_max_window_s`` = 8 s and the ring, set at
+    each full evaluation: 12 samples (50 ms) on the ideal profile, 2.6 s at 1 m/s^2 and
+    100 Hz (r = 2 s2), 8 s at 2 m/s^2 (10.5 s uncapped; a 30 mN step needs ~4 s). Longer
+    windows would find no step of interest sooner, and on a ramp (a drone moving) they
+    fire where the drift adaptation is already following and restart from a window mean
+    that lags the ramp by half the window (the 10 mN/s ramp on the ideal profile of
+    tests/test_tension.py: no restart and 2.1 mN RMS; with windows up to 8 s whatever
+    the noise, 13 restarts and 2.7 mN). Meanwhile the hover filter (tau 19-40 s there)
+    takes in a few per cent of the step, which the innovations then no longer show; the
+    drift adaptation (below) takes in more when the step is large. Where the thrust
+    balance is fused (a hovering drone) it sees the step sooner than the accelerometer
+    does (docs/realistic_benchmark.md: the tug's t90 and its first detection).
 
     **Re-initialisation by replay.** On detection the window with the largest statistic
     is the maximum-likelihood change point. The filter restarts from the observations
@@ -1146,26 +1089,15 @@ class TensionFilter:
     attitude says, 0.17 m/s^2 per degree otherwise); and this filter handles what can be
     learned on line: the noise, its colour, the rate, the memory.
 
-    *Detection against false alarms* (the long-window step test above). What a lower
-    rate for that test costs, by the formulas above (``scan_threshold`` over
-    that test's windows; a 30 mN step, r = 2 s2 as in the realistic simulator's noise,
-    100 Hz, 10 s of reference before the step; the time is where the test detects it
-    about half the time)::
-
-        false alarms per hour   0.005   0.05    0.7     5       30
-        h at 1 m/s^2            43.5    38.3    32.1    27.4    22.9
-        detection at 1 m/s^2    1.00 s  0.87 s  0.72 s  0.61 s  0.50 s
-        h at 2 m/s^2            40.4    35.1    28.8    24.0    19.3
-        detection at 2 m/s^2    5.0 s   4.1 s   3.2 s   2.5 s   1.9 s
-
-    0.005 per hour for the two tests together (``false_alarms_per_h``, each test half)
-    because a false detection is not harmless: with following on it moves
-    the drone, with ``land_below_m`` it can stop the motors. 0.005 per hour is one per
-    200 h of hover per drone (1700 seven-minute battery packs), and with eight drones one
-    per 25 h of flying; 0.7 per hour (h = 32) would be one every 11 minutes of an
-    eight-drone hover, for a detection 28 % sooner (0.72 s against 1.00 s at 1 m/s^2).
-    Measured detections follow the 0.005 column (docs/realistic_benchmark.md, 30 mN tug;
-    measured at 0.005 per hour for this test alone, before the two tests shared one rate).
+    *Detection against false alarms.* What a higher rate would buy, by
+    :func:`~groundstation.tension_change.scan_threshold` over the change test's windows
+    at 100 Hz: h = 49.6 at 0.005 false alarms per hour, 44.5 at 0.05, 38.5 at 0.7, 33.9
+    at 5; a detection needs that much evidence, so the delay at the information limit
+    scales with h (0.7 per hour: 22 % sooner). 0.005 per hour (``false_alarms_per_h``)
+    because a false detection is not harmless: with following on it moves the drone,
+    with ``land_below_m`` it can stop the motors. 0.005 per hour is one per 200 h of
+    hover per drone (1700 seven-minute battery packs), and with eight drones one per 25 h
+    of flying; 0.7 per hour would be one every 11 minutes of an eight-drone hover.
 
     **Initialisation.** The first observation initialises the state (x = y, P = R),
     unlike the paper, whose filter started from T = 0: with H = 0 and s2 = 0 the
@@ -1194,18 +1126,10 @@ class TensionFilter:
         self._change = ChangeTest(
             p.change_min_window, p.change_max_window_s, p.ring_size, self.fast_threshold(None)
         )
-        # Spacings within 1 % of the one the fast test's threshold was derived at.
+        # Spacings within 1 % of the one the change test's threshold was derived at.
         self._fast_band = (math.nan, math.nan)
-        self._step = StepTest(
-            p.long_sizing_threshold,
-            p.long_min_step_weight_ratio * p.mass_kg * GRAVITY_MPS2,
-            0.5 * p.false_alarms_per_h,
-            p.long_max_window_s,
-            p.long_reference_s,
-            p.long_history_size,
-            p.change_min_window,
-            p.change_max_window_s,
-        )
+        min_step_n = p.change_min_step_weight_ratio * p.mass_kg * GRAVITY_MPS2
+        self._inv_min_step_n2 = 1.0 / (min_step_n * min_step_n)
         self._drift = DriftAdaptation(
             p.drift_time_constant_s,
             p.drift_threshold,
@@ -1219,7 +1143,7 @@ class TensionFilter:
         self._prior_std = (math.sqrt(v0), math.sqrt(v1), math.sqrt(v2))
         self._noise = NoiseEstimate(self._prior_var, p.noise_prior_samples)
         self._dt_mean = math.nan
-        self._youth_floor = (math.nan, 1.0)  # (dt_mean, the tests' youth floor at it)
+        self._youth_floor = (math.nan, 1.0)  # (dt_mean, the test's youth floor at it)
         self.trace: list[FilterStep] | None = None
         """Every step from :meth:`start_trace` on (None: not recorded, the default)."""
         self._restart_pending = 0
@@ -1315,7 +1239,6 @@ class TensionFilter:
         to another tension)."""
         self._drift.new_regime()
         self._change.clear()
-        self._step.clear()
         self._hover_v.active = False
         self._moving = None
 
@@ -1488,7 +1411,7 @@ class TensionFilter:
                 self._r_prev = r
         else:
             self._r_prev = r
-        # The youth factor of the drift statistic, >= 1; the change tests' never falls
+        # The youth factor of the drift statistic, >= 1; the change test's never falls
         # below the noise estimate's own scatter once warm (level_scatter_factor).
         k = noise.samples
         youth = youth_factor(k) if estimate_noise and k < YOUTH_FADE_SAMPLES else 1.0
@@ -1503,7 +1426,7 @@ class TensionFilter:
                 )
             if floor[1] > youth:
                 test_youth = floor[1]
-        # The fast test's threshold follows the spacing (log of its longest window):
+        # The change test's threshold follows the spacing (log of its longest window):
         # derived again once the spacing has moved by 1 %.
         lo, hi = self._fast_band
         if not lo < spacing < hi and spacing > 0.0:  # False for a NaN spacing
@@ -1573,7 +1496,6 @@ class TensionFilter:
             # Innovations whitened with a noise estimate of a few samples are not evidence
             # (of a tug or of a drift).
             self._change.clear()
-            self._step.clear()
             stat, window = 0.0, 0
         else:
             self._drift.push(w, dt)
@@ -1582,29 +1504,18 @@ class TensionFilter:
                 lazy = self._change.lazy_statistic(self._dt_mean, test_youth)
                 stat, window = 0.0, 0
             else:
+                # The longest window: where the smallest step of interest reaches the
+                # threshold as applied (h youth) at the long-run noise, h youth r / step^2.
+                r_max = r0 if r0 > r1 else r1
+                r_max = r_max if r_max > r2 else r2
+                n_cap = self._change.threshold * test_youth * r_max * self._inv_min_step_n2
+                self._change.cap_n = int(n_cap) if n_cap < p.ring_size else p.ring_size
                 stat, window = self._change.evaluate(self._dt_mean, test_youth)
-        h_fast = self._change.threshold
-        change = stat > h_fast
+        change = stat > self._change.threshold
         if change:
             # Restart from the observations since the change (x = their mean, P = R / n).
             self._restart(self._change.mean_of_window(window), window, r)
             self._start_moving(window, tau_hover)
-        else:
-            step_stat, window, mean, h_step = self._step.statistic(
-                z, r, self._dt_mean, test_youth, noise if estimate_noise else None
-            )
-            change = step_stat > h_step
-            if change:
-                self._restart(mean, window, r)
-                self._start_moving(window, tau_hover)
-            # On the fast test's scale: a detection is a statistic above its threshold.
-            if lazy is not None:
-                lazy.other = step_stat * (h_fast / h_step)
-            else:
-                stat = max(stat, step_stat * (h_fast / h_step))
-        if not warming:
-            self._step.push(z)
-        if change:
             mixed = None
         if self.trace is not None:
             restart = window if change else self._restart_pending
@@ -1666,15 +1577,15 @@ class TensionFilter:
 
     @property
     def change_threshold(self) -> float:
-        """The fast change test's threshold now (:meth:`fast_threshold` at the measured
+        """The change test's threshold now (:meth:`fast_threshold` at the measured
         spacing), dimensionless: a ``change_statistic`` above it is a detection."""
         return self._change.threshold
 
     def fast_threshold(self, dt_mean_s: float | None) -> float:
-        """The fast test's threshold at a mean sample spacing, dimensionless.
+        """The change test's threshold at a mean sample spacing, dimensionless.
 
-        :func:`~groundstation.tension_change.scan_threshold` for half of
-        ``false_alarms_per_h`` (the other half is the step test's) over the windows
+        :func:`~groundstation.tension_change.scan_threshold` for ``false_alarms_per_h``
+        over the windows
         [``change_min_window``, ``change_max_window_s`` / dt] samples (at most the ring);
         with no spacing known, at ``change_max_window_s`` / ``ring_size`` (the highest rate
         the ring serves: the highest threshold). Infinite when ``false_alarms_per_h`` is 0.
@@ -1687,39 +1598,14 @@ class TensionFilter:
             dt = dt_mean_s
         n_lo = float(p.change_min_window)
         n_hi = min(float(p.ring_size), max(n_lo, float(int(p.change_max_window_s / dt))))
-        return scan_threshold(0.5 * p.false_alarms_per_h, n_lo, max(n_hi, n_lo + 1.0), dt)
-
-    def step_test_design(self, r_n2: float, dt_s: float) -> tuple[float, float, float] | None:
-        """Windows and threshold of the long-window step test at a noise level and rate.
-
-        ``n_max = long_sizing_threshold * r / step^2`` samples (a step of
-        ``long_min_step_weight_ratio`` of the weight, 20 mN at 30 g, the level before it
-        known, reaches the sizing non-centrality in n_max samples),
-        at most ``long_max_window_s`` and half the history; windows from n_max / 4; the
-        threshold from :func:`scan_threshold` for half of ``false_alarms_per_h``. None (the
-        test off) while n_max lies within the fast test's longest window
-        (:meth:`groundstation.tension_change.StepTest.design`).
-
-        Args:
-            r_n2: Long-run noise variance, the largest of the axes, N^2.
-            dt_s: Mean sample spacing, s, > 0.
-
-        Returns:
-            ``(n_lo, n_max, threshold)`` (samples, samples, dimensionless), or None.
-        """
-        return self._step.design(r_n2, dt_s)
+        return scan_threshold(p.false_alarms_per_h, n_lo, max(n_hi, n_lo + 1.0), dt)
 
     def _restart(self, mean_n: list[float], window: int, r: tuple[float, ...]) -> None:
-        """x = the mean of the last ``window`` observations, P = R / window.
-
-        The new regime began ``window`` samples ago: the step test keeps those samples'
-        sums (and the one before them, its baseline) as the start of its next reference.
-        """
+        """x = the mean of the last ``window`` observations, P = R / window."""
         self._kf.set(mean_n, [r[0] / window, r[1] / window, r[2] / window])  # P = R / n
         self._merged = None  # the restart starts the regime (and the smoother's segment)
         self._hover_v.active = False
         self._change.clear()
-        self._step.restart(window)
         self._drift.clear()
 
     def _start_moving(self, window: int, tau_hover: float) -> None:
@@ -1734,8 +1620,8 @@ class TensionFilter:
         window_s = window * dt_mean
         if window_s < tau_hover:
             p = self.params
-            kf = self._kf
             prev = self._moving
+            kf = self._kf
             self._moving = MovingTension(
                 kf.x, kf.P, window_s, tau_hover, p.drift_memory_s, p.drift_min_time_constant_s
             )

@@ -1,21 +1,18 @@
-"""The tension filter's change tests: when has the tension stepped (a tug)?
+"""The tension filter's change test: when has the tension stepped (a tug)?
 
 The paper's filter (``eq:sysk1``, ``eq:sysk2``, ``eq:Kalman_vars``) assumes a constant
-tension; these tests find where that assumption broke, so that
+tension; this test finds where that assumption broke, so that
 :class:`groundstation.tension.TensionFilter` restarts from the samples since the change
 (x = their mean, P = R / n: what the Kalman filter itself gives from an uninformative prior
-with Q = 0 over them). A departure from the paper, whose filter has no change test. Two
-tests, the reasoning and the numbers of both in the ``TensionFilter`` docstring:
+with Q = 0 over them). A departure from the paper, whose filter has no change test; the
+reasoning and the numbers in the ``TensionFilter`` docstring.
 
-* :class:`ChangeTest`, the fast one: a GLR on the filter's whitened innovations over
-  windows of up to ``change_max_window_s``, ``max_n |sum of the last n w|^2 / n``
-  (chi-square, 3 dof, per window under no change);
-* :class:`StepTest`, the long-window one: the mean of the last n observations against the
-  mean of the m before them, ``G_n = sum_i d_n,i^2 / (r_i (1/n + 1/m))``, windows sized by
-  the noise (:meth:`StepTest.design`) and its threshold from :func:`scan_threshold`.
-
-Both divide their statistic by a *youth factor* (:func:`youth_factor`,
-:func:`step_youth_factor`) while the noise estimate is young. Pure: numpy and Python floats.
+:class:`ChangeTest` is a GLR on the filter's whitened innovations over windows of up to
+``change_max_window_s``, ``max_n |sum of the last n w|^2 / n`` (chi-square, 3 dof, per
+window under no change), its threshold from :func:`scan_threshold` for the filter's
+false-alarm rate. It divides its statistic by a *youth factor* (:func:`youth_factor`)
+while the noise estimate is young, and by at least :func:`level_scatter_factor` once it is
+warm. Pure: numpy and Python floats.
 """
 
 from __future__ import annotations
@@ -25,15 +22,11 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from groundstation.tension_noise import NoiseEstimate
-
 __all__ = [
     "ChangeTest",
     "LazyChangeStatistic",
-    "StepTest",
     "level_scatter_factor",
     "scan_threshold",
-    "step_youth_factor",
     "youth_factor",
 ]
 
@@ -86,41 +79,22 @@ def scan_threshold(
 
 
 YOUTH_SIGMAS = 3.0
-"""Standard errors of a young noise estimate the change tests allow for (the upper bound
+"""Standard errors of a young noise estimate the change test allows for (the upper bound
 ``1 + 3 sqrt(2 / k)`` of a k-sample mean square, whose relative standard deviation is
 sqrt(2 / k)); the contact stage's floor vibration uses the same bound."""
 YOUTH_FADE_SAMPLES = 1000
 """Noise samples over which the youth factor fades out linearly (10 s at 100 Hz); from then
 on :func:`level_scatter_factor` is the floor."""
 SCATTER_SIGMAS = 2.0
-"""Standard errors of the warm noise estimate (its level and kappa) the change tests allow
-for (:func:`level_scatter_factor`, :func:`step_youth_factor`)."""
-STEP_YOUTH_MAX = 1.8
-"""Cap of kappa's youth factor in the step test, about 2.65 / 1.5: measured vibration's
-kappa (2.5-2.65) over the prior ``NoiseEstimate.KAPPA_PRIOR``, the most a young kappa can be
-low by."""
-STEP_WINDOW_SPACING = 1.05
-"""The step test's window lengths grow by this ratio (a step k samples old is seen by a
-window within 2.5 % of k: at most 2.5 % of its statistic lost)."""
-STEP_HISTORY_FRACTION = 0.5
-"""The step test's longest window is at most this fraction of its history (the rest is
-reference)."""
-STEP_SHORTEST_FRACTION = 0.25
-"""The step test's shortest window, as a fraction of its longest: its threshold's scan
-covers [n_max / 4, n_max]."""
-STEP_THRESHOLD_BINS = 50.0
-"""The step test's threshold is recomputed when log(n_max) or log(dt) moves by 1 / 50 (a
-threshold moves by well under 1 % within a bin)."""
-STEP_EVAL_FRACTION = 0.05
-"""The step test runs every this fraction of its shortest window (a detection at most 5 %
-of that window late)."""
+"""Standard errors of the warm noise estimate (its level and kappa) the change test allows
+for (:func:`level_scatter_factor`)."""
 
 
 def youth_factor(noise_samples: int) -> float:
-    """Variance factor of the change tests while the noise estimate is young, >= 1.
+    """Variance factor of the change test while the noise estimate is young, >= 1.
 
-    R is the long-run variance, so every window sum has at most the variance the tests
-    assume (short windows of positively correlated noise have less): the statistic counts
+    R is the long-run variance, so every window sum has at most the variance the test
+    assumes (short windows of positively correlated noise have less): the statistic counts
     effective samples and errs toward silence. While the noise estimate is young (k
     differences) an upper bound on its error, ``1 + 3 sqrt(2 / k)`` (the scatter of a
     k-sample mean square), fading out by 1000 samples. Without it the first flight's first
@@ -144,45 +118,23 @@ _KAPPA_BLOCKS = 239
 
 
 def level_scatter_factor(memory_samples: float) -> float:
-    """The change tests' floor of the youth factor, >= 1: the noise estimate's own scatter
+    """The change test's floor of the youth factor, >= 1: the noise estimate's own scatter
     once it is warm, ``1 + 2 sqrt(2 / k + 1.3 / 239)``.
 
     r = s_d kappa is measured, not known, and a window's statistic scales as 1 / r: a
     level a few per cent low reads every window a few per cent high, and over hours it is
-    low often enough to matter. Thresholds set for a known variance (50, and the step
-    test's from :func:`scan_threshold`, both ~0.005 false detections per hour) fired 4
-    times in 90 hours of simulated hover at 1 and 2 m/s^2 (``benchmarks/bench_step_test.py
-    --minutes 60 --flights 30``, the fast test and the step test alike). The level s_d is
+    low often enough to matter. Thresholds set for a known variance (~0.005 false
+    detections per hour each) fired 4 times in 90 hours of simulated hover at 1 and 2 m/s^2
+    (``benchmarks/bench_change_test.py --minutes 60 --flights 30``; the filter then had a
+    second, long-window test, and both fired). The level s_d is
     an exponential mean over ``memory_samples`` = tau / dt samples: a k = 2 tau / dt − 1
     sample mean square's relative variance 2 / k; kappa's at its equilibrium count of 239
-    blocks is 1.3 / 239 (:func:`step_youth_factor`); 2 standard errors of their sum are
-    allowed for, as :func:`step_youth_factor` allows for kappa's while it is young. 1.17 at
+    blocks is 1.3 / 239 (its 30 s exponential average of 0.25 s blocks, 3 axes pooled,
+    neighbouring blocks' second differences correlated); 2 standard errors of their sum
+    are allowed for. 1.17 at
     ~95 Hz with the 5 s memory."""
     k = max(2.0 * memory_samples - 1.0, 1.0)
     return 1.0 + SCATTER_SIGMAS * math.sqrt(2.0 / k + _KAPPA_VAR_PER_BLOCK / _KAPPA_BLOCKS)
-
-
-def step_youth_factor(youth: float, blocks: int) -> float:
-    """The youth factor of the step test, >= 1: the fast test's times the noise shape's.
-
-    Long windows see the noise's long-run variance whole, so they also suffer the error of
-    kappa = r / s_d while it has few blocks B: its relative standard error is
-    ``sqrt(1.3 / B)`` (3 axes pooled, the squared second differences of neighbouring
-    blocks correlated), 2 of which are allowed for beyond what the threshold already
-    allows at B = 239 (the equilibrium count of its 30 s average), at most 1.8 (2.65 /
-    1.5: vibration against the prior 1.5).
-
-    Args:
-        youth: The fast test's factor (:func:`youth_factor`).
-        blocks: Blocks the noise shape has been averaged over, B.
-    """
-    if blocks >= _KAPPA_BLOCKS:
-        return youth
-    excess = SCATTER_SIGMAS * (
-        math.sqrt(_KAPPA_VAR_PER_BLOCK / max(blocks, 1))
-        - math.sqrt(_KAPPA_VAR_PER_BLOCK / _KAPPA_BLOCKS)
-    )
-    return youth * min(1.0 + excess, STEP_YOUTH_MAX)
 
 
 class _Ring:
@@ -308,16 +260,16 @@ def _squared_sums(cum: FloatArray, pos: int, n_min: int, n_max: int) -> FloatArr
 
 
 class LazyChangeStatistic:
-    """The fast test's statistic of one step, computed when first read.
+    """The change test's statistic of one step, computed when first read.
 
-    ``max(max_n |S_n|^2 / (n youth), other)`` over n = n_min .. n_valid, from the ring's
+    ``max_n |S_n|^2 / (n youth)`` over n = n_min .. n_valid, from the ring's
     append-only buffer as it was at that step (:class:`_Ring`). The filter needs only to
     know that no window crossed the threshold, which :class:`ChangeTest` certifies without
     computing every window; the value itself is computed only if someone reads
     :attr:`groundstation.tension.TensionEstimate.change_statistic`.
     """
 
-    __slots__ = ("_args", "other")
+    __slots__ = ("_args",)
 
     def __init__(
         self,
@@ -327,20 +279,19 @@ class LazyChangeStatistic:
         count: int,
         dt_mean_s: float,
         youth: float,
+        cap_n: int,
     ) -> None:
-        self._args = (test, cum, pos, count, dt_mean_s, youth)
-        self.other = 0.0
-        """The step test's statistic on the fast test's scale, maxed with this one."""
+        self._args = (test, cum, pos, count, dt_mean_s, youth, cap_n)
 
     def __call__(self, name: str = "change_statistic") -> float:
-        test, cum, pos, count, dt_mean_s, youth = self._args
+        test, cum, pos, count, dt_mean_s, youth, cap_n = self._args
         n_min = test.min_window
-        n_valid = test.window_cap(dt_mean_s, count)
-        if n_valid < n_min:
-            return max(0.0, self.other)
+        if count < n_min:
+            return 0.0
+        n_valid = max(test.window_cap(dt_mean_s, count, cap_n), n_min)
         ss = _squared_sums(cum, pos, n_min, n_valid)
         stat, _ = _best_window(ss, n_min, test.inv_n, youth)
-        return max(stat, self.other)
+        return stat
 
 
 def _best_window(ss: FloatArray, n_min: int, inv_n: FloatArray, youth: float) -> tuple[float, int]:
@@ -351,7 +302,7 @@ def _best_window(ss: FloatArray, n_min: int, inv_n: FloatArray, youth: float) ->
 
 
 class ChangeTest:
-    """The fast change test: a GLR on whitened innovations (tug detection).
+    """The change test: a GLR on whitened innovations (tug detection).
 
     Each innovation nu is whitened by the Cholesky factor of S = P- + R
     (:meth:`groundstation.tension_kalman.DiagonalKalman.update`), so that at constant
@@ -385,6 +336,10 @@ class ChangeTest:
     def __init__(self, min_window: int, max_window_s: float, size: int, threshold: float) -> None:
         self.min_window = min_window
         self.max_window_s = max_window_s
+        self.cap_n = size
+        """The longest window in use, samples (within ``max_window_s``): set by the filter
+        from the noise (``TensionFilter``: where the smallest step of interest reaches the
+        threshold)."""
         self.ring = _Ring(size)
         self._n = np.arange(min_window, size + 1, dtype=np.float64)  # windows min_window..size
         self.inv_n = 1.0 / self._n
@@ -442,9 +397,13 @@ class ChangeTest:
         d0, d1, d2 = c0 - a0, c1 - a1, c2 - a2
         return d0 * d0 + d1 * d1 + d2 * d2 <= sigma * sigma
 
-    def window_cap(self, dt_mean_s: float, count: int) -> int:
-        """The longest window with ``count`` innovations at a mean sample spacing, samples."""
+    def window_cap(self, dt_mean_s: float, count: int, cap_n: int | None = None) -> int:
+        """The longest window with ``count`` innovations at a mean sample spacing, samples:
+        at most ``cap_n`` (default :attr:`cap_n`) and ``max_window_s``."""
         n = count
+        cap = self.cap_n if cap_n is None else cap_n
+        if cap < n:
+            n = cap
         if dt_mean_s == dt_mean_s and dt_mean_s > 0.0:
             n_cap = max(self.min_window, int(self.max_window_s / dt_mean_s))
             if n_cap < n:
@@ -454,7 +413,9 @@ class ChangeTest:
     def lazy_statistic(self, dt_mean_s: float, youth: float) -> LazyChangeStatistic:
         """This step's statistic (as :meth:`evaluate` gives it), computed when read."""
         ring = self.ring
-        return LazyChangeStatistic(self, ring.cum, ring.pos, ring.count, dt_mean_s, youth)
+        return LazyChangeStatistic(
+            self, ring.cum, ring.pos, ring.count, dt_mean_s, youth, self.cap_n
+        )
 
     def evaluate(self, dt_mean_s: float, youth: float) -> tuple[float, int]:
         """``(max_n |S_n|^2 / (n youth), its n)`` over every window, and a new certificate;
@@ -471,8 +432,8 @@ class ChangeTest:
         if ring.count < n_min:
             self._sigma = math.inf
             return 0.0, 0
-        n_valid = self.window_cap(dt_mean_s, ring.count)
-        # Every window the ring holds (those beyond the cap may come into it).
+        n_valid = max(self.window_cap(dt_mean_s, ring.count), n_min)
+        # Every window the ring holds (those beyond the caps may come into them).
         ss = _squared_sums(ring.cum, ring.pos, n_min, ring.count)
         self._sigma = float((self._radius[: len(ss)] - np.sqrt(ss)).min())
         return _best_window(ss[: n_valid - n_min + 1], n_min, self.inv_n, youth)
@@ -480,211 +441,3 @@ class ChangeTest:
     def mean_of_window(self, n: int) -> list[float]:
         """The mean of the last ``n`` observations, N (the restart's x)."""
         return self.ring.mean_of_latest(n)
-
-
-class _History:
-    """Running sums of the observations since the regime began, for the step test.
-
-    Row j holds ``C_j = z_1 + ... + z_j`` (N), so the sum of any stretch of past samples
-    is one difference of two rows, whatever its length.
-    """
-
-    def __init__(self, size: int) -> None:
-        self.size = size
-        self.rows: FloatArray = np.zeros((size, 3))
-        self._flat = self.rows.reshape(-1)  # a view, for scalar writes
-        self.cum = (0.0, 0.0, 0.0)
-        self.head = 0  # next slot to write
-        self.count = 0  # valid rows
-
-    def clear(self) -> None:
-        # The running sum restarts too, so it never grows beyond one regime's samples.
-        self.count = 0
-        self.cum = (0.0, 0.0, 0.0)
-
-    def push(self, y: tuple[float, float, float] | list[float]) -> None:
-        c0, c1, c2 = self.cum
-        c0, c1, c2 = self.cum = (c0 + y[0], c1 + y[1], c2 + y[2])
-        head = self.head
-        flat, i = self._flat, 3 * head
-        flat[i] = c0
-        flat[i + 1] = c1
-        flat[i + 2] = c2
-        self.head = head + 1 if head + 1 < self.size else 0
-        if self.count < self.size:
-            self.count += 1
-
-    def back(self, k: NDArray[np.intp]) -> FloatArray:
-        """``C_(t-k)`` for each k (k = 1: the newest row pushed), shape (len(k), 3)."""
-        out: FloatArray = self.rows[(self.head - k) % self.size]
-        return out
-
-
-class StepTest:
-    """The long-window step test: slow steps that the fast test cannot see in its 1 s.
-
-    For the last n samples (the one just taken included) against the m before them
-    (m up to ``reference_s``, within the regime), per world axis::
-
-        d_n = zbar_post - zbar_pre,   G_n = sum_i d_n,i^2 / (r_i (1/n + 1/m))
-
-    a two-sample GLR for a step at unknown time (chi-square, 3 dof, under no change). It
-    reads the observations, not the innovations, so what the filter did after the step
-    costs it nothing. Windows from :meth:`design`, the threshold from :func:`scan_threshold`
-    for ``false_alarms_per_h``; evaluated every n_lo / 20 samples (a detection at most 5 %
-    of the shortest window late, at a fraction of the cost).
-
-    Args:
-        sizing_threshold: Non-centrality that sizes the windows.
-        min_step_n: The step the windows are sized for, N.
-        false_alarms_per_h: False detections per hour of hover, 1/h.
-        max_window_s: Cap on the longest window, s.
-        reference_s: Longest reference stretch before a window, s.
-        history_size: Capacity of the history, samples.
-        fast_min_window: The fast test's shortest window, samples.
-        fast_max_window_s: The fast test's longest window, s (the test is off within it).
-    """
-
-    def __init__(
-        self,
-        sizing_threshold: float,
-        min_step_n: float,
-        false_alarms_per_h: float,
-        max_window_s: float,
-        reference_s: float,
-        history_size: int,
-        fast_min_window: int,
-        fast_max_window_s: float,
-    ) -> None:
-        self.sizing_threshold = sizing_threshold
-        self.min_step_n = min_step_n
-        self.false_alarms_per_h = false_alarms_per_h
-        self.max_window_s = max_window_s
-        self.reference_s = reference_s
-        self.history_size = history_size
-        self.fast_min_window = fast_min_window
-        self.fast_max_window_s = fast_max_window_s
-        self.hist = _History(history_size)
-        # Window lengths: integers spaced by at most 5 % (a step k samples old is seen by a
-        # window within 2.5 % of k: at most 2.5 % of its statistic lost), ~40 windows per
-        # factor 4 of length instead of every integer.
-        grid = [1]
-        while grid[-1] < history_size - 1:
-            grid.append(
-                min(max(grid[-1] + 1, round(grid[-1] * STEP_WINDOW_SPACING)), history_size - 1)
-            )
-        self._grid = np.array(grid, dtype=np.intp)
-        self._grid.setflags(write=False)
-        self._grid_list = grid
-        self._threshold_cache: tuple[tuple[int, int] | None, float] = (None, math.inf)
-        self._fast_cache = (math.nan, 0)  # (dt_mean, the fast test's longest window)
-        self._countdown = 0
-
-    def clear(self) -> None:
-        """Forgets the history (a new regime)."""
-        self.hist.clear()
-
-    def restart(self, window: int) -> None:
-        """A restart ``window`` samples ago: those samples stay as the next reference."""
-        h = self.hist
-        if window < h.count:
-            h.count = window
-
-    def push(self, z_n: tuple[float, float, float] | list[float]) -> None:
-        """Takes one observation, N."""
-        self.hist.push(z_n)
-
-    def design(self, r_n2: float, dt_s: float) -> tuple[float, float, float] | None:
-        """Windows and threshold at a noise level and rate (``TensionFilter.step_test_design``).
-
-        ``n_max = sizing_threshold * r / min_step_n^2`` samples, at most ``max_window_s``
-        and half the history; windows from n_max / 4; the threshold from
-        :func:`scan_threshold`. None (the test off) while n_max lies within the fast test's
-        longest window.
-        """
-        if self.false_alarms_per_h == 0.0:
-            return None
-        n_fast = max(self.fast_min_window, int(self.fast_max_window_s / dt_s))
-        n_max = min(
-            self.sizing_threshold * r_n2 / (self.min_step_n * self.min_step_n),
-            self.max_window_s / dt_s,
-            STEP_HISTORY_FRACTION * self.history_size,
-        )
-        if n_max <= n_fast:
-            return None
-        # The threshold moves with log(n_max): recomputed once n_max or dt moves by 1 %.
-        bins = STEP_THRESHOLD_BINS
-        key = (round(bins * math.log(n_max)), round(bins * math.log(dt_s)))
-        if self._threshold_cache[0] != key:
-            h = scan_threshold(self.false_alarms_per_h, STEP_SHORTEST_FRACTION * n_max, n_max, dt_s)
-            self._threshold_cache = (key, h)
-        return STEP_SHORTEST_FRACTION * n_max, n_max, self._threshold_cache[1]
-
-    def statistic(
-        self,
-        z: tuple[float, float, float] | list[float],
-        r: tuple[float, float, float],
-        dt_mean_s: float,
-        youth: float,
-        noise: NoiseEstimate | None,
-    ) -> tuple[float, int, list[float], float]:
-        """``(G, n, mean of the last n z, threshold)``, G the largest over the windows.
-
-        G = 0 while the test is off, between its evaluations, or while the history holds
-        less than its shortest window.
-
-        Args:
-            z: The observation just taken (not yet pushed), N.
-            r: The long-run noise variance per axis, N^2.
-            dt_mean_s: Mean sample spacing, s.
-            youth: The fast test's youth factor (:func:`youth_factor`), >= 1.
-            noise: The on-line noise estimate, or None when the noise is not estimated.
-                With it r is the larger per axis of r and the long-run variance over six
-                times the memory (the short one's scatter is what a long window would read
-                as evidence, the long one lags a rise), and the youth factor is the step
-                test's (:func:`step_youth_factor`).
-        """
-        h = self.hist
-        if h.count < 2 or not (dt_mean_s == dt_mean_s and dt_mean_s > 0.0):
-            return 0.0, 0, [], math.inf
-        r0, r1, r2 = r
-        r_max = max(r0, r1, r2)
-        if dt_mean_s != self._fast_cache[0]:
-            n_fast = max(self.fast_min_window, int(self.fast_max_window_s / dt_mean_s))
-            self._fast_cache = (dt_mean_s, n_fast)
-        if (
-            self.sizing_threshold * r_max / (self.min_step_n * self.min_step_n)
-            <= self._fast_cache[1]
-        ):
-            return 0.0, 0, [], math.inf  # off: n_max <= n_fast, as design() would find
-        design = self.design(r_max, dt_mean_s)
-        if design is None:
-            return 0.0, 0, [], math.inf
-        n_lo, n_max, threshold = design
-        if self._countdown > 0:
-            self._countdown -= 1
-            return 0.0, 0, [], threshold
-        self._countdown = int(STEP_EVAL_FRACTION * n_lo) - 1
-        if noise is not None:
-            q0, q1, q2 = noise.long_run_slow()
-            r0, r1, r2 = max(r0, q0), max(r1, q1), max(r2, q2)
-            youth = step_youth_factor(youth, noise.blocks)
-        grid = self._grid
-        lo = int(np.searchsorted(grid, n_lo, side="left"))
-        # a window needs at least one sample before it
-        hi = int(np.searchsorted(grid, min(n_max, h.count - 1.0), side="right"))
-        if hi <= lo:
-            return 0.0, 0, [], threshold
-        n_int = grid[lo:hi]
-        m_int = np.minimum(h.count - n_int, max(1, int(self.reference_s / dt_mean_s)))
-        c = h.cum
-        now = np.array([c[0] + z[0], c[1] + z[1], c[2] + z[2]])
-        at_n = h.back(n_int)
-        n = n_int.astype(np.float64)[:, None]
-        m = m_int.astype(np.float64)[:, None]
-        post = (now - at_n) / n  # zbar_post: the last n samples
-        d = post - (at_n - h.back(n_int + m_int)) / m  # - zbar_pre: the m before them
-        var = np.array([r0, r1, r2]) * (1.0 / n + 1.0 / m)  # r (1/n + 1/m)
-        stats = np.einsum("ij,ij->i", d, d / var) / youth
-        best = int(stats.argmax())
-        return float(stats[best]), int(n_int[best]), post[best].tolist(), threshold

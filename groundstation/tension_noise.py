@@ -68,12 +68,11 @@ class NoiseEstimate:
 
     def __init__(self, prior_var_n2: tuple[float, float, float], prior_samples: float) -> None:
         self.d1 = [2.0 * v for v in prior_var_n2]
-        self.d1_slow = list(self.d1)  # the same over SLOW times the memory (the step test)
         self.s2 = list(prior_var_n2)
         self.prior_samples = prior_samples
         self.samples = 0  # differences taken
         self.prev1: tuple[float, float, float] | None = None  # y_(t-1)
-        self.alpha_cache = (math.nan, math.nan, math.nan)
+        self.alpha_cache = (math.nan, math.nan)
         # long-run part: kappa, the mean over blocks and axes of r_block / s_d
         self.kappa = self.KAPPA_PRIOR
         self.blocks = 0
@@ -112,44 +111,23 @@ class NoiseEstimate:
         if p1 is not None:
             self.samples += 1
             if self.alpha_cache[0] != dt:
-                self.alpha_cache = (
-                    dt,
-                    -math.expm1(-dt / time_constant_s),
-                    -math.expm1(-dt / (self.SLOW * time_constant_s)),
-                )
-            _, a_fast, a_slow = self.alpha_cache
+                self.alpha_cache = (dt, -math.expm1(-dt / time_constant_s))
+            a_fast = self.alpha_cache[1]
             run = 1.0 / (self.samples + self.prior_samples)
             alpha = a_fast if a_fast > run else run  # max(run, a_fast)
-            alpha_slow = a_slow if a_slow > run else run
-            d1, d1s = self.d1, self.d1_slow
             # e_i = (y_t - y_(t-1))^2 per axis, winsorised at 16 times its mean once warm
             e0, e1, e2 = y0 - p1[0], y1 - p1[1], y2 - p1[2]
             e0, e1, e2 = e0 * e0, e1 * e1, e2 * e2
-            a0, a1, a2 = d1
-            b0, b1, b2 = d1s
+            a0, a1, a2 = self.d1
             if self.samples > warm:
-                f0, f1, f2 = e0, e1, e2
                 if e0 > WINSOR_RATIO * a0:
                     e0 = WINSOR_RATIO * a0
                 if e1 > WINSOR_RATIO * a1:
                     e1 = WINSOR_RATIO * a1
                 if e2 > WINSOR_RATIO * a2:
                     e2 = WINSOR_RATIO * a2
-                if f0 > WINSOR_RATIO * b0:
-                    f0 = WINSOR_RATIO * b0
-                if f1 > WINSOR_RATIO * b1:
-                    f1 = WINSOR_RATIO * b1
-                if f2 > WINSOR_RATIO * b2:
-                    f2 = WINSOR_RATIO * b2
-            else:
-                f0, f1, f2 = e0, e1, e2
-            # 2 s_d <- 2 s_d + alpha (e - 2 s_d), fast and slow
+            # 2 s_d <- 2 s_d + alpha (e - 2 s_d)
             self.d1 = [a0 + alpha * (e0 - a0), a1 + alpha * (e1 - a1), a2 + alpha * (e2 - a2)]
-            self.d1_slow = [
-                b0 + alpha_slow * (f0 - b0),
-                b1 + alpha_slow * (f1 - b1),
-                b2 + alpha_slow * (f2 - b2),
-            ]
             self.block_t += dt
         bs, bq = self.block_sum, self.block_sq
         bs[0] += y0
@@ -194,12 +172,6 @@ class NoiseEstimate:
         self.block_sq = [0.0, 0.0, 0.0]
         self.block_n = 0
         self.block_t = 0.0
-
-    def long_run_slow(self) -> tuple[float, float, float]:
-        """The long-run variance with the level averaged ``SLOW`` times as long, N^2."""
-        k = max(self.kappa, KAPPA_MIN)
-        v0, v1, v2 = (max(0.5 * d * k, MIN_NOISE_VAR_N2) for d in self.d1_slow)
-        return v0, v1, v2
 
     def long_run(self) -> tuple[float, float, float]:
         """The long-run variance ``r = s_d kappa`` per axis (floored), N^2: the filter's R."""

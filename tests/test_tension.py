@@ -449,12 +449,8 @@ def test_invalid_observation_in_filter_raises() -> None:
         {"change_min_window": 10, "ring_size": 5},
         {"drift_min_time_constant_s": 7.0},
         {"noise_prior_samples": 0.0},
-        {"long_sizing_threshold": 0.0},
         {"false_alarms_per_h": -1.0},
-        {"long_min_step_weight_ratio": -0.068},
-        {"long_max_window_s": math.inf},
-        {"long_reference_s": 0.0},
-        {"long_history_size": 4},
+        {"change_max_window_s": math.inf},
     ],
 )
 def test_params_validation(kwargs: dict[str, float]) -> None:
@@ -685,13 +681,16 @@ def test_ramp_is_tracked_without_divergence() -> None:
     t = np.arange(n) * DT_S
     d = np.array([1.0, 0.5, -1.0]) / 1.5
     truth = HOVER_TENSION_N + np.outer(np.clip(t - 3.0, 0.0, None) * 0.010, d)  # 10 mN/s
-    est, _, _ = run_filter(truth, np.random.default_rng(30))
+    est, _, det = run_filter(truth, np.random.default_rng(30))
     err = np.abs(est - truth)[int(5.0 / DT_S) :]
     assert np.all(np.isfinite(est))
-    assert err.max() <= 6e-3, err.max()
-    # 2.55 mN since the change tests allow for the noise estimate's scatter (2.4 before;
-    # a ramp's steps are found a little later): level_scatter_factor.
-    assert np.sqrt(np.mean(err**2)) <= 2.6e-3
+    assert err.max() <= 5e-3, err.max()
+    # 2.1 mN and no restart: the drift adaptation follows the ramp, and the change test's
+    # windows, sized from the noise (~40 ms here), do not read it as a step. With windows up
+    # to 8 s whatever the noise it restarted 13 times from window means that lag a ramp by
+    # half the window: 2.7 mN.
+    assert np.sqrt(np.mean(err**2)) <= 2.3e-3
+    assert det.sum() <= 2, det.sum()
 
 
 def test_irregular_dt_and_gaps_do_not_diverge() -> None:
@@ -868,19 +867,16 @@ def vibration_mix(rng: np.random.Generator, n: int, sigma_n: float) -> np.ndarra
 
 
 def step_detection_limit_s(r_n2: float, step_n: float, dt_s: float) -> float:
-    """When a step's samples hold the step test's threshold h as non-centrality, s.
+    """When a step's samples hold the change test's threshold h as non-centrality, s.
 
-    ``n step^2 / (r (1 + n / m)) = h`` with m = ``long_reference_s`` of samples before it:
-    the information a test at that false-alarm rate needs (TensionFilter docstring). h is
-    the threshold as the test applies it once its noise estimate is warm: the design's
-    times the noise estimate's scatter factor (``level_scatter_factor``).
+    ``n step^2 / r = h`` (the level before it known): the information a test at that
+    false-alarm rate needs (TensionFilter docstring). h is the threshold as the test
+    applies it once its noise estimate is warm: the design's times the noise estimate's
+    scatter factor (``level_scatter_factor``).
     """
     filt = TensionFilter()
-    design = filt.step_test_design(r_n2, dt_s)
-    assert design is not None
-    h = design[2] * level_scatter_factor(filt.params.noise_time_constant_s / dt_s)
-    m = filt.params.long_reference_s / dt_s
-    return h / (step_n**2 / r_n2 - h / m) * dt_s
+    h = filt.fast_threshold(dt_s) * level_scatter_factor(filt.params.noise_time_constant_s / dt_s)
+    return h * r_n2 / step_n**2 * dt_s
 
 
 def test_scan_threshold_solves_the_false_alarm_rate() -> None:
@@ -899,30 +895,25 @@ def test_scan_threshold_solves_the_false_alarm_rate() -> None:
 
 
 def test_the_false_alarm_rate_is_the_change_tests_one_knob() -> None:
-    """Each test's threshold is derived from half of ``false_alarms_per_h`` at the measured
-    spacing (the fast test over its windows [change_min_window, 1 s], the step test over its
-    own); a lower rate raises both; 0 turns both off and a 300 mN step is then not found."""
+    """The threshold is derived from ``false_alarms_per_h`` at the measured spacing (over
+    the windows [change_min_window, change_max_window_s]); a lower rate raises it; 0 turns
+    the test off and a 300 mN step is then not found."""
     rng = np.random.default_rng(4)
     filt = TensionFilter()
     p = filt.params
     before = filt.change_threshold  # no spacing yet: the ring's highest rate, the highest h
-    assert before == pytest.approx(scan_threshold(0.5 * p.false_alarms_per_h, 4, 512, 1 / 512))
+    dt_ring = p.change_max_window_s / p.ring_size
+    assert before == pytest.approx(scan_threshold(p.false_alarms_per_h, 4, 4096, dt_ring))
     for _ in range(400):
         filt.update(HOVER_TENSION_N + rng.normal(0.0, 0.03, 3), 0.01)
     h = filt.change_threshold
-    assert h == pytest.approx(scan_threshold(0.5 * p.false_alarms_per_h, 4, 100, 0.01), rel=0.01)
+    assert h == pytest.approx(scan_threshold(p.false_alarms_per_h, 4, 800, 0.01), rel=0.01)
     assert h < before
     assert h == pytest.approx(filt.fast_threshold(0.01), rel=0.01)
-    design = filt.step_test_design(2 * 0.03**2, 0.01)
-    assert design is not None
-    n_lo, n_hi, h_step = design
-    assert h_step == pytest.approx(scan_threshold(0.5 * p.false_alarms_per_h, n_lo, n_hi, 0.01))
     rarer = TensionFilter(TensionFilterParams(false_alarms_per_h=0.0005))
     assert rarer.fast_threshold(0.01) > h + 4.0
-    design_rarer = rarer.step_test_design(2 * 0.03**2, 0.01)
-    assert design_rarer is not None and design_rarer[2] > h_step + 4.0
     off = TensionFilter(TensionFilterParams(false_alarms_per_h=0.0))
-    assert off.change_threshold == math.inf and off.step_test_design(2 * 0.03**2, 0.01) is None
+    assert off.change_threshold == math.inf
     found = False
     for k in range(1500):
         step = 0.3 if k >= 1000 else 0.0
@@ -937,13 +928,13 @@ def test_a_step_in_strong_coloured_noise_is_found_near_the_information_limit(
 ) -> None:
     """30 mN at 1 and 2 m/s^2, AR(1) rho = 0.3, jittered ~94 Hz, after 40 s of hover.
 
-    The information limit (``step_detection_limit_s``, at the threshold as applied) is
-    ~1 s at 1 m/s^2 and ~5.6 s at 2 m/s^2: at the limit about half the trials are
-    detected, so the median delay is bounded by 1.3 times it, every detected trial by the
-    longest window (7.1 s) plus 1 s, and the estimate is then within the information of the
-    samples since the step. At 2 m/s^2 the 30 mN step's non-centrality over the longest
-    window is close to the threshold (which allows for the noise estimate's scatter,
-    ``level_scatter_factor``): one trial in eight may go unseen within the 9.5 s.
+    The information limit (``step_detection_limit_s``, at the threshold as applied, the
+    level before the step known) is ~1 s at 1 m/s^2 and ~4 s at 2 m/s^2: at the limit
+    about half the trials are detected, so the median delay is bounded by 1.3 times it
+    (the filter does not know the level before the step exactly, and the hover filter
+    takes a little of the step in before it is found), every detected trial by the longest
+    window (8 s) plus 1 s, and the estimate is then within the information of the samples
+    since the step. Every trial is detected within the 9.5 s.
     """
     sigma_n = MASS_KG * accel_noise
     r = sigma_n**2 * 1.3 / 0.7
@@ -970,15 +961,10 @@ def test_a_step_in_strong_coloured_noise_is_found_near_the_information_limit(
                     window_n = found / float(np.mean(dts))
                     assert np.linalg.norm(err) < 4.0 * math.sqrt(3 * r / window_n) + 3e-3
         delays.append(math.inf if found is None else found)
-    missed = sum(d == math.inf for d in delays)
-    assert missed <= (0 if accel_noise < 2.0 else 1), delays
+    assert all(d != math.inf for d in delays), delays
     limit_s = step_detection_limit_s(r, 0.030, float(np.mean(dts)))
     assert np.median(delays) <= 1.3 * limit_s, (np.round(delays, 2), limit_s)
-    delays = [d for d in delays if d != math.inf]
-    # n_max: the window in which a 20 mN step reaches the sizing non-centrality
-    design = TensionFilter().step_test_design(r, float(np.mean(dts)))
-    assert design is not None
-    longest_s = design[1] * float(np.mean(dts))
+    longest_s = TensionFilter().params.change_max_window_s
     assert max(delays) <= longest_s + 1.0, (np.round(delays, 2), longest_s)
 
 
@@ -986,8 +972,8 @@ def test_a_step_in_strong_coloured_noise_is_found_near_the_information_limit(
 def test_no_step_detection_in_minutes_of_coloured_noise(accel_noise: float, colour: str) -> None:
     """Six 60 s hovers per case, AR(1) rho = 0.3 or the simulator's mix, told 0.3 m/s^2.
 
-    The step test's windows reach 1.8 s (1 m/s^2) and 6 s (2 m/s^2) here; its false-alarm
-    rate with the noise known is ~0.02 and ~0.007 per hour, so any detection is a fault.
+    The change test's windows reach 8 s; its false-alarm rate with the noise known is
+    0.005 per hour, so any detection here is a fault.
     """
     sigma_n = MASS_KG * accel_noise
     largest = 0.0
@@ -1002,22 +988,6 @@ def test_no_step_detection_in_minutes_of_coloured_noise(accel_noise: float, colo
             assert not e.change_detected, f"false detection at {k} (seed {seed})"
             largest = max(largest, e.change_statistic)
     assert largest < filt.change_threshold
-
-
-def test_the_step_test_leaves_the_ideal_profile_as_it_was() -> None:
-    """At 0.3 m/s^2 and 250 Hz its longest window is a few samples: it stays off."""
-    rng = np.random.default_rng(77)
-    n = int(8.0 / DT_S)
-    truth = np.tile(HOVER_TENSION_N, (n, 1))
-    truth[n // 2 :] += [0.0, 0.030, 0.0]
-    truth[n // 2 + 500 :] += np.outer(np.arange(n - n // 2 - 500) * DT_S * 0.01, [1, 0, 0])
-    off = TensionFilterParams(long_max_window_s=1e-9)
-    est_on, _, det_on = run_filter(truth, np.random.default_rng(78))
-    est_off, _, det_off = run_filter(truth, np.random.default_rng(78), params=off)
-    assert det_on.any()
-    np.testing.assert_array_equal(est_on, est_off)
-    np.testing.assert_array_equal(det_on, det_off)
-    del rng
 
 
 def test_a_gap_keeps_the_state_and_a_change_during_it_is_found() -> None:

@@ -38,7 +38,8 @@ def test_change_test_equals_windows_summed_afresh(seed: int) -> None:
     """Over 8 000 innovations (the buffer moves ~20 times; regimes restart; drifts push
     the statistic over the threshold): wherever the certificate says no window can cross,
     none does, and the statistic, read at once or long after, and its window equal the
-    windows summed afresh, to 1e-9."""
+    windows summed afresh, to 1e-9, whatever the longest window in use (``cap_n``) was
+    set to meanwhile."""
     rng = np.random.default_rng(seed)
     size, n_min, threshold = 128, 4, 50.0
     test = ChangeTest(n_min, 1.0, size, threshold)
@@ -58,7 +59,9 @@ def test_change_test_equals_windows_summed_afresh(seed: int) -> None:
         history = history[-size:]
         dt_mean = float(rng.choice([0.004, 0.01, math.nan]))
         youth = youth_factor(int(rng.integers(1, 2000)))
-        n_valid = test.window_cap(dt_mean, len(history))
+        if rng.random() < 0.05:  # the filter sets the longest window from the noise
+            test.cap_n = int(rng.integers(1, size + 1))
+        n_valid = max(test.window_cap(dt_mean, len(history)), n_min) if len(history) >= n_min else 0
         if test.push(z, tuple(w.tolist())):
             certified += 1
             lazy = test.lazy_statistic(dt_mean, youth)
