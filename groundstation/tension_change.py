@@ -307,7 +307,7 @@ class ChangeTest:
     Each innovation nu is whitened by the Cholesky factor of S = P- + R
     (:meth:`groundstation.tension_kalman.DiagonalKalman.update`), so that at constant
     tension w ~ N(0, I). A step k samples ago shifts the mean of the last k whitened
-    innovations. For every window n in [``min_window``, min(history,
+    innovations. For every window n in [``min_window``, min(history, :attr:`cap_n`,
     ``max_window_s`` / dt_mean)] the statistic ``|S_n|^2 / n``, S_n the sum of the last n
     w, is chi-square with 3 dof under no change (when the noise is white; smaller for
     positively correlated noise on short windows, since R is the long-run variance). The
@@ -320,7 +320,8 @@ class ChangeTest:
     So once every window has been evaluated at a step t0 (:meth:`evaluate`), none can
     cross before C_t has moved from C_t0 by the smallest slack ``sigma = min_n (sqrt(threshold
     n) - |C_t0 - C_(t0-n)|)`` (triangle inequality); a window that starts later lowers sigma
-    by its own slack when it enters, measured from C_t0 too. While ``|C_t - C_t0| <=
+    by its own slack when it enters, measured from C_t0 too. The certificate covers every
+    window the ring holds, so the caps may move between evaluations. While ``|C_t - C_t0| <=
     sigma`` (:meth:`push` says so, a few float operations) no window can detect, and the
     statistic is left to :class:`LazyChangeStatistic`; otherwise (and whenever the ring's
     buffer moves, which rebases C) every window is evaluated again, exactly as before: one
@@ -328,7 +329,8 @@ class ChangeTest:
 
     Args:
         min_window: Shortest window, samples (a single outlier cannot trigger it).
-        max_window_s: Longest window, s.
+        max_window_s: Longest window, s (:attr:`cap_n`, set by the filter from the
+            noise, may lower it).
         size: Capacity of the history, samples.
         threshold: The detection threshold on the statistic, dimensionless.
     """
