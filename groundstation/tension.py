@@ -645,9 +645,9 @@ class TensionFilterParams:
             cannot trigger a detection).
         change_min_step_weight_ratio: The smallest step the change test's windows are
             sized for, as a fraction of the weight ``m·g`` (20 mN at 30 g), dimensionless:
-            its longest window is the one in which that step's samples reach the threshold,
-            ``h·r / step²`` samples (class docstring). With the noise variance r, which
-            scales as m², the windows do not depend on the mass.
+            its longest window is the one in which that step's samples reach the threshold
+            as applied, ``h·youth·r / step²`` samples (class docstring). With the noise
+            variance r, which scales as m², the windows do not depend on the mass.
         change_max_window_s: Cap on the change test's longest window, s: long enough for
             a 30 mN step at 2 m/s^2 of vibration, 100 Hz, to reach the threshold (~4 s at
             the information limit, class docstring).
@@ -949,13 +949,12 @@ class TensionFilter:
     plumb blend of the localization reads the filter's P) of it; with tau from q_w every
     seed was within 1.07x (docs/realistic_benchmark.md has the same on other seeds).
     Ramps and tugs are the drift adaptation's and the change test's, whose statistics do
-    not depend on tau (ramps on the ideal profile lag as at a fixed 6 s: 2.7 mN RMS at
-    10 mN/s against 2.0 mN at 2.5 s, docs/filter_benchmark.md). The price: a step the
-    tests have not (yet) found is taken in at the hover gain, so more slowly; a 30 mN tug
-    at 2 m/s^2, found within its 5 s in 5 of 8 seeds either way, had a seed-averaged t90
-    of 3.7 s with a fixed 6 s and beyond the 5 s now (at 1 m/s^2 2.3 s and 2.0 s;
-    docs/realistic_benchmark.md). ``hover_wander_n2_per_s`` = 0 gives a fixed tau (the
-    benchmarks' oracles, ``bench_realistic --fixed-tau``).
+    not depend on tau (a 10 mN/s ramp on the ideal profile: 2.3 mN RMS,
+    docs/filter_benchmark.md). The price: a step the test has not (yet) found is taken
+    in at the hover gain, so more slowly (a fixed 6 s against this on the realistic
+    simulator's tug: docs/realistic_benchmark.md, its reading).
+    ``hover_wander_n2_per_s`` = 0 gives a fixed tau (the benchmarks' oracles,
+    ``bench_realistic --fixed-tau``).
 
     **Tug detection (GLR on whitened innovations).** Each innovation nu is whitened by
     the Cholesky factor of S = P- + R, so that at constant tension w ~ N(0, I). A step
