@@ -651,8 +651,7 @@ class TensionFilterParams:
         change_max_window_s: Cap on the change test's longest window, s: long enough for
             a 30 mN step at 2 m/s^2 of vibration, 100 Hz, to reach the threshold (~4 s at
             the information limit, class docstring).
-        ring_size: Capacity of the change test's history, samples (8 s at 512 Hz; every
-            window it holds is certified, :class:`~groundstation.tension_change.ChangeTest`).
+        ring_size: Capacity of the change test's history, samples (8 s at 512 Hz).
         drift_time_constant_s: Time constant of the innovation-bias average that drives
             the drift adaptation, s.
         drift_threshold: Level of the normalised innovation-bias statistic (chi-square,
@@ -1508,7 +1507,7 @@ class TensionFilter:
                 r_max = r0 if r0 > r1 else r1
                 r_max = r_max if r_max > r2 else r2
                 n_cap = self._change.threshold * test_youth * r_max * self._inv_min_step_n2
-                self._change.cap_n = int(n_cap) if n_cap < p.ring_size else p.ring_size
+                self._change.set_cap(int(n_cap) if n_cap < p.ring_size else p.ring_size)
                 stat, window = self._change.evaluate(self._dt_mean, test_youth)
         change = stat > self._change.threshold
         if change:

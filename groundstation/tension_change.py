@@ -320,8 +320,9 @@ class ChangeTest:
     So once every window has been evaluated at a step t0 (:meth:`evaluate`), none can
     cross before C_t has moved from C_t0 by the smallest slack ``sigma = min_n (sqrt(threshold
     n) - |C_t0 - C_(t0-n)|)`` (triangle inequality); a window that starts later lowers sigma
-    by its own slack when it enters, measured from C_t0 too. The certificate covers every
-    window the ring holds, so the caps may move between evaluations. While ``|C_t - C_t0| <=
+    by its own slack when it enters, measured from C_t0 too. The certificate covers the
+    windows within the cap in force (:attr:`cap_n`; a longer one only grows, and a larger cap
+    drops the certificate, :meth:`set_cap`), so its cost follows the cap. While ``|C_t - C_t0| <=
     sigma`` (:meth:`push` says so, a few float operations) no window can detect, and the
     statistic is left to :class:`LazyChangeStatistic`; otherwise (and whenever the ring's
     buffer moves, which rebases C) every window is evaluated again, exactly as before: one
@@ -340,8 +341,9 @@ class ChangeTest:
         self.max_window_s = max_window_s
         self.cap_n = size
         """The longest window in use, samples (within ``max_window_s``): set by the filter
-        from the noise (``TensionFilter``: where the smallest step of interest reaches the
-        threshold)."""
+        from the noise (:meth:`set_cap`; ``TensionFilter``: where the smallest step of
+        interest reaches the threshold)."""
+        self._cert_n = size  # the longest window the certificate covers
         self.ring = _Ring(size)
         self._n = np.arange(min_window, size + 1, dtype=np.float64)  # windows min_window..size
         self.inv_n = 1.0 / self._n
@@ -358,12 +360,20 @@ class ChangeTest:
         self._radius_min = float(self._radius[0])
         self._sigma = -1.0  # the slack; < 0: no certificate
 
+    def set_cap(self, n: int) -> None:
+        """The longest window in use from now on, samples; a cap beyond the windows the
+        certificate covers drops it (the next step evaluates every window)."""
+        if n > self._cert_n:
+            self._sigma = -1.0
+        self.cap_n = n
+
     def clear(self) -> None:
         """Forgets the windows (a new regime): none can detect until they fill again."""
         self.ring.count = 0
         self._anchor = self.ring.c
         self._moves = self.ring.moves
         self._sigma = math.inf
+        self._cert_n = self.ring.size  # every window enters at min_window, under push
 
     def push(
         self,
@@ -433,10 +443,14 @@ class ChangeTest:
         self._moves = ring.moves
         if ring.count < n_min:
             self._sigma = math.inf
+            self._cert_n = ring.size
             return 0.0, 0
         n_valid = max(self.window_cap(dt_mean_s, ring.count), n_min)
-        # Every window the ring holds (those beyond the caps may come into them).
-        ss = _squared_sums(ring.cum, ring.pos, n_min, ring.count)
+        # Every window within the cap in force (:attr:`cap_n`): a longer one only grows
+        # until the next evaluation, and a larger cap (set_cap) drops the certificate.
+        n_cert = max(min(ring.count, self.cap_n), n_min)
+        self._cert_n = ring.size if n_cert >= ring.count else n_cert
+        ss = _squared_sums(ring.cum, ring.pos, n_min, n_cert)
         self._sigma = float((self._radius[: len(ss)] - np.sqrt(ss)).min())
         return _best_window(ss[: n_valid - n_min + 1], n_min, self.inv_n, youth)
 
