@@ -288,7 +288,7 @@ def _ground_run(profile: str, scenario: str, seconds: float) -> dict[str, float 
 def jobs(names: list[str]) -> list[tuple[str, str, float]]:
     """Every (family, row, factor) to run, the baselines first; a switch once. Estimator
     rows run twice: at 1 m/s² with NanoBench and the reel tug (``estimator``), and at the
-    realistic simulator's 2 m/s² (``noisy``), where the step test works."""
+    realistic simulator's 2 m/s² (``noisy``), where the change test needs its long windows."""
     return [
         ("estimator", "baseline", 1.0),
         ("contact", "baseline", 1.0),
