@@ -37,10 +37,8 @@ def main(argv: list[str] | None = None) -> int:
     for level in (float(x) for x in args.levels.split(",")):
         g = br.tug(level, seeds)
         first = ", ".join("-" if x is None else f"{x:.2f}" for x in g["first_detection_s"])
-        t90 = "not reached" if g["t90_s"] is None else f"{g['t90_s']:.2f} s"
-        settle = "not reached" if g["settle_median_s"] is None else f"{g['settle_median_s']:.2f} s"
         print(
-            f"| {level:g} m/s^2 | {t90} | {settle} | "
+            f"| {level:g} m/s^2 | {br._s(g['t90_s'])} | {br._s(g['settle_median_s'])} | "
             f"{sum(x is not None for x in g['first_detection_s'])} of {len(seeds)} "
             f"| {first} |",
             flush=True,
