@@ -99,20 +99,27 @@ class DriftAdaptation:
         # Var(b) = (1 - beta)^2 Var(b) + beta^2 per axis, for white unit w.
         self.bias_var = (1.0 - beta) ** 2 * self.bias_var + beta * beta
 
-    def process_noise_scale(self, dt: float, tau: float, youth: float) -> float:
+    def process_noise_scale(
+        self, dt: float, tau: float, youth: float, evidence: bool = True
+    ) -> float:
         """The factor on the hover process noise for this step, >= 1.
 
         Args:
             dt: Time since the previous step, s.
             tau: The hover time constant, s.
             youth: The change test's youth factor (>= 1), dividing D.
+            evidence: Whether the innovation bias is evidence of a moving tension this
+                step. False while the drone manoeuvres (the caller's hover test says so):
+                then the bias is the observation model's error as much as the tension's
+                move, and the scale only decays.
 
         Returns:
-            ``max((D / threshold)^exponent, decayed previous scale)``, at most
-            ``(tau / min_time_constant_s)^2`` (Q scales as 1 / tau^2).
+            ``max((D / threshold)^exponent, decayed previous scale)`` (the first term 1
+            without ``evidence``), at most ``(tau / min_time_constant_s)^2`` (Q scales as
+            1 / tau^2).
         """
         inst = 1.0
-        if self.bias_var > 0.0:
+        if evidence and self.bias_var > 0.0:
             b0, b1, b2 = self.bias
             d = ((b0 * b0 + b1 * b1) + b2 * b2) / (self.bias_var * youth)  # D = |b|^2 / Var(b)
             ratio = d / self.threshold
