@@ -111,15 +111,20 @@ class DriftAdaptation:
             evidence: Whether the innovation bias is evidence of a moving tension this
                 step. False while the drone manoeuvres (the caller's hover test says so):
                 then the bias is the observation model's error as much as the tension's
-                move, and the scale only decays.
+                move, so the hover's process noise applies (1 is returned) while the scale
+                raised before decays, unused.
 
         Returns:
-            ``max((D / threshold)^exponent, decayed previous scale)`` (the first term 1
-            without ``evidence``), at most ``(tau / min_time_constant_s)^2`` (Q scales as
-            1 / tau^2).
+            ``max((D / threshold)^exponent, decayed previous scale)``, at most
+            ``(tau / min_time_constant_s)^2`` (Q scales as 1 / tau^2); 1 without
+            ``evidence``.
         """
+        if not evidence:
+            relaxed = relaxed_scale(self.scale, dt, self.memory_s)
+            self.scale = relaxed if relaxed >= 1.0 + SCALE_SNAP else 1.0
+            return 1.0
         inst = 1.0
-        if evidence and self.bias_var > 0.0:
+        if self.bias_var > 0.0:
             b0, b1, b2 = self.bias
             d = ((b0 * b0 + b1 * b1) + b2 * b2) / (self.bias_var * youth)  # D = |b|^2 / Var(b)
             ratio = d / self.threshold
