@@ -67,23 +67,25 @@ trusted, and a touch-down is noticed where it can be:
 
   Why the climb's bound is learnt: the leaky speed's noise is the vibration's too. On the
   floor at or above the thrust ratio the drone does not move, so its vertical acceleration
-  is noise: its level ``s_d`` (half the mean square of successive differences, blind to a
-  thrust ramp) is learnt there over ``noise_time_constant_s``, and the speed's variance is
-  ``kappa s_d (1 + 3 sqrt(2 / n)) sum dt_k^2 (1 - dt/tau)^(2 j)``: ``kappa`` =
-  ``noise_long_run_ratio`` (3: the long-run variance over ``s_d``; 1 for white noise, 2.65
-  for an AR(1) with lag-1 0.3 as on real flights, 2.5 in the realistic simulator), the
-  youth factor for n differences. At 2 m/s^2 and ~100 Hz that is 0.12-0.14 m/s with the
-  0.25 s leak, so a climb counts above ~0.5 m/s (``climb_sigmas`` 4); the fixed 0.1 m/s of
-  before was about one standard deviation and fired on the floor in 10 of the 20
-  take-offs. On the floor at hover thrust the leaky speed reached 0.27 m/s at most; in
-  40 x 59 s at hover thrust on the floor with that vibration (synthetic, tests/
-  test_contact.py) no climb was seen at 4 sigma (5 at 3.5), nor in 6 x 58 s of the
-  realistic simulator. The price: a climb alone stands out late under 2 m/s^2 (at 0.25 g,
-  10-80 cm up); the take-offs above were found by their thrust surge at 1.3-1.7 cm. At the
-  ideal profile's 0.3 m/s^2 and 250 Hz the learnt bound is ~0.05 m/s and the fixed 0.1 m/s
-  applies. The leak bounds what a bias left over can build up to (0.1 m/s^2 gives
-  0.025 m/s); the load bound keeps a large bias (vibration at spool-up) from lifting a
-  drone that the floor still visibly carries.
+  is noise, and the tension filter measures it there (``TensionFilter.learn_noise``: the
+  observation's vertical long-run variance r, i.e. its level from successive differences,
+  blind to a thrust ramp, times its shape kappa, measured; over the mass squared, an
+  acceleration's) with its allowance for a young or scattered estimate
+  (``TensionFilter.vertical_noise_var_n2``); the speed's variance is ``r / m^2 * sum
+  dt_k^2 (1 - dt/tau)^(2 j)``. (This stage had a measure of its own, over 1 s, with kappa
+  set to 3 by hand: one measure of the vibration now.) At 2 m/s^2 and ~100 Hz that is
+  0.12-0.14 m/s with the 0.25 s leak, so a climb counts above ~0.5 m/s (``climb_sigmas``
+  4); the fixed 0.1 m/s of before was about one standard deviation and fired on the floor
+  in 10 of the 20 take-offs. On the floor at hover thrust the leaky speed reached 0.27 m/s
+  at most; in 40 x 59 s at hover thrust on the floor with that vibration (synthetic,
+  measured with the stage's own measure) no climb was seen at 4 sigma (5 at 3.5), nor in 6
+  x 58 s of the realistic simulator; with the filter's, none in tests/test_contact.py's 3
+  x 60 s. The price: a climb alone stands out late under 2 m/s^2 (at 0.25 g, 10-80 cm up);
+  the take-offs above were found by their thrust surge at 1.3-1.7 cm. At the ideal
+  profile's 0.3 m/s^2 and 250 Hz the learnt bound is ~0.05 m/s and the fixed 0.1 m/s
+  applies. The leak bounds what a bias left over can build up to (0.1 m/s^2 gives 0.025
+  m/s); the load bound keeps a large bias (vibration at spool-up) from lifting a drone
+  that the floor still visibly carries.
 
   With both, on those 20 take-offs: calibrated, the floor is found to carry nothing at
   hover thrust, 1.5 s before the drone leaves it (the tether on the floor pulls it down
@@ -127,7 +129,6 @@ from typing import Literal
 
 from groundstation.attitude import GRAVITY_MPS2, Rows, rows_from_quat_wxyz
 from groundstation.frozen import evolve
-from groundstation.tension_change import YOUTH_SIGMAS
 
 __all__ = [
     "ContactParams",
@@ -174,9 +175,6 @@ class ContactParams:
             stays below this fraction of the weight, dimensionless ...
         push_hold_s: ... for this long, s.
         push_time_constant_s: Smoothing of the floor load, s.
-        noise_time_constant_s: Memory of the vibration level learnt on the floor, s.
-        noise_long_run_ratio: Long-run variance of the vibration over half the mean square
-            of its successive differences (1: white), dimensionless.
         bias_time_constant_s: Averaging time of the vertical accelerometer bias at rest, s.
         accel_time_constant_s: Smoothing of the vertical acceleration that tells a rest on
             the floor (~0) from a fall (below ``-(1 - ground_thrust_ratio) g``), s.
@@ -195,8 +193,6 @@ class ContactParams:
     push_free_weight_ratio: float = 0.034
     push_hold_s: float = 0.1
     push_time_constant_s: float = 0.1
-    noise_time_constant_s: float = 1.0
-    noise_long_run_ratio: float = 3.0
     bias_time_constant_s: float = 1.0
     accel_time_constant_s: float = 0.05
     rest_hold_s: float = 0.2
@@ -219,8 +215,6 @@ class ContactParams:
             "push_free_weight_ratio",
             "push_hold_s",
             "push_time_constant_s",
-            "noise_time_constant_s",
-            "noise_long_run_ratio",
             "bias_time_constant_s",
             "accel_time_constant_s",
             "rest_hold_s",
@@ -248,10 +242,6 @@ class ContactState:
             (``sum_k dt_k^2 (1 - leak)^(2 j)``), s^2.
         push_n: Smoothed floor load ``m g - F`` while on the ground, N, or None.
         push_free_s: How long ``push_n`` has been below the push limit, s.
-        accel_prev_mps2: Previous vertical acceleration on the floor (for the vibration), m/s^2.
-        noise_mps4: Half the mean square of successive differences of the vertical
-            acceleration on the floor at or above the thrust ratio, (m/s^2)^2, or None.
-        noise_samples: Differences in ``noise_mps4``.
         rest_height_m: Motion-capture height while resting, m, or None.
         rest_seen: The drone has once been disarmed or seen at rest on the ground (below
             the thrust ratio, held still); before that an armed drone at hover thrust is
@@ -270,9 +260,6 @@ class ContactState:
     speed_gain_s2: float = 0.0
     push_n: float | None = None
     push_free_s: float = 0.0
-    accel_prev_mps2: float | None = None
-    noise_mps4: float | None = None
-    noise_samples: int = 0
     rest_height_m: float | None = None
     rest_seen: bool = False
     accel_smooth_mps2: float | None = None
@@ -332,6 +319,7 @@ def contact_step(
     height_m: float | None,
     floor_z_m: float = -math.inf,
     gravity_mps2: float = GRAVITY_MPS2,
+    vertical_noise_var_mps4: float | None = None,
 ) -> ContactState:
     """One sample of the ground/air state machine (module docstring).
 
@@ -347,6 +335,10 @@ def contact_step(
         height_m: Motion-capture height (world z) of the drone, m, or None.
         floor_z_m: Floor height, m (``-inf``: no floor, the resting height alone counts).
         gravity_mps2: Magnitude of gravity, m/s^2.
+        vertical_noise_var_mps4: The vertical acceleration's noise, its long-run variance
+            with the allowance for its estimate's error, (m/s^2)^2: the tension filter's
+            (``TensionFilter.vertical_noise_var_n2`` over the mass squared). None: not
+            measured yet, no climb is judged.
 
     Returns:
         The next state; ``on_ground`` says whether the floor carries the drone.
@@ -432,15 +424,6 @@ def contact_step(
         # The floor cannot pull the drone down: whatever said "ground" no longer holds.
         return evolve(state, on_ground=False, reason="falling", climb_speed_mps=0.0)
     finite_accel = math.isfinite(accel)
-    # The vibration: the drone does not move, so its vertical acceleration is noise.
-    # s_d = E[(a_k - a_(k-1))^2] / 2, blind to a slowly moving mean (a thrust ramp).
-    noise, n_noise = state.noise_mps4, state.noise_samples
-    prev = state.accel_prev_mps2
-    if finite_accel and prev is not None and dt > 0.0:
-        n_noise += 1
-        w = max(1.0 / n_noise, min(1.0, dt / params.noise_time_constant_s))
-        d2 = 0.5 * (accel - prev) ** 2
-        noise = d2 if noise is None else noise + w * (d2 - noise)
     speed, speed_gain = state.climb_speed_mps, state.speed_gain_s2
     if finite_accel and dt > 0.0:
         a = accel - (state.accel_bias_z_mps2 or 0.0)
@@ -448,12 +431,10 @@ def contact_step(
         speed = keep * speed + a * dt  # v_k = (1 - dt/tau) v_(k-1) + a_k dt
         speed_gain = keep * keep * speed_gain + dt * dt  # Var(v) / Var(a), white a
     climb_limit = math.inf  # no climb is judged before the vibration is known
-    if noise is not None and n_noise > 0:
-        # Var(a) = kappa s_d (the long-run variance), times a mean of n squares' youth
-        # factor 1 + 3 sqrt(2 / n) (its relative standard deviation is sqrt(2 / n);
-        # tension_change.YOUTH_SIGMAS, the change test's bound).
-        youth = 1.0 + YOUTH_SIGMAS * math.sqrt(2.0 / n_noise)
-        var_a = params.noise_long_run_ratio * noise * youth
+    var_a = vertical_noise_var_mps4
+    if var_a is not None and math.isfinite(var_a):
+        # The floor's vibration as the tension filter measures it (the drone does not
+        # move, its vertical acceleration is noise): the long-run variance, allowed for.
         climb_limit = max(
             params.liftoff_speed_mps, params.climb_sigmas * math.sqrt(var_a * speed_gain)
         )
@@ -481,7 +462,4 @@ def contact_step(
         speed_gain_s2=speed_gain,
         push_n=push,
         push_free_s=free_s,
-        accel_prev_mps2=accel if finite_accel else None,
-        noise_mps4=noise,
-        noise_samples=n_noise,
     )

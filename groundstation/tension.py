@@ -1312,6 +1312,32 @@ class TensionFilter:
             return self._prior_var, (0.0, 0.0, 0.0), self._prior_var
         return self._noise.model()
 
+    def vertical_noise_var_n2(self) -> float | None:
+        """The observation's vertical noise as a test of it must allow for, N^2, or None
+        before the noise estimate has taken a difference.
+
+        The long-run variance r of the world z axis (what any average of the observation
+        suffers) times the change test's allowance for the estimate's own error: the youth
+        factor while it is young, at least the warm estimate's scatter
+        (:func:`~groundstation.tension_change.level_scatter_factor`) once the spacing is
+        known. The contact stage's climb test reads it on the floor, where
+        :meth:`learn_noise` measures the spinning propellers' vibration: one measure of
+        the vibration, not one per stage. With ``estimate_noise=False`` the prior, as is.
+        """
+        p = self.params
+        if not p.estimate_noise:
+            return self._prior_var[2]
+        noise = self._noise
+        k = noise.samples
+        if k < 1:
+            return None
+        factor = youth_factor(k)
+        spacing = self._dt_mean
+        if spacing == spacing and spacing > 0.0:
+            floor = level_scatter_factor(p.noise_time_constant_s / spacing)
+            factor = floor if floor > factor else factor
+        return noise.long_run()[2] * factor
+
     # -- steps -------------------------------------------------------------------------
 
     def update(

@@ -16,6 +16,7 @@ from groundstation.contact import (
     contact_step,
     vertical_accel_mps2,
 )
+from groundstation.tension import TensionFilter, TensionFilterParams
 
 MASS_KG = 0.030
 G = 9.81
@@ -31,6 +32,30 @@ def test_import_does_not_pull_io_libraries() -> None:
         "assert not bad, bad\n"
     )
     subprocess.run([sys.executable, "-c", code], check=True)
+
+
+class _Vibration:
+    """The floor's vibration as the pipeline hands it to ``contact_step``: the tension
+    filter's measure (``TensionFilter.learn_noise`` on the observation's vertical axis,
+    ``m (a + g) - F``, while on the ground, armed, at or above the thrust ratio), read on
+    the ground (``vertical_noise_var_n2`` over the mass squared)."""
+
+    def __init__(self) -> None:
+        self.filt = TensionFilter(TensionFilterParams(mass_kg=MASS_KG))
+
+    def var(self, state: ContactState) -> float | None:
+        v = self.filt.vertical_noise_var_n2() if state.on_ground else None
+        return None if v is None else v / (MASS_KG * MASS_KG)
+
+    def learn(
+        self, state: ContactState, *, armed: bool, thrust_n: float, accel_z: float, dt_s: float
+    ) -> None:
+        ratio = DEFAULT.ground_thrust_ratio
+        if state.on_ground and armed and thrust_n >= ratio * WEIGHT_N and math.isfinite(accel_z):
+            # The filter pools the noise's shape over the three axes: this 1-D drone's
+            # vertical observation stands for each (a real drone's vibrates on all three).
+            y = MASS_KG * (accel_z + G) - thrust_n
+            self.filt.learn_noise((y, y, y), dt_s)
 
 
 def _step(
@@ -117,6 +142,7 @@ def _spool_up(
     reading off by ``thrust_read_ratio``."""
     rng = np.random.default_rng(seed)
     state = ContactState()
+    vib = _Vibration()
     z = v = 0.0
     out = []
     for k in range(round(seconds / DT_S)):
@@ -140,7 +166,9 @@ def _spool_up(
             vertical_accel_mps2=f_z - G,
             height_m=None,
             floor_z_m=0.0,
+            vertical_noise_var_mps4=vib.var(state),
         )
+        vib.learn(state, armed=armed, thrust_n=read, accel_z=f_z - G, dt_s=DT_S)
         out.append((t, push, z, state.on_ground))
     return out
 
@@ -216,6 +244,7 @@ def _vibrating(
     (t, z m, on_ground, reason) per sample."""
     rng = np.random.default_rng(seed)
     state = ContactState()
+    vib = _Vibration()
     z = v = t = 0.0
     coloured = np.zeros(1)
     beta = 0.2 / 0.6
@@ -242,7 +271,10 @@ def _vibrating(
             vertical_accel_mps2=a + noise,
             height_m=None,
             floor_z_m=0.0,
+            vertical_noise_var_mps4=vib.var(state),
         )
+        read = thrust * thrust_read_ratio
+        vib.learn(state, armed=armed, thrust_n=read, accel_z=a + noise, dt_s=dt)
         out.append((t, z, state.on_ground, state.reason))
     return out
 
@@ -335,6 +367,7 @@ def _fly_1d(
     on_ground, reason)."""
     rng = np.random.default_rng(seed)
     s = state or ContactState()
+    vib = _Vibration()
     z, v, t, thrust = z0_m, 0.0, 0.0, float(thrust_cmd_of_t(0.0, z0_m, 0.0))  # type: ignore[operator]
     coloured = 0.0
     out = []
@@ -366,7 +399,9 @@ def _fly_1d(
             vertical_accel_mps2=a + noise,
             height_m=z + 0.04 if height else None,
             floor_z_m=0.0,
+            vertical_noise_var_mps4=vib.var(s),
         )
+        vib.learn(s, armed=True, thrust_n=cmd, accel_z=a + noise, dt_s=dt)
         out.append((t, z, cmd / WEIGHT_N, s.on_ground, s.reason))
     return out
 

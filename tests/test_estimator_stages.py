@@ -248,6 +248,35 @@ def test_contact_stage_hands_contact_step_this_messages_evidence() -> None:
     assert got.state == want and got.on_ground == want.on_ground
 
 
+def test_contact_stage_judges_a_climb_against_the_vibration_it_is_given() -> None:
+    """Without motion capture a climb is judged against the vertical vibration the stage is
+    handed (the tension filter's measure, DroneEstimator.front): 2 m/s^2 up for 0.3 s on
+    the floor at 0.9 of the weight is a climb against a quiet floor, none against a loud
+    one, and none before any vibration is known."""
+    params = contact_mod.ContactParams()
+    ends = {}
+    for label, var in (("quiet", 1e-4), ("loud", 100.0), ("unknown", None)):
+        state = contact_mod.ContactState(rest_seen=True)
+        for k in range(75):
+            msg = _telemetry(seq=k, stamp_s=0.004 * k, accel_mps2=(0.0, 0.0, G + 2.0))
+            state, _ = contact_decide(
+                state,
+                params,
+                msg,
+                thrust_n=0.9 * MASS_KG * G,
+                mass_kg=MASS_KG,
+                dt_s=0.004,
+                floor_z_m=0.0,
+                rotation_rows_world_body=_rows(msg),
+                vertical_noise_var_mps4=var,
+            )
+            if not state.on_ground:
+                break
+        ends[label] = (state.on_ground, state.reason)
+    assert ends["quiet"] == (False, "climbing")
+    assert ends["loud"][0] and ends["unknown"][0]
+
+
 def test_contact_stage_a_disarmed_drone_is_on_the_ground_and_a_dip_is_not() -> None:
     params = contact_mod.ContactParams()
     state = contact_mod.ContactState()

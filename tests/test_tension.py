@@ -740,6 +740,29 @@ def test_a_manoeuvre_is_no_evidence_for_the_drift_adaptation() -> None:
     assert np.abs(np.array(est_held) - truth)[switch:].max() < 10e-3
 
 
+def test_the_vertical_noise_for_the_contact_stage() -> None:
+    """``vertical_noise_var_n2``: None before a difference; then the z axis' long-run
+    variance times the change test's allowance (the youth factor, at least the warm
+    estimate's scatter), measured on the floor by learn_noise; the prior without the
+    measurement."""
+    rng = np.random.default_rng(5)
+    filt = TensionFilter()
+    assert filt.vertical_noise_var_n2() is None
+    for k in range(3000):
+        y = np.array([0.0, 0.0, -0.3]) + rng.normal(0.0, 0.03, 3)  # 1 m/s^2 on 30 g, white
+        filt.learn_noise(y, DT_S if k else 0.0)
+        if k == 10:
+            young = filt.vertical_noise_var_n2()
+    warm = filt.vertical_noise_var_n2()
+    r_z = filt.noise_model()[2][2]
+    assert young is not None and warm is not None
+    assert warm >= r_z and warm == pytest.approx(r_z * 1.2, rel=0.2)  # the scatter allowance
+    assert young > 1.5 * warm  # youth: 1 + 3 sqrt(2 / 10) at 10 differences
+    assert warm == pytest.approx(0.03**2, rel=0.35)  # white: r = the per-sample variance
+    fixed = TensionFilter(TensionFilterParams(estimate_noise=False, accel_noise_mps2=0.5))
+    assert fixed.vertical_noise_var_n2() == fixed.noise_model()[2][2]  # the prior, as is
+
+
 def test_irregular_dt_and_gaps_do_not_diverge() -> None:
     rng = np.random.default_rng(40)
     n = int(20.0 / DT_S)

@@ -47,6 +47,7 @@ def contact_decide(
     dt_s: float,
     floor_z_m: float,
     rotation_rows_world_body: Rows,
+    vertical_noise_var_mps4: float | None = None,
 ) -> ContactOut:
     """One message's evidence into the contact state (module doc).
 
@@ -59,6 +60,8 @@ def contact_decide(
         dt_s: time since the previous accepted message, s.
         floor_z_m: the floor's height, m.
         rotation_rows_world_body: the message's attitude as ``R_world_body`` rows.
+        vertical_noise_var_mps4: the vertical vibration the tension filter measured,
+            (m/s^2)^2 (``contact_step``'s), or None.
     """
     position = msg.position_m
     new = contact_mod.contact_step(
@@ -73,5 +76,6 @@ def contact_decide(
         ),
         height_m=position[2] if position is not None else None,
         floor_z_m=floor_z_m,
+        vertical_noise_var_mps4=vertical_noise_var_mps4,
     )
     return ContactOut(new, new.on_ground or not msg.armed)

@@ -436,15 +436,20 @@ class DroneEstimator:
         # Ground or air, with hysteresis: between ground_thrust_ratio and the weight the
         # floor may still carry the drone (its push is no tension) until lift-off is seen.
         obs = observed.observation
+        mass_kg = self.params.drone.mass_kg
+        # The floor's vibration for the climb test: the tension filter's measure of it
+        # (read on the ground only, where the test runs).
+        noise_n2 = self.filter.vertical_noise_var_n2() if self.contact.on_ground else None
         contact, on_ground = contact_decide(
             self.contact,
             self.contact_params,
             msg,
             thrust_n=obs.thrust_n,  # calibrated
-            mass_kg=self.params.drone.mass_kg,
+            mass_kg=mass_kg,
             dt_s=dt_s,
             floor_z_m=self.params.base.floor_z_m,
             rotation_rows_world_body=observed.rotation_rows_world_body,
+            vertical_noise_var_mps4=None if noise_n2 is None else noise_n2 / (mass_kg * mass_kg),
         )
         self.contact = contact
         self._check_battery(msg.vbat_v, on_ground, now_s)
