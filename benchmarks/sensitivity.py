@@ -1,6 +1,9 @@
 """Which hand-set constants the figures depend on: each one at half and at twice its value.
 
-``python -m benchmarks.sensitivity [--shard I/N] [--work DIR] [--out docs/sensitivity.md]``
+``python -m benchmarks.sensitivity [--shard I/N] [--work DIR] [--out docs/sensitivity.md]``;
+``python -m benchmarks.sensitivity --variant NAME=FACTOR [--family F]``: one row at one
+factor (or ``baseline``), its figures printed as JSON; with ``--run MODULE ARGS`` another
+benchmark run under that change (its ``--only`` modes print and write no page).
 
 The issue that asks for one estimator with its parameters from data counts the tunables on
 the per-message path (docs/constants.md: the one table). Before a value is replaced by a fit
@@ -48,6 +51,7 @@ import importlib
 import json
 import math
 import re
+import runpy
 import statistics
 import sys
 import time
@@ -523,6 +527,22 @@ def render(work: Path, out: Path) -> None:
     print(f"wrote {out}")
 
 
+def one_variant(
+    name: str, factor: float, work: Path, data: Path, family: str | None = None
+) -> dict[str, object]:
+    """One row at one factor (``baseline``: none), its figures, nothing kept."""
+    undo = [] if name == "baseline" else patch(name, factor)
+    try:
+        figures = Figures(work, data)
+        out: dict[str, object] = {"name": name, "factor": factor, "commit": git_commit()}
+        for fam in (family,) if family else ("estimator", "noisy"):
+            out[fam] = getattr(figures, fam)()
+        return out
+    finally:
+        for step in reversed(undo):
+            step()
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--shard", default="0/1", help="I/N: run every N-th variant from I (0/1)")
@@ -531,11 +551,38 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", help="write the markdown page here (after the run)")
     ap.add_argument("--render", action="store_true", help="only write the page from --work")
     ap.add_argument("--family", choices=("estimator", "noisy", "contact"), help="only these")
+    ap.add_argument(
+        "--variant",
+        metavar="NAME=FACTOR",
+        help="only print one variant's figures as JSON (NAME a docs/constants.md row, or "
+        "'baseline'; FACTOR any, e.g. TensionFilterParams.drift_threshold=1e9 for the drift "
+        "adaptation off): the families estimator and noisy, or --family's",
+    )
+    ap.add_argument(
+        "--run",
+        nargs=argparse.REMAINDER,
+        metavar="MODULE ARGS",
+        help="with --variant: run this benchmark module with these arguments under the "
+        "change instead (e.g. --run benchmarks.bench_realistic --only tug,move --tug-seeds 8)",
+    )
     args = ap.parse_args(argv)
     from benchmarks import nanobench_cli as nc
 
     work = Path(args.work)
     work.mkdir(parents=True, exist_ok=True)
+    if args.variant and args.run:
+        name, _, factor = args.variant.partition("=")
+        if name != "baseline":
+            patch(name, float(factor or 1.0))
+        module, *rest = args.run
+        sys.argv = [module, *rest]
+        runpy.run_module(module, run_name="__main__")
+        return 0
+    if args.variant:
+        name, _, factor = args.variant.partition("=")
+        data = Path(args.data) if args.data else nc.DATA
+        print(json.dumps(one_variant(name, float(factor or 1.0), work, data, args.family)))
+        return 0
     if not args.render:
         data = Path(args.data) if args.data else nc.DATA
         shard, shards = (int(x) for x in args.shard.split("/"))
