@@ -665,10 +665,6 @@ class TensionFilterParams:
             the drone hovers (``update(hover_model_world_n=...)``).
         hover_velocity_time_s: T_c, that velocity's correlation time, s: ``v = 0`` is
             observed with variance ``σ_v²·T_c/dt`` per sample.
-        model_std_n: The observation model's own error per world axis, N, slowly varying
-            (``[calibration] tension_model_std_n``: what ``calibrate`` measured its
-            constants to leave): the drift adaptation's statistic allows for it
-            (:class:`~groundstation.tension_drift.DriftAdaptation`). (0, 0, 0): none known.
     """
 
     mass_kg: float = 0.030
@@ -692,7 +688,6 @@ class TensionFilterParams:
     drift_memory_s: float = 1.0
     hover_velocity_std_mps: float = 0.02
     hover_velocity_time_s: float = 0.5
-    model_std_n: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     def __post_init__(self) -> None:
         positive = {
@@ -720,9 +715,6 @@ class TensionFilterParams:
             "hover_wander_n2_per_s": self.hover_wander_n2_per_s,
             "drift_exponent": self.drift_exponent,
             "drift_memory_s": self.drift_memory_s,
-            "model_std_n[0]": self.model_std_n[0],
-            "model_std_n[1]": self.model_std_n[1],
-            "model_std_n[2]": self.model_std_n[2],
         }
         for name, value in non_negative.items():
             if not (math.isfinite(value) and value >= 0.0):
@@ -1052,16 +1044,15 @@ class TensionFilter:
     ``drift_threshold`` = 9 the process noise is scaled by (D / 9)^3, down to a time
     constant of ``drift_min_time_constant_s`` = 0.1 s, which shortens tau until the lag
     falls back to the threshold; the scale then decays with ``drift_memory_s`` = 1 s.
-    A bias is evidence of a moving tension only beyond what the observation model's own
-    error explains: with ``model_std_n`` (``[calibration] tension_model_std_n``, what
-    ``calibrate`` measured its constants to leave per axis, slowly varying: a day's
-    thrust offset, the battery model's misfit, the drag) the null variance of each axis'
-    b carries ``model_std^2 / S`` (:class:`~groundstation.tension_drift.DriftAdaptation`).
-    On real untethered flights (zero tension, NanoBench: trajectories) the raised noise
-    otherwise published that error: median of flight medians 6.7 mN with the bare
-    statistic, 4.8 mN with the calibration's error in its null (docs/estimator_design.md,
-    *The drift adaptation weighs the calibration's own error*); with no error known
-    (calibration = truth, the simulators) nothing changes.
+    The bias is evidence of a moving tension only where the observation model holds: while
+    the caller's hover test says the drone manoeuvres (``update(manoeuvring=True)``, the
+    pipeline's slow stage) the bias is as much the model's error (drag, the thrust's and
+    the attitude's dynamics) and the hover's Q applies. On real untethered flights (zero
+    tension, NanoBench: trajectories, quasi-static 1-5 % of the time) the raised noise
+    published that error: median of flight medians 6.7 mN with the adaptation throughout,
+    4.8 mN with it held to hovers and the filter alone (docs/estimator_design.md, *The
+    drift adaptation where the model holds*); the realistic simulator's hover and tugs,
+    which happen in a hover, are unchanged.
 
     **Gaps and rates.** A step longer than :data:`GAP_S` = 0.25 s breaks the noise model's
     sample chain and clears the change test's windows (a window across a gap mixes two
@@ -1356,6 +1347,7 @@ class TensionFilter:
         quat_wxyz: ArrayLike | None = None,
         thrust_axis_world: tuple[float, float, float] | None = None,
         hover_model_world_n: Sequence[float] | None = None,
+        manoeuvring: bool = False,
     ) -> TensionEstimate:
         """One filter step with an observation (``eq:sysk1``, ``eq:sysk2``).
 
@@ -1379,6 +1371,11 @@ class TensionFilter:
                 world frame, N, while the drone hovers (None: it does not): the velocity
                 joins the state (:class:`~groundstation.tension_kalman.HoverVelocity`) and
                 ``v = 0`` is observed beside the tension.
+            manoeuvring: The caller's hover test ran and says the drone is not hovering
+                (the slow stage's quasi-static test): the drift adaptation takes no
+                evidence from the innovations this step and the hover's process noise
+                applies. False where no test runs (the filter alone): the adaptation as
+                always.
 
         Returns:
             The estimate after this step.
@@ -1479,7 +1476,7 @@ class TensionFilter:
             rbar = (r0 + r1 + r2) / 3.0  # tau = sqrt(rbar dt_mean / q_w), at least the floor
             tau_w = math.sqrt(rbar * dt_mean / q_w)
             tau_hover = tau_w if tau_w > tau_hover else tau_hover
-        scale = self._drift.process_noise_scale(dt, tau_hover, youth)
+        scale = self._drift.process_noise_scale(dt, tau_hover, youth, not manoeuvring)
         tau = tau_hover / math.sqrt(scale)
         if dt_mean != dt_mean:
             dt_mean = dt
@@ -1536,13 +1533,6 @@ class TensionFilter:
             stat, window = 0.0, 0
         else:
             self._drift.push(w, dt)
-            ms = p.model_std_n
-            if ms[0] or ms[1] or ms[2]:  # model_std^2 / S per axis, S = P- + R
-                self._drift.model_w2 = (
-                    ms[0] * ms[0] / (a_pred[0] + r0),
-                    ms[1] * ms[1] / (a_pred[1] + r1),
-                    ms[2] * ms[2] / (a_pred[2] + r2),
-                )
             if self._change.push(z, w):
                 # No window can be above the threshold: the statistic is computed if read.
                 lazy = self._change.lazy_statistic(self._dt_mean, test_youth)

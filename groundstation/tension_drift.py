@@ -33,12 +33,7 @@ class DriftAdaptation:
     An exponential average b of the whitened innovations w over ``time_constant_s``
     (``drift_time_constant_s``, 0.5 s) measures the lag; its normalised square
     ``D = |b|^2 / (Var(b) youth)`` is chi-square with 3 dof at constant tension (``youth``
-    the change test's factor for a young noise estimate). Where the observation model has an
-    error of its own, slowly varying, of known size (``model_std`` per axis: what
-    ``calibrate`` measured its constants to leave, ``[calibration] tension_model_std_n``), a
-    bias of that size is no drift, and the null variance of b carries it:
-    ``D = sum_i b_i^2 / (Var(b) + model_std_i^2 / S_i) / youth`` (:attr:`model_w2`, which
-    the filter sets). Above ``threshold`` (9) the
+    the change test's factor for a young noise estimate). Above ``threshold`` (9) the
     process noise is scaled by ``(D / threshold)^exponent``, the time constant down to
     ``min_time_constant_s`` at most; the scale then decays with ``memory_s`` (1 s), so a
     restart (which clears b) does not forget that the tension was moving.
@@ -58,7 +53,6 @@ class DriftAdaptation:
         "exponent",
         "memory_s",
         "min_time_constant_s",
-        "model_w2",
         "scale",
         "threshold",
         "time_constant_s",
@@ -81,9 +75,6 @@ class DriftAdaptation:
         self.bias = (0.0, 0.0, 0.0)  # b, EWMA of whitened innovations
         self.bias_var = 0.0  # Var(b) per axis at no drift
         self.scale = 1.0
-        self.model_w2: tuple[float, float, float] | None = None
-        """Per axis, the observation model's own error variance over the innovation's
-        (``model_std^2 / S``), or None (none known): what b carries without any drift."""
 
     def clear(self) -> None:
         """Forgets the innovation bias (a restart of the filter); the scale decays on."""
@@ -108,29 +99,34 @@ class DriftAdaptation:
         # Var(b) = (1 - beta)^2 Var(b) + beta^2 per axis, for white unit w.
         self.bias_var = (1.0 - beta) ** 2 * self.bias_var + beta * beta
 
-    def process_noise_scale(self, dt: float, tau: float, youth: float) -> float:
+    def process_noise_scale(
+        self, dt: float, tau: float, youth: float, evidence: bool = True
+    ) -> float:
         """The factor on the hover process noise for this step, >= 1.
 
         Args:
             dt: Time since the previous step, s.
             tau: The hover time constant, s.
             youth: The change test's youth factor (>= 1), dividing D.
+            evidence: Whether the innovation bias is evidence of a moving tension this
+                step. False while the drone manoeuvres (the caller's hover test says so):
+                then the bias is the observation model's error as much as the tension's
+                move, so the hover's process noise applies (1 is returned) while the scale
+                raised before decays, unused.
 
         Returns:
             ``max((D / threshold)^exponent, decayed previous scale)``, at most
-            ``(tau / min_time_constant_s)^2`` (Q scales as 1 / tau^2).
+            ``(tau / min_time_constant_s)^2`` (Q scales as 1 / tau^2); 1 without
+            ``evidence``.
         """
+        if not evidence:
+            relaxed = relaxed_scale(self.scale, dt, self.memory_s)
+            self.scale = relaxed if relaxed >= 1.0 + SCALE_SNAP else 1.0
+            return 1.0
         inst = 1.0
         if self.bias_var > 0.0:
             b0, b1, b2 = self.bias
-            m = self.model_w2
-            if m is None:
-                d = ((b0 * b0 + b1 * b1) + b2 * b2) / (self.bias_var * youth)  # |b|^2 / Var(b)
-            else:
-                # A slowly varying model error e adds e / sqrt(S) to b, which no average
-                # removes: Var(b) per axis is the noise's plus model_std^2 / S.
-                v = self.bias_var
-                d = (b0 * b0 / (v + m[0]) + b1 * b1 / (v + m[1]) + b2 * b2 / (v + m[2])) / youth
+            d = ((b0 * b0 + b1 * b1) + b2 * b2) / (self.bias_var * youth)  # D = |b|^2 / Var(b)
             ratio = d / self.threshold
             if ratio > 1.0:
                 inst = ratio**self.exponent

@@ -365,6 +365,33 @@ def test_filter_coasts_in_the_air_without_an_observation_and_grows_its_std() -> 
     assert out.std_n[0] > float(before.std_n[0])
 
 
+def test_the_drift_adaptation_reads_the_hover_test_where_one_runs() -> None:
+    """With the slow stage (an accelerometer model given) the filter is told the drone
+    manoeuvres whenever the hover test does not say it hovers; without it (no test) it is
+    never told so. A ramp raises the process noise only where it is told nothing."""
+    rng = np.random.default_rng(3)
+    outs: dict[str, list[float]] = {}
+    for case in ("no_test", "manoeuvring", "hovering"):
+        ctl = FilterControl(TensionFilterParams(mass_kg=MASS_KG))
+        scales = []
+        for k in range(2500):  # 10 s at 250 Hz, a 20 mN/s ramp from 2 s
+            z = (0.02 * max(0.0, k * 0.004 - 2.0) + 0.01 * rng.standard_normal(), 0.0, -0.02)
+            out = ctl.step(
+                on_ground=False,
+                contact_reason="air",
+                observation=_obs(z),
+                dt_s=0.004,
+                accel_model_world_n=None if case == "no_test" else z,
+                hover_model_world_n=None,  # no thrust balance: only the test's verdict
+                hovering=case == "hovering",
+            )
+            assert out.estimate is not None
+            scales.append(out.estimate.process_noise_scale)
+        outs[case] = scales
+    assert max(outs["no_test"]) > 10.0 and max(outs["hovering"]) > 10.0
+    assert max(outs["manoeuvring"]) == 1.0
+
+
 # ---------------------------------------------------------------- localization inputs
 
 

@@ -288,7 +288,6 @@ class DroneEstimator:
                 thrust_noise_n=params.drone.thrust_noise_n,
                 hover_velocity_std_mps=hover_std_mps,
                 hover_velocity_time_s=hover_time_s,
-                model_std_n=params.calibration.tension_model_std_n,
             )
         )
         # [follow] and FollowParams share their field names (a new key fails loudly).

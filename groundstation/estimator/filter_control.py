@@ -145,6 +145,9 @@ class FilterControl:
                 tension_obs if accel_model_world_n is None else accel_model_world_n,
                 dt_s,
                 hover_model_world_n=hover_model_world_n if hovering else None,
+                # The hover test runs with the slow stage (the accelerometer model):
+                # outside a hover the drone manoeuvres.
+                manoeuvring=accel_model_world_n is not None and not hovering,
             )
             if est.change_detected:
                 self.change_detections += 1
