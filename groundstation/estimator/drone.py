@@ -438,8 +438,9 @@ class DroneEstimator:
         obs = observed.observation
         mass_kg = self.params.drone.mass_kg
         # The floor's vibration for the climb test: the tension filter's measure of it
-        # (read on the ground only, where the test runs).
-        noise_n2 = self.filter.vertical_noise_var_n2() if self.contact.on_ground else None
+        # (read on the ground and armed only, where the test runs).
+        on_floor_armed = self.contact.on_ground and msg.armed
+        noise_n2 = self.filter.vertical_noise_var_n2() if on_floor_armed else None
         contact, on_ground = contact_decide(
             self.contact,
             self.contact_params,
