@@ -570,18 +570,18 @@ def main(argv: list[str] | None = None) -> int:
 
     work = Path(args.work)
     work.mkdir(parents=True, exist_ok=True)
-    if args.variant and args.run:
-        name, _, factor = args.variant.partition("=")
-        if name != "baseline":
-            patch(name, float(factor or 1.0))
-        module, *rest = args.run
-        sys.argv = [module, *rest]
-        runpy.run_module(module, run_name="__main__")
-        return 0
     if args.variant:
-        name, _, factor = args.variant.partition("=")
+        name, _, factor_text = args.variant.partition("=")
+        factor = float(factor_text or 1.0)
+        if args.run:
+            if name != "baseline":
+                patch(name, factor)
+            module, *rest = args.run
+            sys.argv = [module, *rest]
+            runpy.run_module(module, run_name="__main__")
+            return 0
         data = Path(args.data) if args.data else nc.DATA
-        print(json.dumps(one_variant(name, float(factor or 1.0), work, data, args.family)))
+        print(json.dumps(one_variant(name, factor, work, data, args.family)))
         return 0
     if not args.render:
         data = Path(args.data) if args.data else nc.DATA

@@ -74,6 +74,24 @@ def hover_sample(
     return accel, quat, thrust
 
 
+def observations(truth_n: np.ndarray, rng: np.random.Generator) -> list[np.ndarray]:
+    """The observed tension (``observe_tension`` of a hover sample) for each true tension."""
+    out = []
+    for truth in truth_n:
+        accel, quat, thrust = hover_sample(truth, rng)
+        obs = observe_tension(accel, quat, thrust, MASS_KG)
+        assert obs.tension_world_n is not None
+        out.append(obs.tension_world_n)
+    return out
+
+
+def ramp_truth_n(seconds: float) -> np.ndarray:
+    """The hover tension ramping at 10 mN/s along (1, 0.5, -1)/1.5 from 3 s, per sample."""
+    t = np.arange(int(seconds / DT_S)) * DT_S
+    d = np.array([1.0, 0.5, -1.0]) / 1.5
+    return HOVER_TENSION_N + np.outer(np.clip(t - 3.0, 0.0, None) * 0.010, d)
+
+
 def run_filter(
     truth_n: np.ndarray,
     rng: np.random.Generator,
@@ -86,12 +104,9 @@ def run_filter(
     est = np.empty((n, 3))
     std = np.empty((n, 3))
     det = np.zeros(n, dtype=bool)
-    for k in range(n):
-        accel, quat, thrust = hover_sample(truth_n[k], rng)
-        obs = observe_tension(accel, quat, thrust, MASS_KG)
-        assert obs.tension_world_n is not None
+    for k, y in enumerate(observations(truth_n, rng)):
         dt = DT_S if dts_s is None else float(dts_s[k])
-        e = filt.update(obs.tension_world_n, dt, quat)
+        e = filt.update(y, dt)
         est[k] = e.tension_world_n
         std[k] = e.std_n
         det[k] = e.change_detected
@@ -677,10 +692,7 @@ def test_step_of_30_mn_settles_within_0p3_s() -> None:
 
 
 def test_ramp_is_tracked_without_divergence() -> None:
-    n = int(15.0 / DT_S)
-    t = np.arange(n) * DT_S
-    d = np.array([1.0, 0.5, -1.0]) / 1.5
-    truth = HOVER_TENSION_N + np.outer(np.clip(t - 3.0, 0.0, None) * 0.010, d)  # 10 mN/s
+    truth = ramp_truth_n(15.0)
     est, _, det = run_filter(truth, np.random.default_rng(30))
     err = np.abs(est - truth)[int(5.0 / DT_S) :]
     assert np.all(np.isfinite(est))
@@ -698,17 +710,9 @@ def test_a_manoeuvre_is_no_evidence_for_the_drift_adaptation() -> None:
     does not hover): the innovations' bias no longer raises the process noise, the hover's
     applies at once, so the filter lags the ramp by about rate x tau at the hover's memory;
     the scale raised before decays meanwhile with ``drift_memory_s``, unused."""
-    n = int(15.0 / DT_S)
-    t = np.arange(n) * DT_S
-    d = np.array([1.0, 0.5, -1.0]) / 1.5
-    truth = HOVER_TENSION_N + np.outer(np.clip(t - 3.0, 0.0, None) * 0.010, d)  # 10 mN/s
-    rng = np.random.default_rng(30)
-    ys = []
-    for k in range(n):
-        accel, quat, thrust = hover_sample(truth[k], rng)
-        obs = observe_tension(accel, quat, thrust, MASS_KG)
-        assert obs.tension_world_n is not None
-        ys.append(obs.tension_world_n)
+    truth = ramp_truth_n(15.0)
+    n = len(truth)
+    ys = observations(truth, np.random.default_rng(30))
     free, held = TensionFilter(), TensionFilter()
     switch = int(10.0 / DT_S)  # the manoeuvre starts 7 s into the ramp
     scales_free, scales_held, kept, est_held = [], [], [], []
