@@ -1332,10 +1332,9 @@ class TensionFilter:
         if k < 1:
             return None
         factor = youth_factor(k)
-        spacing = self._dt_mean
-        if spacing == spacing and spacing > 0.0:
-            floor = level_scatter_factor(p.noise_time_constant_s / spacing)
-            factor = floor if floor > factor else factor
+        floor = self._scatter_floor()
+        if floor is not None and floor > factor:
+            factor = floor
         return noise.long_run()[2] * factor
 
     # -- steps -------------------------------------------------------------------------
@@ -1451,31 +1450,20 @@ class TensionFilter:
         k = noise.samples
         youth = youth_factor(k) if estimate_noise and k < YOUTH_FADE_SAMPLES else 1.0
         test_youth = youth
-        spacing = self._dt_mean
-        if estimate_noise and spacing == spacing and spacing > 0.0:
-            floor = self._youth_floor
-            if floor[0] != spacing:
-                floor = self._youth_floor = (
-                    spacing,
-                    level_scatter_factor(p.noise_time_constant_s / spacing),
-                )
-            if floor[1] > youth:
-                test_youth = floor[1]
+        if estimate_noise:
+            floor = self._scatter_floor()
+            if floor is not None and floor > youth:
+                test_youth = floor
         # The change test's threshold follows the spacing (log of its longest window):
         # derived again once the spacing has moved by 1 %.
         lo, hi = self._fast_band
+        spacing = self._dt_mean
         if not lo < spacing < hi and spacing > 0.0:  # False for a NaN spacing
             self._fast_band = (0.99 * spacing, 1.01 * spacing)
             self._change.set_threshold(self.fast_threshold(spacing))
-        # This step's time constant: the hover one (hover_time_constant, written out),
-        # shortened by the drift adaptation.
-        tau_hover = p.hover_time_constant_s
-        q_w = p.hover_wander_n2_per_s
+        # This step's time constant: the hover one, shortened by the drift adaptation.
         dt_mean = self._dt_mean
-        if q_w > 0.0 and dt_mean == dt_mean and dt_mean > 0.0:
-            rbar = (r0 + r1 + r2) / 3.0  # tau = sqrt(rbar dt_mean / q_w), at least the floor
-            tau_w = math.sqrt(rbar * dt_mean / q_w)
-            tau_hover = tau_w if tau_w > tau_hover else tau_hover
+        tau_hover = self.hover_time_constant(r, dt_mean)
         scale = self._drift.process_noise_scale(dt, tau_hover, youth, not manoeuvring)
         tau = tau_hover / math.sqrt(scale)
         if dt_mean != dt_mean:
@@ -1593,6 +1581,21 @@ class TensionFilter:
 
     # -- internals ---------------------------------------------------------------------
 
+    def _scatter_floor(self) -> float | None:
+        """The warm noise estimate's scatter allowance at the measured spacing
+        (:func:`~groundstation.tension_change.level_scatter_factor`), cached per spacing; None
+        before a spacing is known."""
+        spacing = self._dt_mean
+        if not (spacing == spacing and spacing > 0.0):
+            return None
+        cached = self._youth_floor
+        if cached[0] != spacing:
+            cached = self._youth_floor = (
+                spacing,
+                level_scatter_factor(self.params.noise_time_constant_s / spacing),
+            )
+        return cached[1]
+
     def hover_time_constant(self, r_n2: tuple[float, ...], dt_mean_s: float) -> float:
         """The time constant at hover for a noise r and a sample spacing, s.
 
@@ -1605,8 +1608,10 @@ class TensionFilter:
         tau = p.hover_time_constant_s
         q = p.hover_wander_n2_per_s
         if q > 0.0 and dt_mean_s == dt_mean_s and dt_mean_s > 0.0:
-            rbar = (r_n2[0] + r_n2[1] + r_n2[2]) / 3.0
-            tau = max(math.sqrt(rbar * dt_mean_s / q), tau)
+            r0, r1, r2 = r_n2
+            tau_w = math.sqrt((r0 + r1 + r2) / 3.0 * dt_mean_s / q)
+            if tau_w > tau:
+                tau = tau_w
         return tau
 
     @property

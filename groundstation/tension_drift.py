@@ -119,12 +119,8 @@ class DriftAdaptation:
             ``(tau / min_time_constant_s)^2`` (Q scales as 1 / tau^2); 1 without
             ``evidence``.
         """
-        if not evidence:
-            relaxed = relaxed_scale(self.scale, dt, self.memory_s)
-            self.scale = relaxed if relaxed >= 1.0 + SCALE_SNAP else 1.0
-            return 1.0
         inst = 1.0
-        if self.bias_var > 0.0:
+        if evidence and self.bias_var > 0.0:
             b0, b1, b2 = self.bias
             d = ((b0 * b0 + b1 * b1) + b2 * b2) / (self.bias_var * youth)  # D = |b|^2 / Var(b)
             ratio = d / self.threshold
@@ -135,6 +131,8 @@ class DriftAdaptation:
         if scale < 1.0 + SCALE_SNAP:
             scale = 1.0
         self.scale = scale
+        if not evidence:
+            return 1.0
         # Down to min_time_constant_s, never below it (nor above 1).
         cap = max(1.0, (tau / self.min_time_constant_s) ** 2)
         return min(scale, cap)
