@@ -8,7 +8,8 @@ Calibrates with ``calibrate --untethered`` on the other days' flights with the a
 through ``replay --offline`` and prints the median of |T| and of each world axis over the
 airborne samples (truth zero), and the estimate along the flight. ``--variant`` changes one
 docs/constants.md row by a factor first (``benchmarks.sensitivity.patch``; e.g.
-``SlowAccelParams.time_constant_s=0.1667`` for the slow stage's β at 10 s). Then, per shared
+``BiasKalmanParams.flight_bias_std_mps2=2`` for a bias in the air allowed to stray twice as
+far from the rest's). Then, per shared
 flight, the rotation of Vicon's attitude relative to the drone's own (median rotation vector,
 body frame, degrees): a motion-capture body frame defined differently on one day would show
 there.

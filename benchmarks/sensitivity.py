@@ -29,8 +29,8 @@ deterministic flights each time:
   (mN); ``tug_landing`` (ideal, seed 10): ``on_ground`` mismatch.
 
 How a value is changed: a field of ``TensionFilterParams``, ``SlowAccelParams``,
-``ContactParams`` or ``RestCriteria`` is scaled after the instance is built (whatever the
-configuration gave it); a module constant is rebound in its module and in every
+``BiasKalmanParams``, ``ContactParams`` or ``RestCriteria`` is scaled after the instance is
+built (whatever the configuration gave it); a module constant is rebound in its module and in every
 ``groundstation`` module that imported it by name; a class constant on its class. A value
 captured when a module was imported (a default argument, a constant computed from another)
 is not reached that way: a row whose figures are all exactly the baseline's says so ("no
@@ -66,6 +66,7 @@ from benchmarks import REPO, git_commit
 CLASSES = {
     "TensionFilterParams": "groundstation.tension",
     "SlowAccelParams": "groundstation.slow_accel",
+    "BiasKalmanParams": "groundstation.bias_kalman",
     "ContactParams": "groundstation.contact",
     "RestCriteria": "groundstation.calibration",
 }

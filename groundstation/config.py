@@ -254,9 +254,11 @@ class FilterSection(_Section):
     at or above it, on the ground until lift-off is seen (groundstation.contact:
     motion-capture height, the IMU's climb, or the floor no longer carrying it)."""
     accel_slow_time_constant_s: float = Field(60.0, gt=0.0)
-    """(added) τ, the crossover in the air, s: below ``1/(2π·τ)`` the observation rests on
-    thrust, attitude and the thrust axis. Longer lets less of a sustained manoeuvre into the
-    bias (error ≤ m·Δv/τ); shorter learns a bias never seen at rest sooner."""
+    """(added) No longer used: a value other than 60 is accepted with one warning. It was
+    the time constant of a low-pass that learnt the accelerometer's bias in the air, s; the
+    bias is a state of a Kalman filter beside the velocity now (groundstation.bias_kalman),
+    weighed by the flight's model that ``calibrate`` fits (``[calibration]
+    flight_velocity_std_mps``, ``flight_velocity_time_s``, ``flight_bias_std_mps2``)."""
     accel_hover_crossover_s: float = Field(0.3, ge=0.0)
     """(added) 0 turns the hover off: the tension filter then observes the accelerometer
     model alone. Otherwise, while the drone hovers (1 s mean acceleration < 0.2 m/s², speed
@@ -287,6 +289,18 @@ class FilterSection(_Section):
     drag_velocity_time_constant_s: float = Field(8.0, gt=0.0)
     """(added) Without motion capture the rotor-drag term's velocity is the accelerometer's
     leaky integral with this time constant, s (groundstation.slow_accel)."""
+
+    @model_validator(mode="after")
+    def _slow_time_constant_without_meaning(self) -> FilterSection:
+        if self.accel_slow_time_constant_s != 60.0:
+            _warn_once(
+                f"[filter] accel_slow_time_constant_s = {self.accel_slow_time_constant_s:g} "
+                "is not used: the accelerometer's bias is a state of a Kalman filter beside "
+                "the velocity (groundstation.bias_kalman), weighed by [calibration] "
+                "flight_velocity_std_mps, flight_velocity_time_s and flight_bias_std_mps2 "
+                "(fitted by groundstation calibrate), which replaced the low-pass"
+            )
+        return self
 
     @model_validator(mode="after")
     def _exit_window_without_meaning(self) -> FilterSection:
@@ -392,9 +406,9 @@ class CalibrationSection(_Section):
     thrust ∝ ω² with ω ∝ v, where the data do not determine it)."""
     accel_slow: bool = True
     """(added) Replace the accelerometer's slow content by what transfers across power-ons
-    (groundstation.slow_accel, docs/estimator_design.md): its mean is learnt at rest and, in
-    the air, as the zero (or motion-capture) mean acceleration over ``[filter]
-    accel_slow_time_constant_s``. False: the accelerometer's mean is trusted as read (what
+    (groundstation.slow_accel, docs/estimator_design.md): its bias is learnt at rest and, in
+    the air, from the velocity it integrates to (bounded, or motion capture's:
+    groundstation.bias_kalman). False: the accelerometer's mean is trusted as read (what
     ``groundstation calibrate --model full`` writes: its fitted bias stands for it)."""
     tension_model_std_n: tuple[float, float, float] = (0.0, 0.0, 0.0)
     """(added) The tension error the calibration leaves, per world axis, N (written by
@@ -413,6 +427,21 @@ class CalibrationSection(_Section):
     hover_velocity_time_s: float | None = Field(None, gt=0.0, lt=60.0)
     """(added) T_c, the correlation time of that velocity, s (fitted with
     ``hover_velocity_std_mps``); none: 0.5."""
+    flight_velocity_std_mps: float | None = Field(None, gt=0.0, lt=10.0)
+    """(added) σ_V, how far the flying drone's velocity strays from zero (per world axis),
+    m/s: the accelerometer's bias is learnt in the air from the velocity it integrates to,
+    ``v = 0`` observed with variance ``σ_V²·T_V/T`` per block of T (groundstation.
+    bias_kalman). Written by ``groundstation calibrate`` from the motion-capture velocity
+    of its recordings' airborne samples (groundstation.hover_fit); none: 0.13 (NanoBench's
+    slowest flight, docs/constants.md)."""
+    flight_velocity_time_s: float | None = Field(None, gt=0.0, lt=60.0)
+    """(added) T_V, the correlation time of that velocity, s (fitted with
+    ``flight_velocity_std_mps``); none: 1.4."""
+    flight_bias_std_mps2: float | None = Field(None, gt=0.0, lt=5.0)
+    """(added) σ_δ, how far the accelerometer's bias in the air strays from the rest's
+    before it (per body axis), m/s²: the prior the bias filter adds at each take-off.
+    Written by ``groundstation calibrate`` from its recordings' rests and flights under
+    motion capture (groundstation.hover_fit); none: 0.05 (NanoBench, docs/constants.md)."""
     rotor_drag_n_s_per_m: float = Field(0.0, ge=0.0, le=1.0)
     """(added) ``D_xy``: the rotors' drag per m/s of body-horizontal speed, N·s/m; the
     observation adds ``R·D·Rᵀ·v`` back (v from motion capture, else the accelerometer's

@@ -47,7 +47,16 @@ from groundstation.calibration import (
     _integrated_autocorr_time,
 )
 
-__all__ = ["HOVER_FIT_MIN_S", "HoverVelocityFit", "fit_hover_velocity", "hover_flags"]
+__all__ = [
+    "HOVER_FIT_MIN_S",
+    "FlightFit",
+    "FlightPhases",
+    "HoverVelocityFit",
+    "fit_flight",
+    "fit_hover_velocity",
+    "flight_phases",
+    "hover_flags",
+]
 
 FloatArray = NDArray[np.float64]
 
@@ -83,6 +92,22 @@ class HoverVelocityFit:
     stretches: int
 
 
+@dataclass(frozen=True)
+class FlightPhases:
+    """Per sample of a recording, what the service's stages say (:func:`flight_phases`).
+
+    Attributes:
+        hovering: (n,) the hover test's verdict.
+        airborne: (n,) the slow stage's phase is "air".
+        rest_mean_body_mps2: (n, 3) the latest rest window's mean of ``f − Rᵀ·g·e3`` (the
+            configured bias subtracted) in the recording so far, m/s²; NaN before any.
+    """
+
+    hovering: NDArray[np.bool_]
+    airborne: NDArray[np.bool_]
+    rest_mean_body_mps2: FloatArray
+
+
 def hover_flags(
     data: CalibrationData,
     params: slow_mod.SlowAccelParams,
@@ -93,19 +118,44 @@ def hover_flags(
     accel_bias_mps2: tuple[float, float, float] = (0.0, 0.0, 0.0),
     min_height_m: float = MIN_HEIGHT_M,
 ) -> NDArray[np.bool_]:
-    """(n,) where the service's hover test says the drone hovers: ``slow_accel_step`` run
-    over each recording as the service runs it without motion capture ("rest" while the rest
-    detector says disarmed and still, β its window mean; "air" while armed, at or above
-    ``ground_thrust_ratio`` of the weight and ``min_height_m`` above the floor by motion
-    capture; "hold" otherwise), the configured accelerometer bias subtracted."""
+    """(n,) where the service's hover test says the drone hovers (:func:`flight_phases`)."""
+    return flight_phases(
+        data,
+        params,
+        mass_kg=mass_kg,
+        floor_z_m=floor_z_m,
+        ground_thrust_ratio=ground_thrust_ratio,
+        accel_bias_mps2=accel_bias_mps2,
+        min_height_m=min_height_m,
+    ).hovering
+
+
+def flight_phases(
+    data: CalibrationData,
+    params: slow_mod.SlowAccelParams,
+    *,
+    mass_kg: float,
+    floor_z_m: float,
+    ground_thrust_ratio: float,
+    accel_bias_mps2: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    min_height_m: float = MIN_HEIGHT_M,
+) -> FlightPhases:
+    """``slow_accel_step`` run over each recording as the service runs it without motion
+    capture ("rest" while the rest detector says disarmed and still, β its window mean; "air"
+    while armed, at or above ``ground_thrust_ratio`` of the weight and ``min_height_m`` above
+    the floor by motion capture; "hold" otherwise), the configured accelerometer bias
+    subtracted: where it hovers, where it flies, and the rests' means."""
     n = len(data)
     out = np.zeros(n, bool)
+    airborne = np.zeros(n, bool)
+    rest_mean = np.full((n, 3), math.nan)
     weight_n = mass_kg * GRAVITY_MPS2
     bx, by, bz = accel_bias_mps2
     for seg in np.unique(data.segment):
         state = slow_mod.SlowAccelState()
         rest = RestCalibrator(bias_body_mps2=accel_bias_mps2)
         last: float | None = None
+        latest_rest = (math.nan, math.nan, math.nan)
         for i in np.flatnonzero(data.segment == seg).tolist():
             stamp = float(data.stamp_s[i])
             dt = 0.0 if last is None else max(stamp - last, 0.0)
@@ -138,7 +188,11 @@ def hover_flags(
                 rest_mean_body_mps2=rest.rest_mean_body_mps2 if phase == "rest" else None,
             )
             out[i] = state.quasi_static
-    return out
+            airborne[i] = phase == "air"
+            if phase == "rest" and rest.rest_mean_body_mps2 is not None:
+                latest_rest = rest.rest_mean_body_mps2
+            rest_mean[i] = latest_rest
+    return FlightPhases(out, airborne, rest_mean)
 
 
 def bridged_velocity(data: CalibrationData) -> FloatArray:
@@ -221,3 +275,97 @@ def fit_hover_velocity(
         std_mps=math.sqrt(var), time_s=time_s, hover_s=hover_s, stretches=len(runs)
     )
     return fit, hover_s
+
+
+@dataclass(frozen=True)
+class FlightFit:
+    """Result of :func:`fit_flight`.
+
+    Attributes:
+        velocity_std_mps: σ_V, the airborne velocity's scatter about zero per world axis,
+            m/s.
+        velocity_time_s: T_V, its correlation time, s.
+        bias_std_mps2: σ_δ, the RMS over flights and body axes of the bias in the air less
+            the rest's before it, m/s²; None without a flight that followed a rest.
+        airborne_s: seconds of flight under motion capture used.
+        flights: airborne runs used for σ_δ.
+    """
+
+    velocity_std_mps: float
+    velocity_time_s: float
+    bias_std_mps2: float | None
+    airborne_s: float
+    flights: int
+
+
+def fit_flight(
+    data: CalibrationData,
+    phases: FlightPhases,
+    *,
+    accel_bias_mps2: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    min_airborne_s: float = HOVER_FIT_MIN_S,
+) -> tuple[FlightFit | None, float]:
+    """The bias filter's model of the flight (groundstation.bias_kalman) from the recording::
+
+        σ_V²  = mean(v_mocap²) over the airborne samples and the three axes
+        T_V   = dt · τ_int (Sokal's window, per axis, weighted by each axis' v²)
+        δ     = mean over a flight of f − b_cfg − Rᵀ·(g·e3 + a_mocap)  −  the rest's mean before it
+        σ_δ²  = mean(δ²) over the flights that follow a rest and the three axes
+
+    ``v_mocap`` is :func:`bridged_velocity`, ``a_mocap`` its time derivative; a flight is a run
+    of airborne samples of at least ``slow_accel.HOVER_MEAN_S`` with a velocity.
+
+    Returns:
+        ``(fit or None, seconds of flight found)``.
+    """
+    vel = bridged_velocity(data)
+    usable = phases.airborne & np.all(np.isfinite(vel), axis=1)
+    idx = np.flatnonzero(usable)
+    runs: list[tuple[int, int]] = []
+    dts: list[float] = []
+    for a, b in _index_runs(idx, data.segment):
+        t = data.stamp_s[idx[a:b]]
+        if b - a >= 3 and t[-1] - t[0] >= slow_mod.HOVER_MEAN_S:
+            runs.append((a, b))
+            dts.append(float(np.median(np.diff(t))))
+    airborne_s = float(sum((b - a) * dt for (a, b), dt in zip(runs, dts, strict=True)))
+    if airborne_s < min_airborne_s:
+        return None, airborne_s
+    v = vel[idx]
+    sq = np.concatenate([v[a:b] ** 2 for a, b in runs])
+    var_axes = sq.mean(axis=0)
+    var = float(var_axes.mean())
+    if not var > 0.0:
+        return None, airborne_s
+    tau = np.array([_integrated_autocorr_time(v[:, k], runs) for k in range(3)])
+    dt = float(np.median(dts))
+    time_s = dt * float((var_axes * tau).sum() / var_axes.sum())
+    deltas: list[FloatArray] = []
+    bias = np.asarray(accel_bias_mps2, float)
+    for a, b in runs:
+        piece = idx[a:b]
+        rest = phases.rest_mean_body_mps2[piece[0]]
+        if not np.all(np.isfinite(rest)):
+            continue
+        t = data.stamp_s[piece]
+        acc = np.gradient(vel[piece], t, axis=0)
+        e = np.empty((piece.size, 3))
+        for j, i in enumerate(piece.tolist()):
+            rows = rows_from_quat_wxyz(tuple(data.quat_wxyz[i].tolist()))
+            ref = (acc[j, 0], acc[j, 1], acc[j, 2] + GRAVITY_MPS2)
+            e[j] = [
+                data.accel_body_mps2[i, k]
+                - bias[k]
+                - (rows[0][k] * ref[0] + rows[1][k] * ref[1] + rows[2][k] * ref[2])
+                for k in range(3)
+            ]
+        deltas.append(e.mean(axis=0) - rest)
+    bias_std = float(np.sqrt(np.mean(np.square(deltas)))) if deltas else None
+    fit = FlightFit(
+        velocity_std_mps=math.sqrt(var),
+        velocity_time_s=time_s,
+        bias_std_mps2=bias_std,
+        airborne_s=airborne_s,
+        flights=len(deltas),
+    )
+    return fit, airborne_s

@@ -1,26 +1,28 @@
 """The accelerometer's slow content, replaced by what transfers (docs/estimator_design.md).
 
-Pure physics: Python floats only; time enters as ``dt_s``.
+Pure physics: Python floats per message (the bias filter's block step: numpy); time enters
+as ``dt_s``.
 
 Why. The tension observation (``eq:NE_tether``) ``T = m·R·f − R·u·F`` uses the IMU's specific
 force ``f``. An accelerometer reads ``f + b`` with ``b`` a bias (and scale/misalignment) that
 changes at every power-on: 0.1–0.35 m/s² on Crazyflies, i.e. 3–10 mN of tension on a 30 g
 drone, which a tether of ω = 0.05 N/m turns into 6–20 cm of ``s2`` (NOTES "Sensitivity"). A
 calibration cannot carry it from one power-on to the next; the drone's kinematics can:
-a tethered (or any) drone's velocity is bounded, so over a long window its mean acceleration
-is zero (or what motion capture says it is). So the observation is complementary::
+a tethered (or any) drone's velocity is bounded (or what motion capture says it is). So the
+observation is complementary::
 
     T = m·R·(f − β) − R·u·F + R·D·Rᵀ·v           # eq:NE_tether with the slow part corrected
-    β ← β + (dt/τ)·((f − Rᵀ·(g·e3 + a_ref)) − β)   # body frame, first-order low-pass
+    β = b of the (p, v, b) Kalman filter          # groundstation.bias_kalman
 
 ``β`` is the accelerometer's slow error in the body frame (a body-fixed bias stays put when
-the drone yaws); ``a_ref`` is the acceleration that the drone's kinematics vouch for: zero
-without motion capture, the motion-capture acceleration (low-passed) with it. Above the
-crossover ``1/(2π·τ)`` the accelerometer carries everything (tugs, manoeuvres); below it the
-slow content rests on thrust, attitude and the thrust axis (the hover model
-``m·g·e3 − R·u·F``) plus ``a_ref``. At rest on the floor (disarmed, still) ``a_ref = 0`` is
-exact and ``β`` is learnt quickly: that is this power-on's bias, measured at this power-on,
-carried nowhere else.
+the drone yaws), a state of a Kalman filter beside the velocity it integrates to: ``v = 0``
+observed with the flight's velocity scatter σ_V and correlation time T_V without motion
+capture, the motion-capture position with it, both fitted by ``calibrate``. The data weigh
+it: a bias learnt in seconds where the velocity stays small or motion capture sees it, in
+minutes where the drone manoeuvres within a loose bound. At rest on the floor (disarmed,
+still) ``v = 0`` is exact and ``β`` is the rest window's mean: this power-on's bias,
+measured at this power-on, carried nowhere else; each take-off adds the prior σ_δ of how
+far the bias in the air strays from it (fitted by ``calibrate`` too).
 
 What it cannot remove: where the drone's attitude estimator levels itself on the same
 accelerometer (the Crazyflie's do), an x/y bias tilts the reported attitude by ``b/g``; the
@@ -31,18 +33,21 @@ kinematics can tell it from the floor's tilt. docs/estimator_design.md has the a
 Rotor drag (PX4's EKF2 fuses the same term): a multirotor in translation feels
 ``F_drag = −R·D·Rᵀ·v`` with ``D = diag(D_xy, D_xy, 0)`` in the body frame (momentum drag of
 the rotors), which the observation would report as tension unless added back. ``v`` is the
-motion-capture velocity when there is one, else the accelerometer's high-passed velocity
-(a leaky integral of ``R·(f − β) − g·e3`` with time constant ``τ_v``): it recovers
-manoeuvres of a few seconds and forgets drift. See :func:`drag_velocity_world_mps`.
+filter's (fused) velocity while motion capture is in use, else the accelerometer's
+high-passed velocity (a leaky integral of ``R·(f − β) − g·e3`` with time constant ``τ_v``):
+it recovers manoeuvres of a few seconds and forgets drift. See
+:func:`drag_velocity_world_mps`.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Literal
 
+from groundstation import bias_kalman as bk
 from groundstation.attitude import GRAVITY_MPS2
+from groundstation.bias_kalman import MOCAP_HOLD_S, BiasKalman, BiasKalmanParams
 from groundstation.frozen import evolve
 
 __all__ = [
@@ -66,53 +71,46 @@ drift, keeps a manoeuvre of a second or two)."""
 VIBRATION_MEAN_S = 2.0
 """Memory of the vibration variance around the 1 s mean that scales the hover test's
 thresholds (``SlowAccelParams.quasi_static_sigmas``), s."""
-MOCAP_HOLD_S = 0.3
-"""Motion capture stays in use for this long (telemetry stamp) after the frame that brought
-it, s: the estimator's external position (``estimator.drone``) and the slow stage's
-differences of positions alike (one value). Real motion capture reaches a drone's telemetry
-at 70-116 Hz against the IMU's 100 Hz, in bursts, with gaps up to 150 ms (the realistic
-profile draws the same): without the hold, follow would switch to the tether-based position
-on every telemetry message without a fresh frame."""
 Phase = Literal["rest", "air", "hold"]
-"""``rest``: on the floor, disarmed and still (a_ref = 0 exactly); ``air``: flying (the
-filter observes); ``hold``: anything else (spool-up, landing, armed on the floor): β kept."""
+"""``rest``: on the floor, disarmed and still (v = 0 and b measured exactly); ``air``:
+flying (the filter observes); ``hold``: anything else (spool-up, landing, armed on the
+floor): b kept, v = 0."""
 
 
 @dataclass(frozen=True, slots=True)
 class SlowAccelParams:
-    """Settings (config ``[filter]``: ``accel_slow_time_constant_s`` …).
+    """Settings (config ``[filter]`` for the hover test, ``[calibration]`` for the flight's
+    model that ``calibrate`` fits).
 
     Attributes:
-        time_constant_s: τ, the crossover in the air, s (> 0; ``inf``: the accelerometer's
-            mean is trusted, β only from rest). Longer: less of a sustained manoeuvre leaks
-            into β (error ≤ m·Δv/τ), slower to learn a bias never seen at rest.
-        velocity_time_constant_s: τ_v of the accelerometer's leaky velocity (drag without
-            motion capture), s.
-        mocap_time_constant_s: low-pass of the motion-capture velocity (finite
-            differences of positions) that the drag term uses, s.
+        flight: the (p, v, b) filter's model of the flight (:class:`~groundstation.
+            bias_kalman.BiasKalmanParams`: the velocity's scatter and correlation time, the
+            bias's offset in the air from the rest's, the motion capture's noise).
+        velocity_time_constant_s: τ_v of the accelerometer's leaky velocity (the rotor
+            drag's velocity without motion capture), s.
         hover: run the hover test (False: never quasi-static, the tension filter then
             observes the accelerometer model alone; config ``[filter]
             accel_hover_crossover_s = 0``).
         quasi_static_accel_mps2: quasi-static while the accelerometer's 1 s mean
             acceleration (bias removed) stays below this, m/s² ...
-        quasi_static_speed_mps: ... and the drag's velocity below this, m/s.
-        quasi_static_sigmas: the hover test's thresholds follow the vibration too: the 1 s
+        quasi_static_speed_mps: ... and the speed below this, m/s (motion capture's through
+            the filter, else the corrected acceleration's 2 s leaky integral).
+        quasi_static_sigmas: the hover test's thresholds follow the noise too: the 1 s
             mean's is ``max(quasi_static_accel_mps2, quasi_static_sigmas·σ₁)``, σ₁ its
             standard deviation from the vibration measured around it; the speed's (the
             accelerometer's leaky integral, not motion capture's) likewise with that
             integral's σ (0, the default: the fixed thresholds alone; config ``[filter]
-            accel_hover_noise_sigmas``). At 2 m/s² of vibration (100 Hz) σ₁
-            ≈ 0.15 m/s² and the speed's σ ≈ 0.2 m/s per axis: fixed 0.2 and 0.3 are met a
-            fraction of the time and the hover test switches on and off.
+            accel_hover_noise_sigmas``). At 2 m/s² of vibration (100 Hz) σ₁ ≈ 0.15 m/s² and
+            the speed's σ ≈ 0.2 m/s per axis: fixed 0.2 and 0.3 are met a fraction of the
+            time and the hover test switches on and off.
         quasi_static_exit_ratio: hysteresis: in the hover, it ends only when the 1 s mean
             or the speed exceeds this many times its threshold for starting one (1, the
             default: none; ``[filter] accel_hover_exit_ratio``). Without it a noise-aware
             test flickers on its own noise near the threshold (5–6 switches/s at 1–2 m/s²).
     """
 
-    time_constant_s: float = 60.0
+    flight: BiasKalmanParams = field(default_factory=BiasKalmanParams)
     velocity_time_constant_s: float = 8.0
-    mocap_time_constant_s: float = 0.15
     hover: bool = True
     quasi_static_accel_mps2: float = 0.2
     quasi_static_speed_mps: float = 0.3
@@ -135,13 +133,14 @@ class SlowAccelParams:
         for name in (
             "quasi_static_accel_mps2",
             "quasi_static_speed_mps",
-            "time_constant_s",
             "velocity_time_constant_s",
-            "mocap_time_constant_s",
         ):
             value = getattr(self, name)
             if not (value > 0.0):  # inf allowed, NaN refused
                 raise ValueError(f"SlowAccelParams.{name} must be > 0, got {value!r}")
+
+
+_NEW_KF = BiasKalman()
 
 
 @dataclass(frozen=True)  # no slots: stepped with frozen.evolve
@@ -150,44 +149,54 @@ class SlowAccelState:
     next).
 
     Attributes:
-        bias_body_mps2: β, the accelerometer's slow error, body frame, m/s².
-        air_samples: samples in the air since β was last set at rest (the running mean's
-            count when no rest was seen).
-        learnt_at_rest: β was set at rest at this power-on.
-        velocity_world_mps: the drag's velocity, world frame, m/s (zero on the ground).
-        velocity_source: where it comes from now.
-        mocap_stamp_s / mocap_world_m: the last motion-capture sample (None: none yet).
-        mocap_velocity_world_mps: the low-passed first difference (the drag's velocity).
-        mocap_raw_velocity_world_mps / mocap_accel_world_mps2: the raw first and second
-            differences (a_ref).
-        mocap_samples: consecutive motion-capture samples (the differences need 3).
+        kf: the bias filter between its blocks (:mod:`groundstation.bias_kalman`).
+        kf_velocity_world_mps: its nominal v, integrated per sample, m/s (zero on the
+            ground).
+        kf_position_world_m: its nominal p while motion capture is in use, m; None else.
+        block_s: time integrated since its block began, s.
+        since_mocap_s: time since the last motion-capture frame, s.
+        learnt_at_rest: b was set at rest at this power-on.
+        seen_ground: a rest or a hold was seen (a take-off starts at v = 0; a drone first
+            seen flying has an unknown velocity).
+        in_air: the drone flies (a drag velocity; none on the ground).
+        drag_velocity_world_mps: the drag's velocity, world frame, m/s: the filter's while
+            motion capture is in use, else the corrected acceleration's leaky integral
+            (``velocity_time_constant_s``).
         accel_1s_body_mps2: the 1 s mean of ``f − β − Rᵀ·g·e3``, body frame, m/s².
         vibration_var_mps4: the variance per axis of ``f − β − Rᵀ·g·e3`` around its 1 s
             mean (the vibration), (m/s²)², a 2 s mean.
         quasi_static: the drone hovers (both below their thresholds).
-        regime_velocity_world_mps: the velocity the hover test uses: motion capture's, or a
-            leaky integral with a 2 s leak (a bias not yet learnt drifts it 2 s × less than
-            the drag's 8 s one), world frame, m/s.
+        regime_velocity_world_mps: the velocity the hover test uses: the filter's while
+            motion capture is in use, else the corrected acceleration's leaky integral with a
+            2 s leak, world frame, m/s.
         hover_hold_s: time left before a hover may begin again after a change of the
             tension ended one (:func:`end_hover`), s.
     """
 
-    bias_body_mps2: Vec3 = _ZERO3
-    air_samples: int = 0
+    kf: BiasKalman = _NEW_KF
+    kf_velocity_world_mps: Vec3 = _ZERO3
+    kf_position_world_m: Vec3 | None = None
+    block_s: float = 0.0
+    since_mocap_s: float = math.inf
     learnt_at_rest: bool = False
-    velocity_world_mps: Vec3 = _ZERO3
-    velocity_source: Literal["none", "accel", "mocap"] = "none"
-    mocap_stamp_s: float | None = None
-    mocap_world_m: Vec3 | None = None
-    mocap_velocity_world_mps: Vec3 = _ZERO3
-    mocap_raw_velocity_world_mps: Vec3 = _ZERO3
-    mocap_accel_world_mps2: Vec3 = _ZERO3
-    mocap_samples: int = 0
+    seen_ground: bool = False
+    in_air: bool = False
+    drag_velocity_world_mps: Vec3 = _ZERO3
     accel_1s_body_mps2: Vec3 = _ZERO3
     vibration_var_mps4: float = 0.0
     quasi_static: bool = False
     regime_velocity_world_mps: Vec3 = _ZERO3
     hover_hold_s: float = 0.0
+
+    @property
+    def bias_body_mps2(self) -> Vec3:
+        """β, the accelerometer's slow error, body frame, m/s² (the filter's b)."""
+        return self.kf.bias_body_mps2
+
+    @property
+    def velocity_world_mps(self) -> Vec3:
+        """The bias filter's velocity, world frame, m/s (zero on the ground)."""
+        return self.kf_velocity_world_mps
 
 
 def end_hover(state: SlowAccelState) -> SlowAccelState:
@@ -200,7 +209,7 @@ def end_hover(state: SlowAccelState) -> SlowAccelState:
 
 def correct_accel_body_mps2(state: SlowAccelState, accel_body_mps2: Vec3) -> Vec3:
     """``f − β``: the reading with its slow error removed, body frame, m/s²."""
-    bx, by, bz = state.bias_body_mps2
+    bx, by, bz = state.kf.bias_body_mps2
     return (
         accel_body_mps2[0] - bx,
         accel_body_mps2[1] - by,
@@ -210,47 +219,7 @@ def correct_accel_body_mps2(state: SlowAccelState, accel_body_mps2: Vec3) -> Vec
 
 def drag_velocity_world_mps(state: SlowAccelState) -> Vec3 | None:
     """The velocity the rotor-drag term uses (None on the ground: no drag there)."""
-    return None if state.velocity_source == "none" else state.velocity_world_mps
-
-
-def _mocap_step(
-    state: SlowAccelState, params: SlowAccelParams, stamp_s: float, mocap_world_m: Vec3 | None
-) -> SlowAccelState:
-    """Low-passed first and second differences of the motion-capture position."""
-    if mocap_world_m is None:
-        if state.mocap_stamp_s is not None and stamp_s - state.mocap_stamp_s > MOCAP_HOLD_S:
-            return evolve(state, mocap_stamp_s=None, mocap_world_m=None, mocap_samples=0)
-        return state
-    prev, prev_t = state.mocap_world_m, state.mocap_stamp_s
-    if prev is None or prev_t is None:
-        return evolve(state, mocap_stamp_s=stamp_s, mocap_world_m=mocap_world_m, mocap_samples=1)
-    dt = stamp_s - prev_t
-    if not (0.0 < dt <= MOCAP_HOLD_S):
-        return evolve(state, mocap_stamp_s=stamp_s, mocap_world_m=mocap_world_m, mocap_samples=1)
-    k = min(dt / params.mocap_time_constant_s, 1.0)  # first-order low-pass gain
-    v_old = state.mocap_velocity_world_mps
-    raw_v = tuple((mocap_world_m[i] - prev[i]) / dt for i in range(3))
-    v_new: tuple[float, ...]
-    a_new: tuple[float, ...]
-    if state.mocap_samples < 2:
-        v_new, a_new = raw_v, _ZERO3
-    else:
-        # The drag's velocity is low-passed (it multiplies D directly); the acceleration is
-        # the raw second difference: β low-passes it over τ, where a second difference's
-        # noise telescopes (its mean over a window is Δv/window), and a low-pass here would
-        # lag a turn's rotating acceleration into β.
-        v_raw_old = state.mocap_raw_velocity_world_mps
-        v_new = tuple(v_old[i] + k * (raw_v[i] - v_old[i]) for i in range(3))
-        a_new = tuple((raw_v[i] - v_raw_old[i]) / dt for i in range(3))
-    return evolve(
-        state,
-        mocap_stamp_s=stamp_s,
-        mocap_world_m=mocap_world_m,
-        mocap_velocity_world_mps=(v_new[0], v_new[1], v_new[2]),
-        mocap_raw_velocity_world_mps=(raw_v[0], raw_v[1], raw_v[2]),
-        mocap_accel_world_mps2=(a_new[0], a_new[1], a_new[2]),
-        mocap_samples=state.mocap_samples + 1,
-    )
+    return state.drag_velocity_world_mps if state.in_air else None
 
 
 def slow_accel_step(
@@ -264,122 +233,153 @@ def slow_accel_step(
     phase: Phase,
     mocap_world_m: Vec3 | None,
     rest_mean_body_mps2: Vec3 | None = None,
+    accel_density_m2ps3: float | None = None,
     gravity_mps2: float = GRAVITY_MPS2,
 ) -> SlowAccelState:
-    """Learn β and the drag velocity from one sample (module doc for the equations).
+    """Learn β and the velocity from one sample, and run the hover test (module doc).
 
     Args:
         state: the drone's state before the sample.
         params: settings.
         dt_s: time since the previous sample, s (0 at a restart: nothing integrates).
-        stamp_s: the sample's time, s.
+        stamp_s: the sample's time, s (unused: the filter integrates ``dt_s``).
         accel_body_mps2: the specific force as read (after any configured bias), m/s².
         R_world_body: the attitude as rows of the rotation matrix.
         phase: rest / air / hold (see :data:`Phase`).
-        mocap_world_m: the motion-capture position of this sample, m, or None.
+        mocap_world_m: the motion-capture position of this sample (a fresh frame), m, or
+            None.
         rest_mean_body_mps2: at rest, the still window's mean of ``f − Rᵀ·g·e3`` once it
             has lasted long enough (``calibration.RestCalibrator.rest_mean_body_mps2``, the
             one test of stillness), body frame, m/s²; None: β is kept.
+        accel_density_m2ps3: the accelerometer's noise as a density, (m/s²)²·s: its
+            long-run variance per sample times the mean spacing (the service: the tension
+            filter's measure, which sees the same vibration); None: this stage's own
+            vibration measure times ``dt_s`` (taken as white). Read only at a block's end
+            (:data:`groundstation.bias_kalman.BLOCK_S`).
         gravity_mps2: g, m/s².
 
     Returns:
         The next state.
     """
-    st = _mocap_step(state, params, stamp_s, mocap_world_m)
-    mocap_ok = st.mocap_samples >= 3 and mocap_world_m is not None
-    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = R_world_body
+    del stamp_s
     if phase == "hold":
         return evolve(
-            st,
-            velocity_world_mps=_ZERO3,
-            velocity_source="none",
+            state,
+            kf=bk.hold(state.kf),
+            seen_ground=True,
+            kf_velocity_world_mps=_ZERO3,
+            kf_position_world_m=None,
+            block_s=0.0,
+            since_mocap_s=math.inf,
+            in_air=False,
             accel_1s_body_mps2=_ZERO3,
             quasi_static=False,
             regime_velocity_world_mps=_ZERO3,
             hover_hold_s=0.0,
         )
     if phase == "rest":
-        # Still on the floor: a_ref = 0 exactly, and the rest detector's window mean of
+        # Still on the floor: v = 0 exactly, and the rest detector's window mean of
         # f − Rᵀ·g·e3 is this power-on's bias (a new rest, a new window: the drone may have
         # been moved between flights; a brief disarm is no measurement).
-        bias = st.bias_body_mps2
-        learnt_at_rest = st.learnt_at_rest
-        if rest_mean_body_mps2 is not None:
-            bias, learnt_at_rest = rest_mean_body_mps2, True
+        learnt = state.learnt_at_rest or rest_mean_body_mps2 is not None
         return evolve(
-            st,
-            bias_body_mps2=bias,
-            air_samples=0,
-            learnt_at_rest=learnt_at_rest,
-            velocity_world_mps=_ZERO3,
-            velocity_source="none",
+            state,
+            kf=bk.at_rest(state.kf, rest_mean_body_mps2),
+            seen_ground=True,
+            kf_velocity_world_mps=_ZERO3,
+            kf_position_world_m=None,
+            block_s=0.0,
+            since_mocap_s=math.inf,
+            learnt_at_rest=learnt,
+            in_air=False,
             accel_1s_body_mps2=_ZERO3,
             quasi_static=False,
             regime_velocity_world_mps=_ZERO3,
             hover_hold_s=0.0,
         )
-    n = st.air_samples + 1
-    if mocap_ok:
-        ax, ay, az = st.mocap_accel_world_mps2
-        ref = (ax, ay, gravity_mps2 + az)
-    else:
-        ref = (0.0, 0.0, gravity_mps2)
-    if st.learnt_at_rest:
-        gain = min(dt_s / params.time_constant_s, 1.0)
-    else:
-        # Never seen at rest (started in flight): the running mean until τ's worth.
-        gain = max(1.0 / n, min(dt_s / params.time_constant_s, 1.0))
-    # e = f − Rᵀ·(g·e3 + a_ref), body frame: what the accelerometer reads beyond the
-    # kinematics it should read.
-    rx, ry, rz = ref
-    ex = accel_body_mps2[0] - (r00 * rx + r10 * ry + r20 * rz)
-    ey = accel_body_mps2[1] - (r01 * rx + r11 * ry + r21 * rz)
-    ez = accel_body_mps2[2] - (r02 * rx + r12 * ry + r22 * rz)
-    bx, by, bz = st.bias_body_mps2
-    bias = (bx + gain * (ex - bx), by + gain * (ey - by), bz + gain * (ez - bz))
-    source: Literal["accel", "mocap"]
-    if mocap_ok:
-        velocity, source = st.mocap_velocity_world_mps, "mocap"
-    else:
-        # Leaky integral of the corrected world acceleration: v' = a − v/τ_v.
-        fx, fy, fz = (
-            accel_body_mps2[0] - bias[0],
-            accel_body_mps2[1] - bias[1],
-            accel_body_mps2[2] - bias[2],
+    kf = state.kf
+    if not kf.flight_prior:
+        kf = bk.take_off(kf, params.flight, from_ground=state.seen_ground)
+    dt = dt_s
+    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = R_world_body
+    bx, by, bz = kf.bias_body_mps2
+    fx, fy, fz = accel_body_mps2[0] - bx, accel_body_mps2[1] - by, accel_body_mps2[2] - bz
+    # The corrected world acceleration R·(f − β) − g·e3: the bias filter's nominal state is
+    # integrated with it (groundstation.bias_kalman: exactly, per sample), and the leaky
+    # velocities below.
+    awx = r00 * fx + r01 * fy + r02 * fz
+    awy = r10 * fx + r11 * fy + r12 * fz
+    awz = r20 * fx + r21 * fy + r22 * fz - gravity_mps2
+    vx, vy, vz = state.kf_velocity_world_mps
+    p = state.kf_position_world_m
+    since = state.since_mocap_s + dt
+    if p is not None:
+        if mocap_world_m is None and since > MOCAP_HOLD_S:
+            p = None  # motion capture lost: the velocity's bound observes from here
+        else:
+            h = 0.5 * dt * dt
+            p = (p[0] + vx * dt + awx * h, p[1] + vy * dt + awy * h, p[2] + vz * dt + awz * h)
+    v = (vx + awx * dt, vy + awy * dt, vz + awz * dt)
+    block = state.block_s + dt
+    kind: bk.Kind | None = None
+    if mocap_world_m is not None:
+        since = 0.0
+        if p is None:
+            kind = "start"  # motion capture (back) in use: p starts at the frame
+        elif block >= bk.BLOCK_S:
+            kind = "position"
+    elif p is None and block >= bk.BLOCK_S:
+        kind = "bound"
+    if kind is not None:
+        density = accel_density_m2ps3
+        if density is None:
+            density = state.vibration_var_mps4 * dt
+        kf, v, p = bk.block_update(
+            kf,
+            params.flight,
+            kind,
+            block_s=block,
+            R_world_body=R_world_body,
+            velocity_world_mps=v,
+            position_world_m=p,
+            mocap_world_m=mocap_world_m,
+            accel_density_m2ps3=density,
         )
-        awx = r00 * fx + r01 * fy + r02 * fz
-        awy = r10 * fx + r11 * fy + r12 * fz
-        awz = r20 * fx + r21 * fy + r22 * fz - gravity_mps2
-        vx, vy, vz = st.velocity_world_mps if st.velocity_source != "none" else _ZERO3
-        leak = math.exp(-dt_s / params.velocity_time_constant_s)
-        velocity = (vx * leak + awx * dt_s, vy * leak + awy * dt_s, vz * leak + awz * dt_s)
-        source = "accel"
+        block = 0.0
+        bx, by, bz = kf.bias_body_mps2
     # The hover test. e = f − β − Rᵀ·g·e3 is the drone's acceleration plus vibration, body
     # frame. While the drone hovers (its 1 s mean acceleration and its velocity small) the
     # tension filter also takes the thrust balance through the drone's velocity
     # (tension_kalman.HoverVelocity); out of it the accelerometer model alone carries the
     # manoeuvre, whose sustained acceleration the thrust balance would miss.
-    gx, gy, gz = r20 * gravity_mps2, r21 * gravity_mps2, r22 * gravity_mps2  # Rᵀ·g·e3
-    ex = accel_body_mps2[0] - bias[0] - gx
-    ey = accel_body_mps2[1] - bias[1] - gy
-    ez = accel_body_mps2[2] - bias[2] - gz
+    ex = accel_body_mps2[0] - bx - r20 * gravity_mps2
+    ey = accel_body_mps2[1] - by - r21 * gravity_mps2
+    ez = accel_body_mps2[2] - bz - r22 * gravity_mps2
     k1 = min(dt_s / HOVER_MEAN_S, 1.0)
-    a1x, a1y, a1z = st.accel_1s_body_mps2
-    a1 = (a1x + k1 * (ex - a1x), a1y + k1 * (ey - a1y), a1z + k1 * (ez - a1z))
+    a1x, a1y, a1z = state.accel_1s_body_mps2
     leak2 = 1.0
-    if source == "mocap":
-        rv = velocity
+    if p is not None:
+        # Motion capture's velocity, through the filter: the drag's and the hover test's.
+        velocity = rv = v
     else:
-        # awx.. is this sample's corrected world acceleration (computed above).
-        ox, oy, oz = st.regime_velocity_world_mps
+        # The corrected world acceleration's leaky integrals: high passes that keep a
+        # manoeuvre of a few seconds (the drag's, τ_v) or of a second or two (the hover
+        # test's). The filter's own velocity is held near zero by its bound, a model of the
+        # flight's low frequencies (which is what β needs), not a measure of a manoeuvre:
+        # as the drag's velocity it read NanoBench's onboard-attitude median 6.4 mN against
+        # 5.2 (docs/estimator_design.md, *The bias as a state*).
+        ux, uy, uz = state.drag_velocity_world_mps if state.in_air else _ZERO3
+        leak = math.exp(-dt_s / params.velocity_time_constant_s)
+        velocity = (ux * leak + awx * dt_s, uy * leak + awy * dt_s, uz * leak + awz * dt_s)
+        ox, oy, oz = state.regime_velocity_world_mps
         leak2 = math.exp(-dt_s / HOVER_SPEED_LEAK_S)
         rv = (ox * leak2 + awx * dt_s, oy * leak2 + awy * dt_s, oz * leak2 + awz * dt_s)
-    vx, vy, vz = rv
+    a1 = (a1x + k1 * (ex - a1x), a1y + k1 * (ey - a1y), a1z + k1 * (ez - a1z))
     # The vibration around the 1 s mean (per axis): the mean's standard deviation is the
     # vibration's times sqrt(k / (2 − k)) for an exponential mean of gain k over white noise.
     dx, dy, dz = ex - a1[0], ey - a1[1], ez - a1[2]
     kv = min(dt_s / VIBRATION_MEAN_S, 1.0)
-    var = st.vibration_var_mps4
+    var = state.vibration_var_mps4
     var += kv * ((dx * dx + dy * dy + dz * dz) / 3.0 - var)
     limit1 = params.quasi_static_accel_mps2**2
     limit_v = params.quasi_static_speed_mps**2
@@ -390,17 +390,18 @@ def slow_accel_step(
         limit1 = max(limit1, sigmas2 * var * k1 / (2.0 - k1))
         # The speed's likewise when it is the accelerometer's leaky integral (v ← leak·v +
         # e·dt: σ_v² = var·dt²/(1 − leak²) per axis), not motion capture's.
-        if source == "accel" and leak2 < 1.0:
+        if leak2 < 1.0:
             limit_v = max(limit_v, sigmas2 * var * dt_s * dt_s / (1.0 - leak2 * leak2))
-    if st.quasi_static:
+    if state.quasi_static:
         # In the hover, times the exit ratio (hysteresis: the noise around the threshold
         # does not switch it).
         ratio2 = params.quasi_static_exit_ratio**2
         limit1 *= ratio2
         limit_v *= ratio2
-    hold = st.hover_hold_s
+    hold = state.hover_hold_s
     if hold > 0.0:
         hold = hold - dt_s if hold > dt_s else 0.0
+    vx, vy, vz = rv
     quasi = (
         params.hover
         and hold == 0.0
@@ -408,11 +409,14 @@ def slow_accel_step(
         and vx * vx + vy * vy + vz * vz < limit_v
     )
     return evolve(
-        st,
-        bias_body_mps2=bias,
-        air_samples=n,
-        velocity_world_mps=velocity,
-        velocity_source=source,
+        state,
+        kf=kf,
+        kf_velocity_world_mps=v,
+        kf_position_world_m=p,
+        block_s=block,
+        since_mocap_s=since,
+        in_air=True,
+        drag_velocity_world_mps=velocity,
         accel_1s_body_mps2=a1,
         vibration_var_mps4=var,
         quasi_static=quasi,

@@ -1312,6 +1312,17 @@ class TensionFilter:
             return self._prior_var, (0.0, 0.0, 0.0), self._prior_var
         return self._noise.model()
 
+    def noise_density_n2s(self) -> float | None:
+        """The observation's noise as a density, N²·s: the long-run variance r (the mean of
+        the three axes') times the mean sample spacing; None before a spacing is known. The
+        slow stage's velocity filter takes it over m² as the accelerometer's
+        (``groundstation.bias_kalman``): the same vibration, measured once."""
+        spacing = self._dt_mean
+        if not (spacing == spacing and spacing > 0.0):
+            return None
+        r0, r1, r2 = self.noise_model()[2]
+        return (r0 + r1 + r2) / 3.0 * spacing
+
     def vertical_noise_var_n2(self) -> float | None:
         """The observation's vertical noise as a test of it must allow for, N^2, or None
         before the noise estimate has taken a difference.

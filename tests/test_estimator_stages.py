@@ -17,6 +17,7 @@ import pytest
 from groundstation import contact as contact_mod
 from groundstation import follow as follow_mod
 from groundstation.attitude import Rows, rows_from_quat_wxyz
+from groundstation.bias_kalman import BiasKalman
 from groundstation.calibration import RestCalibrator
 from groundstation.config import LocalizationSection
 from groundstation.estimator import checks, output
@@ -118,7 +119,7 @@ def test_observation_is_observe_tension_of_the_reading_less_the_rest_offset() ->
 
 def test_observation_with_the_slow_stage_subtracts_beta_but_reports_the_raw_reading() -> None:
     msg = _telemetry(accel_mps2=(0.3, 0.0, G))
-    slow = SlowAccelState(bias_body_mps2=(0.3, 0.0, 0.0))
+    slow = SlowAccelState(kf=BiasKalman(bias_body_mps2=(0.3, 0.0, 0.0)))
     got = observe(
         msg,
         mass_kg=MASS_KG,

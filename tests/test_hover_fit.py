@@ -9,12 +9,20 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from groundstation.bias_kalman import BiasKalmanParams
 from groundstation.bus import Sample
 from groundstation.calibration import CalibrationData
 from groundstation.cli import main
 from groundstation.config import load_settings
-from groundstation.estimator.drone import hover_velocity_params, slow_accel_params
-from groundstation.hover_fit import HOVER_FIT_MIN_S, fit_hover_velocity, hover_flags
+from groundstation.estimator.drone import flight_params, hover_velocity_params, slow_accel_params
+from groundstation.hover_fit import (
+    HOVER_FIT_MIN_S,
+    FlightPhases,
+    fit_flight,
+    fit_hover_velocity,
+    flight_phases,
+    hover_flags,
+)
 from groundstation.pipeline import Pipeline
 from groundstation.tension import TensionFilterParams
 from tests.calib_synth import write_mcap
@@ -170,3 +178,86 @@ def test_calibrate_writes_what_it_fitted_and_says_when_it_cannot(
     assert "hover velocity           not fitted" in capsys.readouterr().out
     cal = load_settings(out2, use_env=False).for_drone("cf1").calibration
     assert cal.hover_velocity_std_mps is None and cal.hover_velocity_time_s is None
+
+
+def test_the_flight_fit_finds_the_velocity_about_zero_and_the_bias_offset_from_the_rest() -> None:
+    """σ_V and T_V of an airborne AR(1) velocity (about zero); σ_δ from a flight whose
+    accelerometer reads 0.08 m/s² more in x than at the rest before it."""
+    settings = load_settings(None, {}, use_env=False)
+    params = slow_accel_params(settings.for_drone("cf1"))
+    data = _hover(120.0, 0.1, 0.5, seed=4, accel_noise_mps2=0.2)
+    data.position_world_m[:, 2] = 1.0  # level flight (a vertical walk would reach the floor)
+    data.accel_body_mps2[:, 2] = G
+    data.armed[:200] = False  # 2 s on the floor, disarmed and still
+    data.thrust_n[:200] = 0.0
+    data.accel_body_mps2[:200] = (0.0, 0.0, G)
+    data.accel_body_mps2[200:, 0] += 0.08  # the bias in the air: +0.08 m/s² in x
+    phases = flight_phases(data, params, mass_kg=MASS_KG, floor_z_m=0.0, ground_thrust_ratio=0.5)
+    assert not phases.airborne[:200].any() and phases.airborne[300:].all()
+    np.testing.assert_allclose(phases.rest_mean_body_mps2[300], (0.0, 0.0, 0.0), atol=1e-9)
+    fit, airborne_s = fit_flight(data, phases)
+    assert fit is not None and airborne_s == pytest.approx(118.0, abs=0.2)
+    # Two axes of 0.1 m/s and a still one: σ_V² the mean of the three.
+    assert fit.velocity_std_mps == pytest.approx(0.1 * math.sqrt(2.0 / 3.0), rel=0.25)
+    assert fit.velocity_time_s == pytest.approx(_expected_time_s(0.5), rel=0.5)
+    # One flight after a rest: δ = (0.08, 0, 0) ± its mean's noise, RMS over the axes.
+    assert fit.flights == 1
+    assert fit.bias_std_mps2 == pytest.approx(0.08 / math.sqrt(3), rel=0.15)
+    # No rest before the flight: no σ_δ; too little flight: nothing.
+    no_rest = np.full_like(phases.rest_mean_body_mps2, np.nan)
+    fit2, _ = fit_flight(data, FlightPhases(phases.hovering, phases.airborne, no_rest))
+    assert fit2 is not None and fit2.bias_std_mps2 is None
+    short = _hover(2.5, 0.1, 0.5)
+    short_phases = flight_phases(
+        short, params, mass_kg=MASS_KG, floor_z_m=0.0, ground_thrust_ratio=0.5
+    )
+    fit3, _ = fit_flight(short, short_phases)
+    assert fit3 is None
+
+
+def test_the_service_takes_the_fitted_flight_model() -> None:
+    none = load_settings(None, {}, use_env=False)
+    assert flight_params(none.for_drone("cf1").calibration) == BiasKalmanParams()
+    fitted = load_settings(
+        None,
+        {
+            "calibration": {
+                "flight_velocity_std_mps": 0.4,
+                "flight_velocity_time_s": 0.6,
+                "flight_bias_std_mps2": 0.03,
+            },
+            "localization": {"mocap_std_m": 0.001},
+        },
+        use_env=False,
+    )
+    pipe = Pipeline(fitted)
+    pipe.handle(Sample("tether/cf1/telemetry", TELEMETRY), 0.0)
+    slow = pipe.drones["cf1"].slow_params
+    assert slow is not None
+    assert slow.flight == BiasKalmanParams(
+        velocity_std_mps=0.4, velocity_time_s=0.6, flight_bias_std_mps2=0.03, mocap_std_m=0.001
+    )
+    with pytest.raises(Exception, match="flight_bias_std_mps2"):
+        load_settings(None, {"calibration": {"flight_bias_std_mps2": 0.0}}, use_env=False)
+
+
+def test_calibrate_writes_the_flight_model(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    rec = tmp_path / "flight.mcap"
+    data = _hover(40.0, 0.1, 0.5, seed=6, accel_noise_mps2=0.1)
+    data.position_world_m[:, 2] = 1.0
+    data.accel_body_mps2[:, 2] = G
+    data.armed[:200] = False
+    data.thrust_n[:200] = 0.0
+    data.accel_body_mps2[:200] = (0.0, 0.0, G)
+    write_mcap(str(rec), data)
+    out = tmp_path / "cal.toml"
+    assert (
+        main(["calibrate", "--untethered", "--tether-detached", str(rec), "--out", str(out)]) == 0
+    )
+    said = capsys.readouterr().out
+    assert "flight_velocity_std_mps" in said and "flight_bias_std_mps2" in said
+    cal = load_settings(out, use_env=False).for_drone("cf1").calibration
+    assert cal.flight_velocity_std_mps == pytest.approx(0.1 * math.sqrt(2.0 / 3.0), rel=0.3)
+    assert cal.flight_velocity_time_s is not None and cal.flight_bias_std_mps2 is not None

@@ -12,6 +12,7 @@ from scipy.spatial.transform import Rotation
 
 from groundstation import config as config_mod
 from groundstation.attitude import rows_from_quat_wxyz
+from groundstation.bias_kalman import BiasKalmanParams
 from groundstation.calibration import RestCalibrator
 from groundstation.config import FilterSection, load_settings
 from groundstation.estimator.drone import slow_accel_params
@@ -70,8 +71,8 @@ def _run(
 
 
 def test_bad_settings_are_refused() -> None:
-    with pytest.raises(ValueError, match="time_constant_s"):
-        SlowAccelParams(time_constant_s=0.0)
+    with pytest.raises(ValueError, match="velocity_time_constant_s"):
+        SlowAccelParams(velocity_time_constant_s=0.0)
     with pytest.raises(ValueError, match="velocity_time_constant_s"):
         SlowAccelParams(velocity_time_constant_s=math.nan)
 
@@ -101,9 +102,12 @@ def test_a_hold_changes_nothing() -> None:
 
 
 def test_in_the_air_a_bounded_velocity_leaves_the_bias_alone() -> None:
-    """Manoeuvres with bounded velocity: 0.5 m/s² sine at 0.2 Hz on top of the bias; after
-    the rest, the air update keeps β within m·Δv/τ-sized error of the bias."""
-    params = SlowAccelParams(time_constant_s=30.0)
+    """Manoeuvres with bounded velocity: 0.5 m/s² sine at 0.2 Hz (0.4 m/s peak) on top of
+    the bias, within the bound the filter is told (σ_V 0.45 m/s, T_V 0.7 s: NanoBench's
+    trajectories, as ``calibrate`` fits them); after the rest, β stays within the σ_δ prior
+    of the bias (0.05 m/s²) and the filter's own σ of it."""
+    flight = BiasKalmanParams(velocity_std_mps=0.45, velocity_time_s=0.7)
+    params = SlowAccelParams(flight=flight)
     st = _run(SlowAccelState(), params, 200, "rest", lambda i: (BIAS[0], BIAS[1], G + BIAS[2]))
 
     def manoeuvre(i: int) -> tuple[float, float, float]:
@@ -111,11 +115,14 @@ def test_in_the_air_a_bounded_velocity_leaves_the_bias_alone() -> None:
         return (BIAS[0] + a, BIAS[1], G + BIAS[2])
 
     st = _run(st, params, 6000, "air", manoeuvre)
-    # |mean of a over τ| ≤ 2·v_max/τ = 2·0.4/30 m/s²
-    assert np.allclose(st.bias_body_mps2, BIAS, atol=0.03)
+    assert st.kf.cov is not None
+    sd = np.sqrt(np.diag(st.kf.cov)[6:])
+    err = np.subtract(st.bias_body_mps2, BIAS)
+    assert np.all(np.abs(err) < np.maximum(3.0 * sd, 0.01)), (err, sd)
+    assert np.all(np.abs(err) < flight.flight_bias_std_mps2), err
 
 
-def test_started_in_the_air_the_running_mean_finds_the_bias() -> None:
+def test_started_in_the_air_the_filter_finds_the_bias() -> None:
     params = SlowAccelParams()
     rng = np.random.default_rng(2)
     st = _run(
@@ -130,19 +137,22 @@ def test_started_in_the_air_the_running_mean_finds_the_bias() -> None:
 
 
 def test_a_body_fixed_bias_stays_put_while_the_drone_yaws() -> None:
-    params = SlowAccelParams(time_constant_s=5.0)
+    """A noiseless still drone yawing at 0.5 rad/s: the body-frame bias is found in every
+    axis (the yaw turns it in the world, where the velocity sees it)."""
+    params = SlowAccelParams()
 
     def R(i: int) -> tuple[tuple[float, float, float], ...]:
         return _yaw(0.5 * i * 0.01)  # 0.5 rad/s
 
     st = _run(SlowAccelState(), params, 6000, "air", lambda i: (BIAS[0], BIAS[1], G + BIAS[2]), R)
-    assert np.allclose(st.bias_body_mps2, BIAS, atol=1e-6)
+    assert np.allclose(st.bias_body_mps2, BIAS, atol=2e-3)
 
 
-def test_motion_capture_acceleration_keeps_a_sustained_turn_out_of_the_bias() -> None:
-    """A 1 m circle at 1 rad/s: 1 m/s² centripetal, sustained. Without motion capture the
-    air update takes part of it for bias; with it, the bias is found."""
-    params = SlowAccelParams(time_constant_s=2.0)
+def test_motion_capture_keeps_a_sustained_turn_out_of_the_bias() -> None:
+    """A 1 m circle at 1 rad/s: 1 m/s² centripetal, sustained, a velocity of 1 m/s far
+    outside a hover's bound (σ_V 0.05 m/s). Without motion capture the filter takes part of
+    it for bias; with motion capture's positions, the bias is found."""
+    params = SlowAccelParams(flight=BiasKalmanParams(velocity_std_mps=0.05))
     w, dt = 1.0, 0.01
 
     def accel(i: int) -> tuple[float, float, float]:
@@ -158,13 +168,13 @@ def test_motion_capture_acceleration_keeps_a_sustained_turn_out_of_the_bias() ->
     blind = _run(SlowAccelState(), params, 3000, "air", accel)
     err_seen = np.linalg.norm(np.subtract(seen.bias_body_mps2, BIAS))
     err_blind = np.linalg.norm(np.subtract(blind.bias_body_mps2, BIAS))
-    assert err_seen < 0.05, seen.bias_body_mps2
-    assert err_blind > 0.2, blind.bias_body_mps2  # ≈ |1/(1 + iωτ)| = 0.45 m/s²
-    assert seen.velocity_source == "mocap"
+    assert err_seen < 0.01, seen.bias_body_mps2
+    assert err_blind > 3.0 * err_seen, blind.bias_body_mps2  # 0.066 against 0.004 m/s²
+    assert seen.kf_position_world_m is not None  # motion capture in use
     v = drag_velocity_world_mps(seen)
     assert v is not None
-    t_end = 2999 * dt  # the low-pass (0.15 s) lags the turn by about 0.15 rad
-    assert np.allclose(v[:2], (-math.sin(w * t_end), math.cos(w * t_end)), atol=0.2), v
+    t_end = 2999 * dt  # the fused velocity follows the turn
+    assert np.allclose(v[:2], (-math.sin(w * t_end), math.cos(w * t_end)), atol=0.05), v
 
 
 def test_the_drag_velocity_without_motion_capture_follows_a_manoeuvre() -> None:
@@ -173,7 +183,7 @@ def test_the_drag_velocity_without_motion_capture_follows_a_manoeuvre() -> None:
     st = _run(SlowAccelState(), params, 150, "rest", lambda i: (0.0, 0.0, G))
     st = _run(st, params, 100, "air", lambda i: (1.0, 0.0, G))
     v = drag_velocity_world_mps(st)
-    assert v is not None and st.velocity_source == "accel"
+    assert v is not None and st.kf_position_world_m is None
     assert 0.9 < v[0] < 1.0 and abs(v[1]) < 1e-9
 
 
@@ -339,3 +349,25 @@ def test_the_hover_test_settings_reach_the_estimator(tmp_path: Path) -> None:
     cfg.write_text("[filter]\naccel_hover_exit_ratio = 0.5\n")
     with pytest.raises(ConfigError, match="accel_hover_exit_ratio"):
         load_settings(cfg, {}, use_env=False)
+
+
+def test_the_retired_bias_time_constant_is_accepted_with_one_warning(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """``[filter] accel_slow_time_constant_s``: the bias filter replaced the low-pass; a
+    value other than 60 is kept, told once (naming what replaced it), and changes nothing."""
+    config_mod._warned.clear()
+    with caplog.at_level(logging.WARNING, logger="groundstation.config"):
+        for _ in range(3):
+            FilterSection(accel_slow_time_constant_s=10.0)
+    said = [r.getMessage() for r in caplog.records]
+    assert len(said) == 1 and "accel_slow_time_constant_s = 10 is not used" in said[0]
+    assert "flight_velocity_std_mps" in said[0] and "replaced" in said[0]
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="groundstation.config"):
+        FilterSection()
+    assert caplog.records == []
+    settings = load_settings(None, {"filter": {"accel_slow_time_constant_s": 10.0}}, use_env=False)
+    assert slow_accel_params(settings.for_drone("cf1")) == slow_accel_params(
+        load_settings(None, {}, use_env=False).for_drone("cf1")
+    )

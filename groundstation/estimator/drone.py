@@ -41,9 +41,11 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from groundstation import bias_kalman
 from groundstation import contact as contact_mod
 from groundstation import follow as follow_mod
 from groundstation import slow_accel as slow_mod
+from groundstation.bias_kalman import BiasKalmanParams
 from groundstation.bus import Sample
 from groundstation.calibration import RestCalibrator
 from groundstation.config import CalibrationSection, DroneParams, Settings
@@ -114,11 +116,14 @@ def calibration_from_config(
     return cal, section.source if section.source != "none" else "config"
 
 
-def slow_accel_params(params: DroneParams) -> slow_mod.SlowAccelParams:
-    """The slow stage's settings from ``[filter]`` (the service's, and ``calibrate``'s when
-    it runs the same hover test over a recording)."""
+def slow_accel_params(
+    params: DroneParams, mocap_std_m: float | None = None
+) -> slow_mod.SlowAccelParams:
+    """The slow stage's settings from ``[filter]`` and ``[calibration]`` (the service's, and
+    ``calibrate``'s when it runs the same hover test over a recording); ``mocap_std_m``:
+    ``[localization] mocap_std_m`` (None: the bias filter's default, the same 2 mm)."""
     return slow_mod.SlowAccelParams(
-        time_constant_s=params.filter.accel_slow_time_constant_s,
+        flight=flight_params(params.calibration, mocap_std_m),
         velocity_time_constant_s=params.filter.drag_velocity_time_constant_s,
         hover=params.filter.accel_hover_crossover_s > 0.0,
         quasi_static_sigmas=params.filter.accel_hover_noise_sigmas,
@@ -127,6 +132,27 @@ def slow_accel_params(params: DroneParams) -> slow_mod.SlowAccelParams:
 
 
 _FILTER_DEFAULTS = TensionFilterParams()
+_FLIGHT_DEFAULTS = BiasKalmanParams()
+
+
+def flight_params(
+    section: CalibrationSection, mocap_std_m: float | None = None
+) -> BiasKalmanParams:
+    """The bias filter's model of the flight where ``calibrate`` fitted it (``[calibration]
+    flight_velocity_std_mps`` / ``flight_velocity_time_s`` / ``flight_bias_std_mps2``); the
+    defaults otherwise (groundstation.bias_kalman)."""
+    d = _FLIGHT_DEFAULTS
+    std, time, bias = (
+        section.flight_velocity_std_mps,
+        section.flight_velocity_time_s,
+        section.flight_bias_std_mps2,
+    )
+    return BiasKalmanParams(
+        velocity_std_mps=d.velocity_std_mps if std is None else std,
+        velocity_time_s=d.velocity_time_s if time is None else time,
+        flight_bias_std_mps2=d.flight_bias_std_mps2 if bias is None else bias,
+        mocap_std_m=d.mocap_std_m if mocap_std_m is None else mocap_std_m,
+    )
 
 
 def hover_velocity_params(section: CalibrationSection) -> tuple[float, float]:
@@ -255,7 +281,11 @@ class DroneEstimator:
             ground_thrust_ratio=params.filter.ground_thrust_ratio
         )
         self.contact = contact_mod.ContactState()
-        self.slow_params = slow_accel_params(params) if params.calibration.accel_slow else None
+        self.slow_params = (
+            slow_accel_params(params, settings.localization.mocap_std_m)
+            if params.calibration.accel_slow
+            else None
+        )
         """``[calibration] accel_slow``: the accelerometer's slow content replaced (None: off)."""
         self.slow = slow_mod.SlowAccelState()
         mx, my, mz = params.calibration.tension_model_std_n
@@ -459,6 +489,13 @@ class DroneEstimator:
             assert self.slow_params is not None
             was_hovering = self.slow.quasi_static
             still = not msg.armed and self.rest_detector.still  # armed: no property calls
+            # The vibration the velocity filter's block step needs (read only then): the
+            # tension filter's measure of it, over the mass squared.
+            density = None
+            if self.slow.in_air and self.slow.block_s + dt_s >= bias_kalman.BLOCK_S:
+                density_n2s = self.filter.noise_density_n2s()
+                if density_n2s is not None:
+                    density = density_n2s / (mass_kg * mass_kg)
             self.slow = learn_slow(
                 self.slow,
                 self.slow_params,
@@ -469,6 +506,7 @@ class DroneEstimator:
                 calibration=self.calibration,
                 still=still,
                 rest_mean_body_mps2=self.rest_detector.rest_mean_body_mps2 if still else None,
+                accel_density_m2ps3=density,
             )
             if self.slow.quasi_static != was_hovering:
                 detections = self.filter_control.change_detections

@@ -143,11 +143,13 @@ def learn_slow(
     calibration: ObservationCalibration | None,
     still: bool,
     rest_mean_body_mps2: Vec3 | None,
+    accel_density_m2ps3: float | None = None,
 ) -> slow_mod.SlowAccelState:
     """One accepted sample into the slow stage: at rest (disarmed and still: ``still`` and
     ``rest_mean_body_mps2`` from the rest detector, :class:`~groundstation.calibration.
     RestCalibrator`, the one test of stillness), in the air (observing a tension), or held
-    (spool-up, landing, a dip)."""
+    (spool-up, landing, a dip). ``accel_density_m2ps3``: the accelerometer's noise density
+    for the velocity filter (``slow_accel_step``), None: the stage's own measure."""
     accel_read = observed.accel_read_body_mps2
     phase: slow_mod.Phase
     if not msg.armed and still:
@@ -170,4 +172,5 @@ def learn_slow(
         phase=phase,
         mocap_world_m=msg.position_m,
         rest_mean_body_mps2=rest_mean_body_mps2 if phase == "rest" else None,
+        accel_density_m2ps3=accel_density_m2ps3,
     )

@@ -35,7 +35,12 @@ from groundstation.calibration import (
 )
 from groundstation.config import ConfigError, Settings, load_settings
 from groundstation.estimator.drone import slow_accel_params
-from groundstation.hover_fit import HOVER_FIT_MIN_S, fit_hover_velocity, hover_flags
+from groundstation.hover_fit import (
+    HOVER_FIT_MIN_S,
+    fit_flight,
+    fit_hover_velocity,
+    flight_phases,
+)
 from groundstation.outputs import NewFile, OutputError, check_output
 from groundstation.recording.format import RecordingError
 from groundstation.recording.reader import iter_messages
@@ -945,33 +950,66 @@ def run_calibrate(
 
 
 def hover_velocity_drone(rec: DroneRecording, settings: Settings) -> tuple[dict[str, float], str]:
-    """σ_v and T_c of one drone's hovers (groundstation.hover_fit): the keys to write (none
-    when there is too little hover under motion capture) and the line to print."""
+    """σ_v and T_c of one drone's hovers, σ_V, T_V and σ_δ of its flights
+    (groundstation.hover_fit): the keys to write (none where there is too little under
+    motion capture) and the lines to print."""
     params = settings.for_drone(rec.drone)
-    flags = hover_flags(
+    bias = params.calibration.accel_bias_mps2
+    phases = flight_phases(
         rec.data,
         slow_accel_params(params),
         mass_kg=params.drone.mass_kg,
         floor_z_m=params.base.floor_z_m,
         ground_thrust_ratio=params.filter.ground_thrust_ratio,
-        accel_bias_mps2=params.calibration.accel_bias_mps2,
+        accel_bias_mps2=bias,
     )
-    fit, hover_s = fit_hover_velocity(rec.data, flags)
+    keys: dict[str, float] = {}
+    lines: list[str] = []
+    fit, hover_s = fit_hover_velocity(rec.data, phases.hovering)
     if fit is None:
-        return {}, (
+        lines.append(
             f"    hover velocity           not fitted: {hover_s:.1f} s of hover under motion "
             f"capture (the service's hover test; need {HOVER_FIT_MIN_S:.0f} s): the "
             "filter's defaults stand"
         )
-    keys = {
-        "hover_velocity_std_mps": round(fit.std_mps, 6),
-        "hover_velocity_time_s": round(fit.time_s, 4),
-    }
-    return keys, (
-        f"    hover_velocity_std_mps   {fit.std_mps:.4f}  hover_velocity_time_s {fit.time_s:.3f}"
-        f"  ({fit.hover_s:.1f} s of hover in {fit.stretches} stretches: the velocity's "
-        "scatter and correlation time, which bound the hover's thrust balance)"
-    )
+    else:
+        keys["hover_velocity_std_mps"] = round(fit.std_mps, 6)
+        keys["hover_velocity_time_s"] = round(fit.time_s, 4)
+        lines.append(
+            f"    hover_velocity_std_mps   {fit.std_mps:.4f}  hover_velocity_time_s "
+            f"{fit.time_s:.3f}  ({fit.hover_s:.1f} s of hover in {fit.stretches} stretches: "
+            "the velocity's scatter and correlation time, which bound the hover's thrust "
+            "balance)"
+        )
+    flight, airborne_s = fit_flight(rec.data, phases, accel_bias_mps2=bias)
+    if flight is None:
+        lines.append(
+            f"    flight velocity          not fitted: {airborne_s:.1f} s of flight under "
+            f"motion capture (need {HOVER_FIT_MIN_S:.0f} s): the bias filter's defaults stand"
+        )
+    else:
+        keys["flight_velocity_std_mps"] = round(flight.velocity_std_mps, 6)
+        keys["flight_velocity_time_s"] = round(flight.velocity_time_s, 4)
+        line = (
+            f"    flight_velocity_std_mps  {flight.velocity_std_mps:.4f}  "
+            f"flight_velocity_time_s {flight.velocity_time_s:.3f}  ({flight.airborne_s:.1f} s "
+            "of flight: the velocity's scatter about zero and its correlation time, from "
+            "which the bias filter learns the accelerometer's bias in the air)"
+        )
+        lines.append(line)
+        if flight.bias_std_mps2 is None:
+            lines.append(
+                "    flight_bias_std_mps2     not fitted: no flight followed a rest on the "
+                "floor (disarmed and still): the default stands"
+            )
+        else:
+            keys["flight_bias_std_mps2"] = round(flight.bias_std_mps2, 6)
+            lines.append(
+                f"    flight_bias_std_mps2     {flight.bias_std_mps2:.4f}  ({flight.flights} "
+                "flights after a rest: how far the accelerometer's bias in the air strays "
+                "from the rest's)"
+            )
+    return keys, "\n".join(lines)
 
 
 def _attitude_line(drone: str, source: str) -> str:
