@@ -366,8 +366,8 @@ def slow_accel_step(
         # manoeuvre of a few seconds (the drag's, τ_v) or of a second or two (the hover
         # test's). The filter's own velocity is held near zero by its bound, a model of the
         # flight's low frequencies (which is what β needs), not a measure of a manoeuvre:
-        # as the drag's velocity it read NanoBench's onboard-attitude median 6.4 mN against
-        # 5.2 (docs/estimator_design.md, *The bias as a state*).
+        # as the drag's velocity it read NanoBench worse with the onboard attitude, in a
+        # development variant not kept (docs/estimator_design.md, *The bias as a state*).
         ux, uy, uz = state.drag_velocity_world_mps if state.in_air else _ZERO3
         leak = math.exp(-dt_s / params.velocity_time_constant_s)
         velocity = (ux * leak + awx * dt_s, uy * leak + awy * dt_s, uz * leak + awz * dt_s)
