@@ -61,6 +61,7 @@ CONFIG_DEFAULTS = "groundstation/config.py:defaults"
 ESTIMATOR: tuple[str, ...] = (
     "groundstation/airframe.py",
     "groundstation/attitude.py",
+    "groundstation/bias_kalman.py",
     "groundstation/calibration.py",
     "groundstation/catenary.py",
     "groundstation/contact.py",

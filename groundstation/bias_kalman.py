@@ -129,18 +129,18 @@ class BiasKalman:
         cov: the 9×9 covariance of (p, v, b) in the air (p's rows zero while p is unused);
             None on the ground.
         bias_var_mps4: b's variance per axis on the ground (cov None), (m/s²)².
-        grounded: on the ground: v = 0, no p, cov None.
         flight_prior: the flight offset's prior was added since the last rest.
-        velocity_var_mps2: v's variance per axis (the mean of the three) after the last
-            block's observation, (m/s)².
     """
 
     bias_body_mps2: Vec3 = _ZERO3
     cov: NDArray[np.float64] | None = None
     bias_var_mps4: float = BIAS_PRIOR_STD_MPS2 * BIAS_PRIOR_STD_MPS2
-    grounded: bool = True
     flight_prior: bool = False
-    velocity_var_mps2: float = 0.0
+
+    @property
+    def grounded(self) -> bool:
+        """On the ground: v = 0, no p, b's variance alone (no covariance)."""
+        return self.cov is None
 
 
 def _grounded(state: BiasKalman, flight_prior: bool) -> BiasKalman:
@@ -195,8 +195,6 @@ def take_off(state: BiasKalman, params: BiasKalmanParams, *, from_ground: bool) 
         bias_body_mps2=state.bias_body_mps2,
         cov=cov,
         flight_prior=True,
-        grounded=False,
-        velocity_var_mps2=state.velocity_var_mps2,
     )
 
 
@@ -278,7 +276,5 @@ def block_update(
         bias_body_mps2=(float(x[6]), float(x[7]), float(x[8])),
         cov=0.5 * (cov + cov.T),
         flight_prior=state.flight_prior,
-        grounded=False,
-        velocity_var_mps2=float(cov[3, 3] + cov[4, 4] + cov[5, 5]) / 3.0,
     )
     return nxt, (float(x[3]), float(x[4]), float(x[5])), p

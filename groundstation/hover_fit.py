@@ -39,7 +39,7 @@ from scipy.signal import savgol_filter
 
 from groundstation import slow_accel as slow_mod
 from groundstation.airframe import MIN_HEIGHT_M
-from groundstation.attitude import GRAVITY_MPS2, rows_from_quat_wxyz
+from groundstation.attitude import GRAVITY_MPS2, rotations_world_body, rows_from_quat_wxyz
 from groundstation.calibration import (
     CalibrationData,
     RestCalibrator,
@@ -230,6 +230,35 @@ def bridged_velocity(data: CalibrationData) -> FloatArray:
     return vel
 
 
+def _velocity_runs(
+    data: CalibrationData, mask: NDArray[np.bool_]
+) -> tuple[FloatArray, NDArray[np.int64], list[tuple[int, int]], list[float], float]:
+    """The motion-capture velocity (:func:`bridged_velocity`) and the runs of ``mask`` where it
+    is known that last at least the hover test's window (``slow_accel.HOVER_MEAN_S``) and 3
+    samples: ``(velocity, indices, runs into the indices, each run's median period, seconds
+    they span)``."""
+    vel = bridged_velocity(data)
+    idx = np.flatnonzero(mask & np.all(np.isfinite(vel), axis=1))
+    runs: list[tuple[int, int]] = []
+    dts: list[float] = []
+    for a, b in _index_runs(idx, data.segment):
+        t = data.stamp_s[idx[a:b]]
+        if b - a >= 3 and t[-1] - t[0] >= slow_mod.HOVER_MEAN_S:
+            runs.append((a, b))
+            dts.append(float(np.median(np.diff(t))))
+    seconds = float(sum((b - a) * dt for (a, b), dt in zip(runs, dts, strict=True)))
+    return vel, idx, runs, dts, seconds
+
+
+def _correlation_time_s(
+    v: FloatArray, runs: list[tuple[int, int]], dts: list[float], var_axes: FloatArray
+) -> float:
+    """dt · τ_int per axis (Sokal's window, on the runs' mean-removed series), weighted by
+    each axis' variance, s."""
+    tau = np.array([_integrated_autocorr_time(v[:, k], runs) for k in range(3)])
+    return float(np.median(dts)) * float((var_axes * tau).sum() / var_axes.sum())
+
+
 def fit_hover_velocity(
     data: CalibrationData,
     hovering: NDArray[np.bool_],
@@ -246,31 +275,16 @@ def fit_hover_velocity(
     Returns:
         ``(fit or None, seconds of hover found)``.
     """
-    vel = bridged_velocity(data)
-    usable = hovering & np.all(np.isfinite(vel), axis=1)
-    idx = np.flatnonzero(usable)
-    if idx.size < 2:
-        return None, 0.0
-    runs: list[tuple[int, int]] = []
-    dts: list[float] = []
-    for a, b in _index_runs(idx, data.segment):
-        t = data.stamp_s[idx[a:b]]
-        if b - a >= 3 and t[-1] - t[0] >= slow_mod.HOVER_MEAN_S:
-            runs.append((a, b))
-            dts.append(float(np.median(np.diff(t))))
-    hover_s = float(sum((b - a) * dt for (a, b), dt in zip(runs, dts, strict=True)))
-    if hover_s < min_hover_s:
+    vel, idx, runs, dts, hover_s = _velocity_runs(data, hovering)
+    if not runs or hover_s < min_hover_s:
         return None, hover_s
     v = vel[idx]
     d = np.concatenate([v[a:b] - v[a:b].mean(axis=0) for a, b in runs])
     var_axes = (d * d).mean(axis=0)
-    # Each axis' correlation time in samples, on the stretches' own (mean-removed) series.
-    tau = np.array([_integrated_autocorr_time(v[:, k], runs) for k in range(3)])
     var = float(var_axes.mean())
     if not var > 0.0:
         return None, hover_s
-    dt = float(np.median(dts))
-    time_s = dt * float((var_axes * tau).sum() / var_axes.sum())
+    time_s = _correlation_time_s(v, runs, dts, var_axes)
     fit = HoverVelocityFit(
         std_mps=math.sqrt(var), time_s=time_s, hover_s=hover_s, stretches=len(runs)
     )
@@ -318,18 +332,8 @@ def fit_flight(
     Returns:
         ``(fit or None, seconds of flight found)``.
     """
-    vel = bridged_velocity(data)
-    usable = phases.airborne & np.all(np.isfinite(vel), axis=1)
-    idx = np.flatnonzero(usable)
-    runs: list[tuple[int, int]] = []
-    dts: list[float] = []
-    for a, b in _index_runs(idx, data.segment):
-        t = data.stamp_s[idx[a:b]]
-        if b - a >= 3 and t[-1] - t[0] >= slow_mod.HOVER_MEAN_S:
-            runs.append((a, b))
-            dts.append(float(np.median(np.diff(t))))
-    airborne_s = float(sum((b - a) * dt for (a, b), dt in zip(runs, dts, strict=True)))
-    if airborne_s < min_airborne_s:
+    vel, idx, runs, dts, airborne_s = _velocity_runs(data, phases.airborne)
+    if not runs or airborne_s < min_airborne_s:
         return None, airborne_s
     v = vel[idx]
     sq = np.concatenate([v[a:b] ** 2 for a, b in runs])
@@ -337,9 +341,7 @@ def fit_flight(
     var = float(var_axes.mean())
     if not var > 0.0:
         return None, airborne_s
-    tau = np.array([_integrated_autocorr_time(v[:, k], runs) for k in range(3)])
-    dt = float(np.median(dts))
-    time_s = dt * float((var_axes * tau).sum() / var_axes.sum())
+    time_s = _correlation_time_s(v, runs, dts, var_axes)
     deltas: list[FloatArray] = []
     bias = np.asarray(accel_bias_mps2, float)
     for a, b in runs:
@@ -349,16 +351,9 @@ def fit_flight(
             continue
         t = data.stamp_s[piece]
         acc = np.gradient(vel[piece], t, axis=0)
-        e = np.empty((piece.size, 3))
-        for j, i in enumerate(piece.tolist()):
-            rows = rows_from_quat_wxyz(tuple(data.quat_wxyz[i].tolist()))
-            ref = (acc[j, 0], acc[j, 1], acc[j, 2] + GRAVITY_MPS2)
-            e[j] = [
-                data.accel_body_mps2[i, k]
-                - bias[k]
-                - (rows[0][k] * ref[0] + rows[1][k] * ref[1] + rows[2][k] * ref[2])
-                for k in range(3)
-            ]
+        ref = acc + np.array([0.0, 0.0, GRAVITY_MPS2])
+        rot = rotations_world_body(data.quat_wxyz[piece])
+        e = data.accel_body_mps2[piece] - bias - np.einsum("nji,nj->ni", rot, ref)  # f − b − Rᵀ·ref
         deltas.append(e.mean(axis=0) - rest)
     bias_std = float(np.sqrt(np.mean(np.square(deltas)))) if deltas else None
     fit = FlightFit(

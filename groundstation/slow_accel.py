@@ -193,10 +193,21 @@ class SlowAccelState:
         """β, the accelerometer's slow error, body frame, m/s² (the filter's b)."""
         return self.kf.bias_body_mps2
 
-    @property
-    def velocity_world_mps(self) -> Vec3:
-        """The bias filter's velocity, world frame, m/s (zero on the ground)."""
-        return self.kf_velocity_world_mps
+
+_ON_THE_GROUND: dict[str, object] = {
+    "seen_ground": True,
+    "kf_velocity_world_mps": _ZERO3,
+    "kf_position_world_m": None,
+    "block_s": 0.0,
+    "since_mocap_s": math.inf,
+    "in_air": False,
+    "accel_1s_body_mps2": _ZERO3,
+    "quasi_static": False,
+    "regime_velocity_world_mps": _ZERO3,
+    "hover_hold_s": 0.0,
+}
+"""What a sample on the floor (at rest or held) sets: the floor holds the drone, so every
+velocity is zero and no hover, block or motion-capture position carries over to the air."""
 
 
 def end_hover(state: SlowAccelState) -> SlowAccelState:
@@ -263,20 +274,7 @@ def slow_accel_step(
     """
     del stamp_s
     if phase == "hold":
-        return evolve(
-            state,
-            kf=bk.hold(state.kf),
-            seen_ground=True,
-            kf_velocity_world_mps=_ZERO3,
-            kf_position_world_m=None,
-            block_s=0.0,
-            since_mocap_s=math.inf,
-            in_air=False,
-            accel_1s_body_mps2=_ZERO3,
-            quasi_static=False,
-            regime_velocity_world_mps=_ZERO3,
-            hover_hold_s=0.0,
-        )
+        return evolve(state, kf=bk.hold(state.kf), **_ON_THE_GROUND)
     if phase == "rest":
         # Still on the floor: v = 0 exactly, and the rest detector's window mean of
         # f − Rᵀ·g·e3 is this power-on's bias (a new rest, a new window: the drone may have
@@ -285,17 +283,8 @@ def slow_accel_step(
         return evolve(
             state,
             kf=bk.at_rest(state.kf, rest_mean_body_mps2),
-            seen_ground=True,
-            kf_velocity_world_mps=_ZERO3,
-            kf_position_world_m=None,
-            block_s=0.0,
-            since_mocap_s=math.inf,
             learnt_at_rest=learnt,
-            in_air=False,
-            accel_1s_body_mps2=_ZERO3,
-            quasi_static=False,
-            regime_velocity_world_mps=_ZERO3,
-            hover_hold_s=0.0,
+            **_ON_THE_GROUND,
         )
     kf = state.kf
     if not kf.flight_prior:

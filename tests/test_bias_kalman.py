@@ -53,9 +53,7 @@ def test_block_update_equals_filterpy(with_mocap: bool) -> None:
     cov0 = state.cov.copy()
     if with_mocap:
         cov0[:3, :3] = np.eye(3) * 1e-4
-        state = bk.BiasKalman(
-            bias_body_mps2=state.bias_body_mps2, cov=cov0, flight_prior=True, grounded=False
-        )
+        state = bk.BiasKalman(bias_body_mps2=state.bias_body_mps2, cov=cov0, flight_prior=True)
     f = np.array([0.2, -0.1, G + 0.05])
     T = 0.1
     a0 = R @ (f - b0) - np.array([0.0, 0.0, G])

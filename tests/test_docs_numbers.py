@@ -12,6 +12,8 @@ command the failure names), from committed code, and its page must name its comm
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -143,3 +145,27 @@ def test_the_command_line_and_the_dashboard_are_not_measured() -> None:
         assert not [f for f in files if f.startswith(("groundstation/dashboard", "docs/"))]
         assert "groundstation/cli.py" not in files
         assert "groundstation/config.py" not in files  # its defaults only
+
+
+def test_every_module_the_pipeline_runs_is_measured() -> None:
+    """A module the per-message path imports, left out of ``figures.ESTIMATOR``, could change
+    every figure without a page going stale (groundstation.bias_kalman was, once)."""
+    code = (
+        "import sys, groundstation.pipeline\n"
+        "print('\\n'.join(m for m in sys.modules if m.startswith('groundstation')))"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=fig.REPO
+    ).stdout.split()
+    files = set(fig.measured_files(fig.ESTIMATOR))
+    # The package itself, the bus interface (no estimate), and the configuration (measured
+    # by its defaults: figures.CONFIG_DEFAULTS) stand outside the list.
+    outside = {"groundstation", "groundstation.bus", "groundstation.config"}
+    missing = sorted(
+        m
+        for m in out
+        if m not in outside
+        and m.replace(".", "/") + ".py" not in files
+        and m.replace(".", "/") + "/__init__.py" not in files
+    )
+    assert not missing, f"not in benchmarks.figures.ESTIMATOR: {missing}"
