@@ -42,7 +42,9 @@ it recovers manoeuvres of a few seconds and forgets drift. See
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
+from types import MappingProxyType
 from typing import Literal
 
 from groundstation import bias_kalman as bk
@@ -194,18 +196,20 @@ class SlowAccelState:
         return self.kf.bias_body_mps2
 
 
-_ON_THE_GROUND: dict[str, object] = {
-    "seen_ground": True,
-    "kf_velocity_world_mps": _ZERO3,
-    "kf_position_world_m": None,
-    "block_s": 0.0,
-    "since_mocap_s": math.inf,
-    "in_air": False,
-    "accel_1s_body_mps2": _ZERO3,
-    "quasi_static": False,
-    "regime_velocity_world_mps": _ZERO3,
-    "hover_hold_s": 0.0,
-}
+_ON_THE_GROUND: Mapping[str, object] = MappingProxyType(
+    {
+        "seen_ground": True,
+        "kf_velocity_world_mps": _ZERO3,
+        "kf_position_world_m": None,
+        "block_s": 0.0,
+        "since_mocap_s": math.inf,
+        "in_air": False,
+        "accel_1s_body_mps2": _ZERO3,
+        "quasi_static": False,
+        "regime_velocity_world_mps": _ZERO3,
+        "hover_hold_s": 0.0,
+    }
+)
 """What a sample on the floor (at rest or held) sets: the floor holds the drone, so every
 velocity is zero and no hover, block or motion-capture position carries over to the air."""
 
