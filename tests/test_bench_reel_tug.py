@@ -55,3 +55,25 @@ def test_the_reel_tug_meets_the_issue_target_on_three_seeds() -> None:
     t90s = sorted(9.0 if r["t90_s"] is None else r["t90_s"] for r in runs)
     assert t90s[1] <= T90_TARGET_S, runs
     assert all(r["pre_tug_error_mn"] <= 1e3 * PRE_TUG_TARGET_N for r in runs), runs
+
+
+def test_two_commits_are_compared_sample_by_sample() -> None:
+    """``reel_tug_diff.compare``: an estimate 0.2 mN off along x everywhere differs by
+    0.2 mN at every stamp both published, and its mean error over the span is 0.2 mN more;
+    stamps only one side published are left out; t90 judged on each as the page does."""
+    from benchmarks.reel_tug_diff import compare
+
+    f = _flight(0, moving=False)
+    t, true = f["t_s"], f["true_n"]
+    lag = np.where((t >= TUG_S) & (t < TUG_S + 0.3), 1.0, 0.0)[:, None]
+    est = true + lag * [0.030, 0.0, 0.0]  # 0.3 s behind the jump, then exact
+    shifted = est + np.array([0.0002, 0.0, 0.0])
+    before = {"t_s700": t, "est_n700": est, "true_n700": true}
+    after = {"t_s700": t[::2], "est_n700": shifted[::2], "true_n700": true[::2]}
+    r = compare(before, after, 700)
+    assert abs(r["median_difference_mn"] - 0.2) < 1e-9
+    assert abs(r["max_difference_mn"] - 0.2) < 1e-9
+    assert r["mean_error_after_mn"] is not None and r["mean_error_before_mn"] is not None
+    assert r["mean_error_after_mn"] > r["mean_error_before_mn"]
+    assert r["t90_before_s"] is not None and abs(r["t90_before_s"] - 0.3) < 0.01
+    assert r["t90_after_s"] is not None and abs(r["t90_after_s"] - 0.3) < 0.01
