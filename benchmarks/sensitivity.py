@@ -74,10 +74,9 @@ CLASSES = {
 
 CONTACT_ROWS = frozenset(
     {
-        "estimator.filter_control.LIFTOFF_PRIOR_STD_N",
         "tension.GAP_S",
         "estimator.gate.MAX_GAP_S",
-        "slow_accel.MOCAP_HOLD_S",
+        "bias_kalman.MOCAP_HOLD_S",
         "TensionFilterParams.noise_warmup_samples",
     }
 )

@@ -35,7 +35,6 @@ from groundstation.estimator.drone import (
     DroneEstimator,
     calibration_from_config,
 )
-from groundstation.estimator.filter_control import LIFTOFF_PRIOR_STD_N
 from groundstation.estimator.follow_control import (
     UNTRUSTED_POSITION_REASON,
     FollowCommandState,
@@ -59,7 +58,6 @@ from groundstation.messages import (
 __all__ = [
     "FOLLOW_OFF",
     "FOLLOW_ON",
-    "LIFTOFF_PRIOR_STD_N",
     "MOCAP_HOLD_S",
     "UNTRUSTED_POSITION_REASON",
     "DroneRuntime",

@@ -22,7 +22,7 @@ from groundstation.calibration import RestCalibrator
 from groundstation.config import LocalizationSection
 from groundstation.estimator import checks, output
 from groundstation.estimator.contact_control import contact_decide
-from groundstation.estimator.filter_control import LIFTOFF_PRIOR_STD_N, FilterControl
+from groundstation.estimator.filter_control import FilterControl, liftoff_prior_std_n
 from groundstation.estimator.follow_control import (
     UNTRUSTED_POSITION_REASON,
     FollowCommandState,
@@ -344,13 +344,16 @@ def test_filter_restarts_once_per_stay_on_the_ground_with_the_liftoff_prior() ->
     trace = ctl.filter.start_trace()
     ctl.step(on_ground=True, contact_reason="disarmed", observation=_obs(None), dt_s=0.004)
     assert not [s for s in trace if s.kind == "reset"], "reset once per stay, not per sample"
-    # Lift-off: the first observation updates the prior N(0, LIFTOFF_PRIOR_STD_N²).
+    # Lift-off: the first observation updates the prior N(0, σ²), σ derived from the floor
+    # load the contact stage lets the drone go at (5 mN at 30 g).
+    ratio = contact_mod.ContactParams().push_free_weight_ratio
+    assert ctl.liftoff_std_n == (liftoff_prior_std_n(ratio, MASS_KG),) * 3
     out = ctl.step(
         on_ground=False, contact_reason="air", observation=_obs((0.5, 0.0, 0.0)), dt_s=0.004
     )
     assert out.estimate is not None
     assert 0.0 < out.tension_world_n[0] < 0.5  # pulled toward the prior, not the raw sample
-    assert out.std_n[0] < LIFTOFF_PRIOR_STD_N[0]
+    assert out.std_n[0] < ctl.liftoff_std_n[0]
 
 
 def test_filter_coasts_in_the_air_without_an_observation_and_grows_its_std() -> None:
@@ -538,3 +541,15 @@ def test_estimate_fields_encode_to_the_models_json_and_drop_a_non_finite_positio
     assert got["horizontal_n"] == pytest.approx(0.05) and got["vertical_n"] == 0.01
     with pytest.raises(ValueError, match="non-finite"):
         output.encode({**fields, "length_m": math.nan})
+
+
+def test_the_liftoff_prior_scales_with_the_weight() -> None:
+    """The lift-off prior is half the floor load the contact stage lets a rested drone go
+    at (its bound as 2σ): 5 mN at 30 g, as the hand-set value it replaced, and a hundred
+    times more for a drone a hundred times heavier; a stricter push bound, a tighter prior."""
+    assert liftoff_prior_std_n(0.034, 0.030) == pytest.approx(0.005, rel=1e-3)
+    assert liftoff_prior_std_n(0.034, 3.0) == pytest.approx(100 * liftoff_prior_std_n(0.034, 0.03))
+    heavy = FilterControl(TensionFilterParams(mass_kg=2.0))
+    strict = FilterControl(TensionFilterParams(mass_kg=2.0), push_free_weight_ratio=0.017)
+    assert heavy.liftoff_std_n[0] == pytest.approx(2 * strict.liftoff_std_n[0])
+    assert heavy.liftoff_std_n[0] == pytest.approx(0.5 * 0.034 * 2.0 * 9.81)

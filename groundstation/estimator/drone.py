@@ -318,7 +318,8 @@ class DroneEstimator:
                 thrust_noise_n=params.drone.thrust_noise_n,
                 hover_velocity_std_mps=hover_std_mps,
                 hover_velocity_time_s=hover_time_s,
-            )
+            ),
+            self.contact_params.push_free_weight_ratio,
         )
         # [follow] and FollowParams share their field names (a new key fails loudly).
         self.follow_params = follow_mod.FollowParams(**params.follow.model_dump())

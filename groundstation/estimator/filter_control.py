@@ -6,7 +6,7 @@ given the contact stage's ground/air decision and the observation:
 - **On the ground** the floor carries the drone: no tension is estimated (zeros, not
   converged). The filter restarts once per stay (again if the prior changes), from the
   prior that a tether resting on the floor pulls with next to nothing
-  (:data:`LIFTOFF_PRIOR_STD_N`) when the drone was seen resting (disarmed, or low thrust
+  (:func:`liftoff_prior_std_n`) when the drone was seen resting (disarmed, or low thrust
   held still), else from its first observation in the air (a service started mid-flight).
   Observations taken on the floor, propellers spinning, teach the filter the propellers'
   vibration (:meth:`TensionFilter.learn_noise`), so the restart weighs its first samples
@@ -33,6 +33,8 @@ import math
 from collections.abc import Sequence
 from typing import NamedTuple
 
+from groundstation.attitude import GRAVITY_MPS2
+from groundstation.contact import ContactParams
 from groundstation.tension import (
     TensionEstimate,
     TensionFilter,
@@ -40,10 +42,26 @@ from groundstation.tension import (
     TensionObservation,
 )
 
-__all__ = ["LIFTOFF_PRIOR_STD_N", "FilterControl", "FilterOutput"]
+__all__ = ["FilterControl", "FilterOutput", "liftoff_prior_std_n"]
 
-LIFTOFF_PRIOR_STD_N = (0.005, 0.005, 0.005)
-"""Prior standard deviation of the tension at lift-off, N (per world axis)."""
+
+def liftoff_prior_std_n(push_free_weight_ratio: float, mass_kg: float) -> float:
+    """Prior standard deviation of the tension at lift-off after a rest, N per world axis.
+
+    Derived, ``½·push_free_weight_ratio·m·g``: the contact stage lets a rested drone go when
+    the floor's load ``m·g − F``, which the observation of a drone at rest reads as vertical
+    tension, stays below ``push_free_weight_ratio`` of the weight
+    (:class:`~groundstation.contact.ContactParams`); that bound is taken as two standard
+    deviations of the tension there. 5.0 mN at 30 g (it was a hand-set 5 mN for every
+    mass), 0.33 N at 2 kg.
+
+    Args:
+        push_free_weight_ratio: ``ContactParams.push_free_weight_ratio``, dimensionless.
+        mass_kg: The drone's mass, kg.
+    """
+    return 0.5 * push_free_weight_ratio * mass_kg * GRAVITY_MPS2
+
+
 _ZEROS3 = (0.0, 0.0, 0.0)
 _RESTING = ("disarmed", "low_thrust")
 """Contact reasons that mean the drone was seen resting on the floor."""
@@ -83,10 +101,21 @@ def _floats3(v: object) -> list[float]:
 class FilterControl:
     """One drone's tension filter and when it runs (module doc)."""
 
-    __slots__ = ("change_detections", "filter", "prior", "rested")
+    __slots__ = ("change_detections", "filter", "liftoff_std_n", "prior", "rested")
 
-    def __init__(self, params: TensionFilterParams) -> None:
+    def __init__(
+        self, params: TensionFilterParams, push_free_weight_ratio: float | None = None
+    ) -> None:
+        """``push_free_weight_ratio``: the contact stage's
+        (:class:`~groundstation.contact.ContactParams`; None: its default), for the lift-off
+        prior (:func:`liftoff_prior_std_n` at ``params.mass_kg``)."""
         self.filter = TensionFilter(params)
+        ratio = push_free_weight_ratio
+        if ratio is None:
+            ratio = ContactParams().push_free_weight_ratio
+        std = liftoff_prior_std_n(ratio, params.mass_kg)
+        self.liftoff_std_n = (std, std, std)
+        """The lift-off prior's standard deviation per world axis, N."""
         self.rested = False
         """Seen certainly on the ground (disarmed, low thrust) since the last lift-off: the
         filter then restarts from the lift-off prior."""
@@ -124,7 +153,7 @@ class FilterControl:
             # Once per stay on the ground (again if the prior changes), not per sample.
             if filt.initialized or self.prior != self.rested:
                 if self.rested:
-                    filt.reset(prior_world_n=_ZEROS3, prior_std_n=LIFTOFF_PRIOR_STD_N)
+                    filt.reset(prior_world_n=_ZEROS3, prior_std_n=self.liftoff_std_n)
                 else:
                     filt.reset()
                 self.prior = self.rested
