@@ -76,7 +76,6 @@ CONTACT_ROWS = frozenset(
     {
         "tension.GAP_S",
         "estimator.gate.MAX_GAP_S",
-        "bias_kalman.MOCAP_HOLD_S",
         "TensionFilterParams.noise_warmup_samples",
     }
 )

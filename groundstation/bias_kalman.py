@@ -45,6 +45,8 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from groundstation.tension import GAP_S
+
 __all__ = [
     "BIAS_PRIOR_STD_MPS2",
     "BIAS_WALK_MPS2_PER_SQRT_S",
@@ -70,11 +72,13 @@ block is short beside T_V (0.4–1 s fitted on NanoBench) and the bias's time to
 integration and two sums. Numerical, not a model value: the block's update is the exact
 one of the model observed once per block."""
 
-MOCAP_HOLD_S = 0.3
+MOCAP_HOLD_S = GAP_S
 """Motion capture stays in use for this long (telemetry stamp) after the frame that brought
 it, s: the estimator's external position (``estimator.drone``) and this filter's position
-alike (one value). Real motion capture reaches a drone's telemetry at 70-116 Hz against the
-IMU's 100 Hz, in bursts, with gaps up to 150 ms (the realistic profile draws the same):
+alike. It is the one definition of a broken stream, ``tension.GAP_S`` (0.25 s; it was a
+hand-set 0.3 s of its own): a motion-capture stream silent for longer is lost as a
+telemetry stream is. Real motion capture reaches a drone's telemetry at 70-116 Hz against
+the IMU's 100 Hz, in bursts, with gaps up to 150 ms (the realistic profile draws the same):
 without the hold, follow would switch to the tether-based position on every telemetry
 message without a fresh frame."""
 

@@ -75,8 +75,8 @@ __all__ = [
 
 MOCAP_HOLD_S = slow_mod.MOCAP_HOLD_S
 """A motion-capture position stays the drone's external position for this long (telemetry
-stamp) after the frame that brought it, s (:data:`groundstation.slow_accel.MOCAP_HOLD_S`,
-the one value)."""
+stamp) after the frame that brought it, s (:data:`groundstation.bias_kalman.MOCAP_HOLD_S`,
+which is ``tension.GAP_S``: one definition of a broken stream)."""
 
 Vec3 = tuple[float, float, float]
 OnDrop = Callable[[str, str, str], None]
