@@ -42,14 +42,14 @@ trusted, and a touch-down is noticed where it can be:
 * **Lift-off without motion capture**, either of:
 
   - *the floor carries nothing*: the floor's load ``m g - F`` (what the observation of
-    ``eq:NE_tether`` reads vertically for a drone at rest, from the same calibrated thrust ``F``),
-    smoothed over ``push_time_constant_s``, stays below ``push_free_weight_ratio`` of the weight (10
-    mN at 30 g) for ``push_hold_s``. Whatever rests on the floor then, what is published as tension
-    is below that, which is the point; in the air the tether pulls down (or a hand pulls), so a
-    hovering drone whose service restarts is found in the air in 0.1 s. A thrust reading low by more
-    than the tether's downward pull (e.g. 15 % at 10 mN of pull) defeats this rule; a take-off is
-    then found by its thrust surge (the climb's acceleration takes some 20 % of the weight) or by
-    the climb;
+    ``eq:NE_tether`` reads vertically for a drone at rest, from the same calibrated thrust
+    ``F``), smoothed over ``push_time_s``, stays below ``push_free_weight_ratio`` of the weight
+    (10 mN at 30 g) for ``push_time_s`` too (one time scale of the load's judgement). Whatever
+    rests on the floor then, what is published as tension is below that, which is the point; in
+    the air the tether pulls down (or a hand pulls), so a hovering drone whose service restarts
+    is found in the air in 0.1 s. A thrust reading low by more than the tether's downward pull
+    (e.g. 15 % at 10 mN of pull) defeats this rule; a take-off is then found by its thrust surge
+    (the climb's acceleration takes some 20 % of the weight) or by the climb;
   - *climbing*: the vertical acceleration (IMU specific force rotated to the world, minus
     gravity, minus the bias learnt at rest) integrated with a leak of
     ``speed_time_constant_s`` exceeds ``liftoff_speed_mps`` and ``climb_sigmas``
@@ -112,7 +112,7 @@ it (a drone flying below the surface it last rested on, beside a table, is not o
 The state starts on the ground, but until the drone has once been *certainly* on the
 ground (disarmed or below the ratio) the push rule is looser: a load below
 ``climb_push_max_weight_ratio`` (50 mN at 30 g) instead of ``push_free_weight_ratio`` for
-``push_hold_s`` says the drone is
+``push_time_s`` says the drone is
 flying (``reason = "flying_at_start"``: the service (re)started while it was in the air).
 With the strict bound a hover under a tether that pulls *up* (a base above the drone, the
 paper's coin bench: 12.7 mN up) would be held on the ground forever. The price: a service
@@ -173,8 +173,9 @@ class ContactParams:
             scales with the weight), dimensionless.
         push_free_weight_ratio: No motion capture: lift-off when the smoothed floor load
             stays below this fraction of the weight, dimensionless ...
-        push_hold_s: ... for this long, s.
-        push_time_constant_s: Smoothing of the floor load, s.
+        push_time_s: ... for this long, s; also the floor load's smoothing time constant
+            (one time scale over which the load is judged; they were two values, both
+            0.1 s).
         bias_time_constant_s: Averaging time of the vertical accelerometer bias at rest, s.
         accel_time_constant_s: Smoothing of the vertical acceleration that tells a rest on
             the floor (~0) from a fall (below ``-(1 - ground_thrust_ratio) g``), s.
@@ -191,8 +192,7 @@ class ContactParams:
     climb_sigmas: float = 4.0
     climb_push_max_weight_ratio: float = 0.17
     push_free_weight_ratio: float = 0.034
-    push_hold_s: float = 0.1
-    push_time_constant_s: float = 0.1
+    push_time_s: float = 0.1
     bias_time_constant_s: float = 1.0
     accel_time_constant_s: float = 0.05
     rest_hold_s: float = 0.2
@@ -213,8 +213,7 @@ class ContactParams:
             "speed_time_constant_s",
             "climb_push_max_weight_ratio",
             "push_free_weight_ratio",
-            "push_hold_s",
-            "push_time_constant_s",
+            "push_time_s",
             "bias_time_constant_s",
             "accel_time_constant_s",
             "rest_hold_s",
@@ -442,7 +441,7 @@ def contact_step(
     # eq:NE_tether reads there (the accelerometer adds only its noise), from the same thrust.
     load = weight_n - thrust_n
     push = state.push_n
-    w = min(1.0, dt / params.push_time_constant_s) if push is not None else 1.0
+    w = min(1.0, dt / params.push_time_s) if push is not None else 1.0
     push = load if push is None else push + w * (load - push)
     # Before any rest was seen the drone is most likely flying (the service started
     # mid-flight), perhaps under a tether that pulls up: a looser bound on the load.
@@ -451,7 +450,7 @@ def contact_step(
     free_s = state.push_free_s + dt if push < push_limit_n else 0.0
     if speed > climb_limit and push < climb_push_max_n:
         return evolve(state, on_ground=False, reason="climbing", climb_speed_mps=0.0)
-    if push < push_limit_n and free_s >= params.push_hold_s:
+    if push < push_limit_n and free_s >= params.push_time_s:
         reason: Reason = "push_free" if state.rest_seen else "flying_at_start"
         return evolve(state, on_ground=False, reason=reason, climb_speed_mps=0.0)
     return evolve(
