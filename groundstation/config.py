@@ -287,9 +287,8 @@ class FilterSection(_Section):
     the thresholds for entering it; 1: none (a noise-aware test then flickers on its own
     noise near the threshold)."""
     drag_velocity_time_constant_s: float = Field(8.0, gt=0.0)
-    """(added) Without motion capture the drone's velocity for the rotor-drag term and the
-    hover test's speed is the accelerometer's leaky integral with this time constant, s
-    (groundstation.slow_accel)."""
+    """(added) Without motion capture the rotor-drag term's velocity is the accelerometer's
+    leaky integral with this time constant, s (groundstation.slow_accel)."""
 
     @model_validator(mode="after")
     def _slow_time_constant_without_meaning(self) -> FilterSection:

