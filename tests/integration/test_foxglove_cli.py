@@ -152,8 +152,10 @@ def test_serve_serves_the_scene_to_a_foxglove_client(procs: Procs) -> None:
             arrow.shaft_length + arrow.head_length, ARROW_M_PER_N * norm_n, rel_tol=1e-9
         )
         assert float(metadata(by_id["cf1/tension"])["tension_n"]) == pytest.approx(norm_n)
-        # A hovering drone on its tether: a real pull, mostly down the tether.
-        assert 0.05 < norm_n < 1.0 and tension[2] < 0
+        # A hovering drone on its tether: a real pull, down the tether. (The first scenes
+        # come a second after lift-off, the estimate still rising from the lift-off prior:
+        # 50 to 53 mN over the first five here, so the bound is well below that.)
+        assert 0.02 < norm_n < 1.0 and tension[2] < 0
         checked += 1
     assert checked >= 5, f"{checked} scenes matched an Estimate of {len(got['scenes'])} received"
     assert service.stop(signal.SIGTERM) == 0
