@@ -31,9 +31,9 @@ from numpy.typing import ArrayLike, NDArray
 
 from groundstation.attitude import GRAVITY_MPS2, QUAT_MIN_NORM, Rows, rows_from_unit_quat
 from groundstation.tension_change import (
-    YOUTH_FADE_SAMPLES,
     ChangeTest,
     LazyChangeStatistic,
+    level_samples,
     level_scatter_factor,
     scan_threshold,
     youth_factor,
@@ -960,7 +960,8 @@ class TensionFilter:
     windows, since R is the long-run variance: a window of n samples counts as its
     effective sample size, never more, so the test errs toward silence on vibration.
     While the noise estimate is young the statistic is divided by an upper bound on its
-    error (``1 + 3 sqrt(2 / k)`` after k samples, fading by 1000), and never by less than
+    error (``1 + 3 sqrt(2 / k)`` after k samples, fading out as k reaches the level's
+    equilibrium count, 2τ/dt − 1), and never by less than
     the warm estimate's own scatter allows for
     (:func:`~groundstation.tension_change.level_scatter_factor`, 1.17 at ~95 Hz: without
     it thresholds set for a known noise fired 4 times in 90 h of simulated hover); and
@@ -1146,7 +1147,8 @@ class TensionFilter:
         self._prior_std = (math.sqrt(v0), math.sqrt(v1), math.sqrt(v2))
         self._noise = NoiseEstimate(self._prior_var, p.noise_prior_samples)
         self._dt_mean = math.nan
-        self._youth_floor = (math.nan, 1.0)  # (dt_mean, the test's youth floor at it)
+        # (dt_mean, the test's youth floor at it, the youth factor's fade-out count at it)
+        self._youth_floor = (math.nan, 1.0, math.inf)
         self.trace: list[FilterStep] | None = None
         """Every step from :meth:`start_trace` on (None: not recorded, the default)."""
         self._restart_pending = 0
@@ -1342,9 +1344,9 @@ class TensionFilter:
         k = noise.samples
         if k < 1:
             return None
-        factor = youth_factor(k)
-        floor = self._scatter_floor()
-        if floor is not None and floor > factor:
+        floor, fade = self._noise_allowances()
+        factor = youth_factor(k, fade)
+        if floor > factor:
             factor = floor
         return noise.long_run()[2] * factor
 
@@ -1459,11 +1461,12 @@ class TensionFilter:
         # The youth factor of the drift statistic, >= 1; the change test's never falls
         # below the noise estimate's own scatter once warm (level_scatter_factor).
         k = noise.samples
-        youth = youth_factor(k) if estimate_noise and k < YOUTH_FADE_SAMPLES else 1.0
-        test_youth = youth
+        youth = test_youth = 1.0
         if estimate_noise:
-            floor = self._scatter_floor()
-            if floor is not None and floor > youth:
+            floor, fade = self._noise_allowances()
+            if k < fade:
+                youth = test_youth = youth_factor(k, fade)
+            if floor > youth:
                 test_youth = floor
         # The change test's threshold follows the spacing (log of its longest window):
         # derived again once the spacing has moved by 1 %.
@@ -1592,20 +1595,24 @@ class TensionFilter:
 
     # -- internals ---------------------------------------------------------------------
 
-    def _scatter_floor(self) -> float | None:
-        """The warm noise estimate's scatter allowance at the measured spacing
-        (:func:`~groundstation.tension_change.level_scatter_factor`), cached per spacing; None
-        before a spacing is known."""
+    def _noise_allowances(self) -> tuple[float, float]:
+        """The noise estimate's allowances at the measured spacing, cached per spacing: the
+        warm estimate's scatter (:func:`~groundstation.tension_change.level_scatter_factor`,
+        the change test's floor) and the count where the youth factor has faded out
+        (:func:`~groundstation.tension_change.level_samples`, the level's equilibrium
+        count). ``(1, inf)`` before a spacing is known: no floor, no fade."""
         spacing = self._dt_mean
         if not (spacing == spacing and spacing > 0.0):
-            return None
+            return 1.0, math.inf
         cached = self._youth_floor
         if cached[0] != spacing:
+            memory = self.params.noise_time_constant_s / spacing
             cached = self._youth_floor = (
                 spacing,
-                level_scatter_factor(self.params.noise_time_constant_s / spacing),
+                level_scatter_factor(memory),
+                level_samples(memory),
             )
-        return cached[1]
+        return cached[1], cached[2]
 
     def hover_time_constant(self, r_n2: tuple[float, ...], dt_mean_s: float) -> float:
         """The time constant at hover for a noise r and a sample spacing, s.

@@ -25,6 +25,7 @@ from numpy.typing import NDArray
 __all__ = [
     "ChangeTest",
     "LazyChangeStatistic",
+    "level_samples",
     "level_scatter_factor",
     "scan_threshold",
     "youth_factor",
@@ -82,44 +83,58 @@ YOUTH_SIGMAS = 3.0
 """Standard errors of a young noise estimate the change test allows for (the upper bound
 ``1 + 3 sqrt(2 / k)`` of a k-sample mean square, whose relative standard deviation is
 sqrt(2 / k)); the contact stage's floor vibration uses the same bound."""
-YOUTH_FADE_SAMPLES = 1000
-"""Noise samples over which the youth factor fades out linearly (10 s at 100 Hz); from then
-on :func:`level_scatter_factor` is the floor."""
 SCATTER_SIGMAS = 2.0
 """Standard errors of the warm noise estimate (its level and kappa) the change test allows
 for (:func:`level_scatter_factor`)."""
 
 
-def youth_factor(noise_samples: int) -> float:
+def level_samples(memory_samples: float) -> float:
+    """The noise level's equilibrium sample count, ``k = 2·M − 1`` (at least 1): an
+    exponential mean over ``memory_samples`` = M = tau / dt samples scatters as a k-sample
+    mean does (its weights' sum of squares is 1 / (2M − 1)). Derived; 999 at 100 Hz with the
+    5 s memory."""
+    return max(2.0 * memory_samples - 1.0, 1.0)
+
+
+def youth_factor(noise_samples: int, fade_samples: float = math.inf) -> float:
     """Variance factor of the change test while the noise estimate is young, >= 1.
 
     R is the long-run variance, so every window sum has at most the variance the test
     assumes (short windows of positively correlated noise have less): the statistic counts
     effective samples and errs toward silence. While the noise estimate is young (k
     differences) an upper bound on its error, ``1 + 3 sqrt(2 / k)`` (the scatter of a
-    k-sample mean square), fading out by 1000 samples. Without it the first flight's first
-    samples fired on 2 m/s^2 noise: the estimate is 30 % low after 20 samples.
+    k-sample mean square), fading out linearly as k reaches the level's own equilibrium count
+    (:func:`level_samples`: from there the estimate is no younger than its memory, and
+    :func:`level_scatter_factor` is the change test's floor). Without it the first flight's
+    first samples fired on 2 m/s^2 noise: the estimate is 30 % low after 20 samples.
 
     Args:
         noise_samples: Differences the noise estimate has taken, k.
+        fade_samples: Where the factor reaches 1, samples: :func:`level_samples` at the
+            measured spacing (infinite: no fade, before a spacing is known).
     """
     k = noise_samples
-    if k < YOUTH_FADE_SAMPLES:
-        fade = 1.0 - k / YOUTH_FADE_SAMPLES
+    if k < fade_samples:
+        fade = 1.0 - k / fade_samples
         return 1.0 + YOUTH_SIGMAS * math.sqrt(2.0 / max(k, 1)) * fade
     return 1.0
 
 
-_KAPPA_VAR_PER_BLOCK = 1.3
-"""kappa's relative variance times its blocks (3 axes pooled, the squared second
-differences of neighbouring blocks correlated): relative standard error sqrt(1.3 / B)."""
+_KAPPA_VAR_PER_BLOCK = 35.0 / 27.0
+"""kappa's relative variance times its blocks, 35/27 = 1.296 (derived): per axis a block's
+``d² = (m_j − 2 m_(j−1) + m_(j−2))²`` of independent Gaussian block means has relative
+variance 2, and neighbouring blocks' d share means: correlation −4/6 at lag 1 and 1/6 at lag
+2, so their squares correlate by the squares of those (4/9, 1/36). A mean of B of them has
+relative variance ``2·(1 + 2·(4/9 + 1/36))/B = (35/9)/B`` per axis, and the three axes
+pooled (independent) ``(35/27)/B``: relative standard error sqrt(1.296 / B)
+(tests/test_tension.py draws it)."""
 _KAPPA_BLOCKS = 239
 """kappa's equilibrium block count: its 30 s exponential average of 0.25 s blocks."""
 
 
 def level_scatter_factor(memory_samples: float) -> float:
     """The change test's floor of the youth factor, >= 1: the noise estimate's own scatter
-    once it is warm, ``1 + 2 sqrt(2 / k + 1.3 / 239)``.
+    once it is warm, ``1 + 2 sqrt(2 / k + (35/27) / 239)``.
 
     r = s_d kappa is measured, not known, and a window's statistic scales as 1 / r: a
     level a few per cent low reads every window a few per cent high, and over hours it is
@@ -129,11 +144,10 @@ def level_scatter_factor(memory_samples: float) -> float:
     second, long-window test, and both fired). The level s_d is
     an exponential mean over ``memory_samples`` = tau / dt samples: a k = 2 tau / dt − 1
     sample mean square's relative variance 2 / k; kappa's at its equilibrium count of 239
-    blocks is 1.3 / 239 (its 30 s exponential average of 0.25 s blocks, 3 axes pooled,
-    neighbouring blocks' second differences correlated); 2 standard errors of their sum
-    are allowed for. 1.17 at
-    ~95 Hz with the 5 s memory."""
-    k = max(2.0 * memory_samples - 1.0, 1.0)
+    blocks is (35/27) / 239 (its 30 s exponential average of 0.25 s blocks, 3 axes pooled,
+    neighbouring blocks' second differences correlated: :data:`_KAPPA_VAR_PER_BLOCK`); 2
+    standard errors of their sum are allowed for. 1.17 at ~95 Hz with the 5 s memory."""
+    k = level_samples(memory_samples)
     return 1.0 + SCATTER_SIGMAS * math.sqrt(2.0 / k + _KAPPA_VAR_PER_BLOCK / _KAPPA_BLOCKS)
 
 

@@ -1100,3 +1100,37 @@ def test_a_stream_repeating_one_value_stays_finite() -> None:
     np.testing.assert_allclose(e.tension_world_n, HOVER_TENSION_N, atol=1e-12)
     e = filt.update(HOVER_TENSION_N + 0.03, DT_S)  # and a step after it is still handled
     assert np.all(np.isfinite(e.tension_world_n))
+
+
+def test_kappas_relative_variance_per_block_is_the_derived_35_27() -> None:
+    """``tension_change._KAPPA_VAR_PER_BLOCK``: the mean of B pooled (three-axis) squared
+    second differences of block means has relative variance (35/27)/B for Gaussian noise,
+    the neighbouring blocks' correlation included (without it: (2/3)/B)."""
+    from groundstation.tension_change import _KAPPA_VAR_PER_BLOCK
+
+    rng = np.random.default_rng(7)
+    reps, blocks, n = 4000, 40, 25
+    means = rng.normal(0.0, 1.0, (reps, 3, blocks + 2, n)).mean(axis=3)
+    d2 = (means[:, :, 2:] - 2.0 * means[:, :, 1:-1] + means[:, :, :-2]) ** 2 / (6.0 / n)
+    kappa = d2.mean(axis=1).mean(axis=1)  # pooled over the axes, then over B blocks
+    rel_var_times_b = float(kappa.var() / kappa.mean() ** 2 * blocks)
+    assert abs(_KAPPA_VAR_PER_BLOCK - 35.0 / 27.0) < 1e-15
+    assert abs(rel_var_times_b / _KAPPA_VAR_PER_BLOCK - 1.0) < 0.08, rel_var_times_b
+
+
+def test_the_youth_factor_fades_out_at_the_levels_own_memory() -> None:
+    """The youth allowance ends where the noise level's estimate is as old as its memory
+    (2·τ/dt − 1 samples): the same time at any rate, 999 samples at 100 Hz with 5 s and
+    2,499 at 250 Hz; continuous there (it reaches 1), none after; before a spacing is known
+    it does not fade."""
+    from groundstation.tension_change import level_samples, youth_factor
+
+    tau = TensionFilterParams().noise_time_constant_s
+    assert level_samples(tau / 0.01) == pytest.approx(999.0)
+    assert level_samples(tau / 0.004) == pytest.approx(2499.0)
+    for dt in (0.01, 0.004):
+        fade = level_samples(tau / dt)
+        assert youth_factor(int(fade) - 1, fade) == pytest.approx(1.0, abs=1e-3)
+        assert youth_factor(int(fade) + 1, fade) == 1.0
+        assert youth_factor(20, fade) > 1.5  # 1 + 3·sqrt(2/20)·(1 − 20/fade)
+    assert youth_factor(5000) > 1.0  # no spacing yet: no fade
