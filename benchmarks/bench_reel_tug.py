@@ -226,11 +226,18 @@ def told_the_noise(f: dict[str, np.ndarray], tau_s: float) -> tuple[np.ndarray, 
     return glr_random_walk(f["t_s"], f["obs_n"], f["true_n"], TUG_S, tau_s)
 
 
+def jump_n(t_s: np.ndarray, true_n: np.ndarray) -> float:
+    """The tug's jump, N: the true tension's mean over 2–4 s after ``TUG_S`` less its mean
+    over the 2 s before."""
+    before = (t_s >= TUG_S - 2.0) & (t_s < TUG_S)
+    late = (t_s >= TUG_S + 2.0) & (t_s < TUG_S + 4.0)
+    return float(np.linalg.norm(true_n[late].mean(0) - true_n[before].mean(0)))
+
+
 def judge(f: dict[str, np.ndarray]) -> dict[str, Any]:
     t, est, true, obs = f["t_s"], f["est_n"], f["true_n"], f["obs_n"]
     before = (t >= TUG_S - 2.0) & (t < TUG_S)
-    late = (t >= TUG_S + 2.0) & (t < TUG_S + 4.0)
-    jump = float(np.linalg.norm(true[late].mean(0) - true[before].mean(0)))
+    jump = jump_n(t, true)
     err = np.linalg.norm(est - true, axis=1)
     stop_s = TUG_S + (LENGTH_M - SHORT_M) / -REEL_RATE_MPS
     since = t >= stop_s

@@ -63,9 +63,7 @@ def compare(
     picked = {}
     for name, f in rows.items():
         t = f["t_s"]
-        before_tug = (t >= reel.TUG_S - 2.0) & (t < reel.TUG_S)
-        late = (t >= reel.TUG_S + 2.0) & (t < reel.TUG_S + 4.0)
-        jump = float(np.linalg.norm(f["true_n"][late].mean(0) - f["true_n"][before_tug].mean(0)))
+        jump = reel.jump_n(t, f["true_n"])
         err = np.linalg.norm(f["est_n"] - f["true_n"], axis=1)
         out[f"t90_{name}_s"] = reel.t90(t, err, jump)
         keep = np.isin(np.round(t, 6), common)

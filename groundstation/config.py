@@ -341,9 +341,9 @@ class LocalizationSection(_Section):
     """Exit angles older than this (receive time) are not used, s."""
     exit_azimuth_std_rad: float = Field(0.03, gt=0.0)
     """σ of the tether's direction across it at the exit, for an ``exit_azimuth_rad`` the Reel
-    message gives no σ for, rad: the azimuth's σ is this over max(cos(exit elevation), 0.02)
-    (near plumb the azimuth is noise), with the elevation of the same or the last fresh Reel;
-    without an elevation this as is."""
+    message gives no σ for, rad: the azimuth's σ is this over cos(exit elevation) (near
+    plumb the azimuth is noise; at plumb there is none), with the elevation of the same or
+    the last fresh Reel; without an elevation this as is."""
     exit_elevation_std_rad: float = Field(0.03, gt=0.0)
     """σ of ``exit_elevation_rad`` when the Reel message gives none, rad."""
     mocap_std_m: float = Field(0.002, gt=0.0)
@@ -576,7 +576,8 @@ class ServiceSection(_Section):
     max_payload_bytes: int = Field(65536, ge=256)
     """Larger payloads are dropped as ``too_large``."""
     stale_after_s: float = Field(0.5, gt=0.0)
-    """A drone silent this long is stale: no estimates, follow off, s."""
+    """A drone silent this long is stale: no estimates, follow off, s; its next message
+    restarts its stream and its tension filter (the tension may have changed meanwhile)."""
     status_period_s: float = Field(1.0, gt=0.0)
     """Health bookkeeping period, s."""
     log_level: Literal["DEBUG", "INFO", "WARNING", "ERROR"] = "INFO"

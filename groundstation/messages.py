@@ -242,8 +242,9 @@ class Reel(_In):
     base, pointing from the base toward the drone, radians (atan2(y, x))."""
     exit_azimuth_std_rad: Finite | None = Field(default=None, gt=0.0)
     """(added) Standard deviation of ``exit_azimuth_rad``. Absent: ``[localization]
-    exit_azimuth_std_rad`` over max(cos(``exit_elevation_rad``), 0.02), the elevation of this
-    or the last fresh message (near plumb the azimuth is noise); without one, as is."""
+    exit_azimuth_std_rad`` over cos(``exit_elevation_rad``), the elevation of this or the
+    last fresh message (near plumb the azimuth is noise: at plumb no azimuth); without one,
+    as is."""
     exit_elevation_rad: Finite | None = Field(default=None, ge=-1.5708, le=1.5708)
     """(added) The tether's angle above horizontal where it leaves the base, radians."""
     exit_elevation_std_rad: Finite | None = Field(default=None, gt=0.0)

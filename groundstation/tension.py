@@ -1148,7 +1148,7 @@ class TensionFilter:
         self._noise = NoiseEstimate(self._prior_var, p.noise_prior_samples)
         self._dt_mean = math.nan
         # (dt_mean, the test's youth floor at it, the youth factor's fade-out count at it)
-        self._youth_floor = (math.nan, 1.0, math.inf)
+        self._allowances = (math.nan, 1.0, math.inf)
         self.trace: list[FilterStep] | None = None
         """Every step from :meth:`start_trace` on (None: not recorded, the default)."""
         self._restart_pending = 0
@@ -1604,10 +1604,10 @@ class TensionFilter:
         spacing = self._dt_mean
         if not (spacing == spacing and spacing > 0.0):
             return 1.0, math.inf
-        cached = self._youth_floor
+        cached = self._allowances
         if cached[0] != spacing:
             memory = self.params.noise_time_constant_s / spacing
-            cached = self._youth_floor = (
+            cached = self._allowances = (
                 spacing,
                 level_scatter_factor(memory),
                 level_samples(memory),

@@ -24,9 +24,13 @@ difference moves the noise level by a few per mille, not by half."""
 KAPPA_MIN = 0.5
 """Floor of kappa = r / s_d (half of white noise's 1): an anti-correlated stretch cannot
 read the long-run variance as nothing."""
-BLOCK_MIN_SAMPLES = 3
-"""A noise block ends after ``NoiseEstimate.BLOCK_S`` and at least this many samples (a
-block mean of one or two samples at a low rate says little of the noise's shape)."""
+BLOCK_MIN_SAMPLES = 2
+"""A noise block ends after ``NoiseEstimate.BLOCK_S`` and at least this many samples: a
+guard, not a tunable. The within-block variance (``status``) divides by ``n − 1``; κ's
+block ratio needs no more, since each second difference is divided by its own expected
+size ``r·(1/n₀ + 4/n₁ + 1/n₂)``, exact for any block counts (it was 3, a judgement that a
+two-sample block "says little": it says as much, weighed as it is). It binds only below
+8 Hz (two samples per 0.25 s)."""
 
 
 class NoiseEstimate:

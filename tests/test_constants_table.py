@@ -55,6 +55,7 @@ GUARDS = {
     "localization.MIN_HORIZONTAL_N",
     "tension_noise.MIN_NOISE_VAR_N2",
     "tension_kalman.MOVING_MIN_LOG_ODDS",
+    "tension_noise.BLOCK_MIN_SAMPLES",
 }
 """Public numeric constants that change a result only for degenerate input or at rounding
 level: listed under the page's *Not counted* (each by name), not in the table."""

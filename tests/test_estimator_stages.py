@@ -30,7 +30,7 @@ from groundstation.estimator.follow_control import (
     follow_decide,
     refuse_command,
 )
-from groundstation.estimator.gate import MAX_GAP_S, GateState, gate_step, mark_stale
+from groundstation.estimator.gate import GateState, gate_step, mark_stale
 from groundstation.estimator.localize_control import (
     LocalizeIn,
     fresh_angle,
@@ -60,13 +60,15 @@ def _telemetry(**kw: object) -> Telemetry:
 
 # ---------------------------------------------------------------- gate
 
+GAP_S = 0.5  # [service] stale_after_s's default
+
 
 def test_gate_accepts_in_order_and_counts_forward_gaps() -> None:
-    state, v = gate_step(GateState(), seq=0, stamp_s=1.0, now_s=10.0)
+    state, v = gate_step(GateState(), seq=0, stamp_s=1.0, now_s=10.0, max_gap_s=GAP_S)
     assert v.drop_kind is None and v.resumed and v.dt_s == 0.0  # a new stream resumes
-    state, v = gate_step(state, seq=1, stamp_s=1.004, now_s=10.004)
+    state, v = gate_step(state, seq=1, stamp_s=1.004, now_s=10.004, max_gap_s=GAP_S)
     assert v.drop_kind is None and not v.resumed and v.dt_s == pytest.approx(0.004)
-    state, v = gate_step(state, seq=5, stamp_s=1.02, now_s=10.02)
+    state, v = gate_step(state, seq=5, stamp_s=1.02, now_s=10.02, max_gap_s=GAP_S)
     assert v.seq_gap == 3 and v.dt_s == pytest.approx(0.016)
     assert (state.last_seq, state.last_stamp_s, state.last_seen_s) == (5, 1.02, 10.02)
 
@@ -79,22 +81,22 @@ def test_gate_refuses_repeats_and_backwards_and_keeps_its_state(
     seq: int, stamp_s: float, kind: str
 ) -> None:
     state = GateState(last_seq=3, last_stamp_s=1.5, last_seen_s=10.0, stale=False)
-    after, v = gate_step(state, seq=seq, stamp_s=stamp_s, now_s=10.01, drone="cf1")
+    after, v = gate_step(state, seq=seq, stamp_s=stamp_s, now_s=10.01, max_gap_s=GAP_S, drone="cf1")
     assert v.drop_kind == kind and "cf1" in v.detail
     assert after is state
 
 
 def test_gate_resumes_after_silence_or_staleness_in_any_order() -> None:
     state = GateState(last_seq=100, last_stamp_s=50.0, last_seen_s=10.0, stale=False)
-    # A rebooted drone counts from 0 again, after more than MAX_GAP_S of silence.
-    after, v = gate_step(state, seq=0, stamp_s=0.1, now_s=10.0 + MAX_GAP_S + 0.01)
+    # A rebooted drone counts from 0 again, after more than the stale time of silence.
+    after, v = gate_step(state, seq=0, stamp_s=0.1, now_s=10.0 + GAP_S + 0.01, max_gap_s=GAP_S)
     assert v.drop_kind is None and v.resumed and v.dt_s == 0.0 and v.seq_gap == 0
     assert after.last_seq == 0 and not after.stale
     # Within the gap the same message is refused ...
-    _, v = gate_step(state, seq=0, stamp_s=0.1, now_s=10.5)
+    _, v = gate_step(state, seq=0, stamp_s=0.1, now_s=10.0 + GAP_S, max_gap_s=GAP_S)
     assert v.drop_kind == "seq_backwards"
     # ... unless the drone was marked stale.
-    _, v = gate_step(mark_stale(state), seq=0, stamp_s=0.1, now_s=10.5)
+    _, v = gate_step(mark_stale(state), seq=0, stamp_s=0.1, now_s=10.1, max_gap_s=GAP_S)
     assert v.drop_kind is None and v.resumed
 
 

@@ -101,6 +101,25 @@ def test_drone_restart_after_silence_is_accepted() -> None:
     assert pipe.handle(_telemetry(0), 2.0), "a rebooted drone starts again at seq 0"
 
 
+def test_silence_without_ticks_restarts_at_the_stale_time() -> None:
+    """The gate's restart after silence is ``[service] stale_after_s``, the service's
+    stale time: a pipeline driven without ticks (a script, a test) resumes where the
+    service's tick would have marked the drone stale, not later."""
+    settings = settings_for()
+    stale_s = settings.service.stale_after_s
+    pipe = Pipeline(settings)
+    assert pipe.handle(_telemetry(500), 0.0)
+    assert pipe.handle(_telemetry(0), stale_s) == [], "within the stale time: seq backwards"
+    assert pipe.handle(_telemetry(0), stale_s + 0.01), "past it: a new stream"
+    longer = settings.model_copy(
+        update={"service": settings.service.model_copy(update={"stale_after_s": 2 * stale_s})}
+    )
+    pipe = Pipeline(longer)
+    assert pipe.handle(_telemetry(500), 0.0)
+    assert pipe.handle(_telemetry(0), stale_s + 0.01) == [], "the configured time, not 0.5 s"
+    assert pipe.handle(_telemetry(0), 2 * stale_s + 0.01)
+
+
 def test_ground_contact_gives_no_tension() -> None:
     pipe = Pipeline(settings_for())
     for seq, patch in enumerate([{"armed": False}, {"thrust_n": 0.1}]):
@@ -559,8 +578,9 @@ def test_reel_exit_angles_are_used_while_fresh_and_named_in_the_estimate() -> No
 
 def test_exit_azimuth_without_std_grows_toward_plumb() -> None:
     """A Reel exit azimuth without its σ gets ``[localization] exit_azimuth_std_rad`` over
-    max(cos(elevation), 0.02): the elevation of the same message, or the last one still
-    fresh; without an elevation the configured σ as is. A σ sent is kept as sent."""
+    cos(elevation), no floor: the elevation of the same message, or the last one still
+    fresh; without an elevation the configured σ as is; at or past plumb no azimuth (the
+    localization then takes none from the reel). A σ sent is kept as sent."""
     pipe = Pipeline(settings_for())
     loc = pipe.settings.localization
     base = {"length_m": 1.6, "exit_azimuth_rad": 0.7}
@@ -579,14 +599,33 @@ def test_exit_azimuth_without_std_grows_toward_plumb() -> None:
     assert reel(0.3, exit_elevation_rad=-math.radians(80)) == pytest.approx(
         std / math.cos(math.radians(80))
     )
-    # plumb: 50 times (the cosine floored at 0.02), i.e. no azimuth
-    assert reel(0.4, exit_elevation_rad=math.pi / 2) == pytest.approx(std / 0.02)
+    # 89.9°: 573 times the configured σ, no floor on the cosine
+    assert reel(0.35, exit_elevation_rad=math.radians(89.9)) == pytest.approx(
+        std / math.cos(math.radians(89.9))
+    )
+    # the message's largest elevation, past plumb by rounding: no azimuth at all, and the
+    # estimate takes none from the reel
+    assert reel(0.4, exit_elevation_rad=1.5708) == math.inf
     # the last elevation while fresh, then no longer
-    assert reel(0.4 + loc.reel_stale_after_s / 2) == pytest.approx(std / 0.02)
+    assert reel(0.4 + loc.reel_stale_after_s / 2) == math.inf
     assert reel(0.5 + loc.reel_stale_after_s) == pytest.approx(std)
     # a σ sent is the reel's own
     assert reel(2.0, exit_elevation_rad=1.5, exit_azimuth_std_rad=0.01) == 0.01
     assert exit_azimuth_default_std_rad(0.03, None) == 0.03
+
+    # The localization's view: a plumb pull (no tension azimuth), the reel's azimuth the
+    # source at 57° of elevation, none at plumb.
+    pipe = Pipeline(settings_for())
+    sources = []
+    for elevation_rad in (1.0, 1.5708):
+        t0 = len(sources) * 0.4
+        body = json.dumps({"stamp_s": t0, **base, "exit_elevation_rad": elevation_rad})
+        pipe.handle(Sample("tether/cf1/reel", body.encode()), t0)
+        for i in range(100):
+            now_s = t0 + 0.004 * i
+            out = pipe.handle(_telemetry(100 * len(sources) + i, stamp_s=now_s), now_s)
+        sources.append(json.loads(out[0].payload)["azimuth_source"])
+    assert sources == ["reel", "none"]
 
 
 def test_mocap_azimuth_takes_beta_from_position_m_one_by_one_and_batched() -> None:

@@ -270,6 +270,9 @@ class DroneEstimator:
 
         # -- the stages' states
         self.gate = GateState()
+        self.max_gap_s = settings.service.stale_after_s
+        """Receive-time silence that resumes the stream (the gate's), s: the service's
+        stale time, so a pipeline without ticks restarts where the service would."""
         self.calibration, self.calibration_source = calibration_from_config(params.calibration)
         self.vbat_range_v = params.calibration.thrust_vbat_range_v
         self.rest_detector = RestCalibrator(bias_body_mps2=params.calibration.accel_bias_mps2)
@@ -447,7 +450,12 @@ class DroneEstimator:
             self._drop("bad_observation", str(exc))
             return None
         gate, verdict = gate_step(
-            self.gate, seq=msg.seq, stamp_s=msg.stamp_s, now_s=now_s, drone=self.drone
+            self.gate,
+            seq=msg.seq,
+            stamp_s=msg.stamp_s,
+            now_s=now_s,
+            max_gap_s=self.max_gap_s,
+            drone=self.drone,
         )
         if verdict.drop_kind is not None:
             self._drop(verdict.drop_kind, verdict.detail)

@@ -104,16 +104,15 @@ class FilterControl:
     __slots__ = ("change_detections", "filter", "liftoff_std_n", "prior", "rested")
 
     def __init__(
-        self, params: TensionFilterParams, push_free_weight_ratio: float | None = None
+        self,
+        params: TensionFilterParams,
+        push_free_weight_ratio: float = ContactParams.push_free_weight_ratio,
     ) -> None:
         """``push_free_weight_ratio``: the contact stage's
-        (:class:`~groundstation.contact.ContactParams`; None: its default), for the lift-off
-        prior (:func:`liftoff_prior_std_n` at ``params.mass_kg``)."""
+        (:class:`~groundstation.contact.ContactParams`; its default unless given), for the
+        lift-off prior (:func:`liftoff_prior_std_n` at ``params.mass_kg``)."""
         self.filter = TensionFilter(params)
-        ratio = push_free_weight_ratio
-        if ratio is None:
-            ratio = ContactParams().push_free_weight_ratio
-        std = liftoff_prior_std_n(ratio, params.mass_kg)
+        std = liftoff_prior_std_n(push_free_weight_ratio, params.mass_kg)
         self.liftoff_std_n = (std, std, std)
         """The lift-off prior's standard deviation per world axis, N."""
         self.rested = False

@@ -2,9 +2,11 @@
 
 Control only (PX4's ``*_control``): no physics. A message is refused when it repeats or
 goes back in the stream (``seq`` or ``stamp_s`` not increasing), unless the stream has
-*resumed*: the drone was stale, or silent for more than :data:`MAX_GAP_S` of receive time,
-after which any order is accepted as a fresh start (a rebooted drone counts from 0 again)
-and the tension filter restarts. Forward ``seq`` jumps are counted as gaps, not refused.
+*resumed*: the drone was stale, or silent for more than ``[service] stale_after_s`` of
+receive time (one definition of a lost stream at receive time: the service's tick marks the
+drone stale after as long, and a pipeline driven without ticks sees the same), after which
+any order is accepted as a fresh start (a rebooted drone counts from 0 again) and the
+tension filter restarts. Forward ``seq`` jumps are counted as gaps, not refused.
 
 Pure: :func:`gate_step` maps ``(state, message's seq and stamp, receive time)`` to the next
 state and a frozen :class:`GateVerdict`; a refused message leaves the state as it was.
@@ -14,11 +16,7 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-__all__ = ["MAX_GAP_S", "GateState", "GateVerdict", "gate_step", "mark_stale"]
-
-MAX_GAP_S = 1.0
-"""A telemetry gap longer than this (receive time) restarts the filter: the tension may
-have changed meanwhile."""
+__all__ = ["GateState", "GateVerdict", "gate_step", "mark_stale"]
 
 
 class GateState(NamedTuple):
@@ -60,7 +58,13 @@ class GateVerdict(NamedTuple):
 
 
 def gate_step(
-    state: GateState, *, seq: int, stamp_s: float, now_s: float, drone: str = ""
+    state: GateState,
+    *,
+    seq: int,
+    stamp_s: float,
+    now_s: float,
+    max_gap_s: float,
+    drone: str = "",
 ) -> tuple[GateState, GateVerdict]:
     """One message through the gate.
 
@@ -69,13 +73,16 @@ def gate_step(
         seq: the message's sequence number.
         stamp_s: its timestamp, drone clock, s.
         now_s: its receive time, service clock, s.
+        max_gap_s: receive-time silence after which the stream resumes and the tension
+            filter restarts (the tension may have changed meanwhile), s: ``[service]
+            stale_after_s``.
         drone: the drone id, for the refusal's text.
 
     Returns:
         ``(next state, verdict)``; a refused message returns ``state`` itself.
     """
     last_seq, last_stamp_s, last_seen_s = state.last_seq, state.last_stamp_s, state.last_seen_s
-    resumed = state.stale or (last_seen_s is not None and now_s - last_seen_s > MAX_GAP_S)
+    resumed = state.stale or (last_seen_s is not None and now_s - last_seen_s > max_gap_s)
     if not resumed:
         if last_seq is not None and seq <= last_seq:
             kind = "seq_repeated" if seq == last_seq else "seq_backwards"

@@ -64,11 +64,6 @@ class LocalizeIn(NamedTuple):
     model_var_n2: tuple[float, float, float] | None = None
 
 
-EXIT_AZIMUTH_MIN_COS = 0.02
-"""Floor of ``cos(elevation)`` in :func:`exit_azimuth_default_std_rad` (at most 50 times the
-configured σ: some 1.5 rad for 0.03 rad, i.e. no azimuth)."""
-
-
 def exit_azimuth_default_std_rad(std_rad: float, elevation_rad: float | None) -> float:
     """σ of a Reel ``exit_azimuth_rad`` sent without ``exit_azimuth_std_rad``, rad.
 
@@ -76,8 +71,11 @@ def exit_azimuth_default_std_rad(std_rad: float, elevation_rad: float | None) ->
     exit, across it; the azimuth of that direction is the angle of its horizontal
     projection, which shrinks as ``cos(elevation)``: the same sideways error is
     ``std / cos(elevation)`` of azimuth, and near plumb (elevation ±90°) any azimuth is
-    noise. So ``std / max(cos(elevation), EXIT_AZIMUTH_MIN_COS)`` with the exit elevation
-    known (this Reel message's, or the last one received within ``reel_stale_after_s``).
+    noise. So ``std / cos(elevation)`` with the exit elevation known (this Reel message's,
+    or the last one received within ``reel_stale_after_s``), without a floor: near plumb
+    the σ grows past the plumb blend's limit and the azimuth carries no weight, as it
+    should (inverse-variance fusion; at or beyond plumb, ``cos <= 0``, it is infinite: no
+    azimuth). A floor on the cosine would state a σ smaller than the geometry's.
     Without an elevation it stays ``std``, as for a tether leaving level: a reel that sends
     an azimuth without elevation and may point up steeply should send its own σ.
 
@@ -90,7 +88,8 @@ def exit_azimuth_default_std_rad(std_rad: float, elevation_rad: float | None) ->
     """
     if elevation_rad is None or not math.isfinite(elevation_rad):
         return std_rad
-    return std_rad / max(math.cos(elevation_rad), EXIT_AZIMUTH_MIN_COS)
+    cos_elevation = math.cos(elevation_rad)
+    return std_rad / cos_elevation if cos_elevation > 0.0 else math.inf
 
 
 def fresh_angle(
