@@ -77,7 +77,6 @@ CLASSES = {
 CONTACT_ROWS = frozenset(
     {
         "tension.GAP_S",
-        "estimator.gate.MAX_GAP_S",
         "TensionFilterParams.noise_warmup_samples",
     }
 )

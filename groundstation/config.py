@@ -278,7 +278,8 @@ class FilterSection(_Section):
     accel_hover_noise_sigmas: float = Field(4.0, ge=0.0)
     """(added) The hover test's thresholds follow the vibration: the 1 s mean acceleration
     must stay below ``max(0.2 m/s², this × its own σ)`` and the accelerometer's speed below
-    ``max(0.3 m/s, this × its σ)`` (σ from the vibration measured in flight); 0: the fixed
+    ``max(0.3 m/s, this × its σ)`` (σ from the vibration the tension filter measures in
+    flight, its long-run noise); 0: the fixed
     thresholds alone. 4 (with ``accel_hover_exit_ratio = 1.5``) holds the hover through
     1–2 m/s² of vibration and leaves real manoeuvres (NanoBench) to the accelerometer
     (docs/estimator_design.md, *A hover test that follows the vibration*)."""

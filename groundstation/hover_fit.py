@@ -46,6 +46,8 @@ from groundstation.calibration import (
     _index_runs,
     _integrated_autocorr_time,
 )
+from groundstation.tension import TensionFilterParams
+from groundstation.tension_noise import NoiseEstimate
 
 __all__ = [
     "HOVER_FIT_MIN_S",
@@ -144,16 +146,25 @@ def flight_phases(
     capture ("rest" while the rest detector says disarmed and still, β its window mean; "air"
     while armed, at or above ``ground_thrust_ratio`` of the weight and ``min_height_m`` above
     the floor by motion capture; "hold" otherwise), the configured accelerometer bias
-    subtracted: where it hovers, where it flies, and the rests' means."""
+    subtracted: where it hovers, where it flies, and the rests' means. The vibration its
+    hover test scales with is measured as the service's tension filter measures it
+    (:class:`~groundstation.tension_noise.NoiseEstimate`, the filter's default settings),
+    on the world-frame specific force ``R·f`` in the air: the observation less the
+    thrust's share of its noise; the density at the recording's median sample spacing."""
     n = len(data)
     out = np.zeros(n, bool)
     airborne = np.zeros(n, bool)
     rest_mean = np.full((n, 3), math.nan)
     weight_n = mass_kg * GRAVITY_MPS2
     bx, by, bz = accel_bias_mps2
+    noise_params = TensionFilterParams()
+    prior_var = noise_params.accel_noise_mps2**2
     for seg in np.unique(data.segment):
         state = slow_mod.SlowAccelState()
         rest = RestCalibrator(bias_body_mps2=accel_bias_mps2)
+        noise = NoiseEstimate((prior_var,) * 3, noise_params.noise_prior_samples)
+        steps = np.diff(data.stamp_s[data.segment == seg])
+        spacing_s = float(np.median(steps)) if steps.size else math.nan
         last: float | None = None
         latest_rest = (math.nan, math.nan, math.nan)
         for i in np.flatnonzero(data.segment == seg).tolist():
@@ -176,16 +187,32 @@ def flight_phases(
             phase: slow_mod.Phase = "air" if air else "hold"
             if not armed and rest.still:
                 phase = "rest"
+            R = rows_from_quat_wxyz(tuple(data.quat_wxyz[i].tolist()))
+            density = None
+            if air:
+                f = (float(a[0]) - bx, float(a[1]) - by, float(a[2]) - bz)
+                world = [r[0] * f[0] + r[1] * f[1] + r[2] * f[2] for r in R]
+                r0, r1, r2 = noise.push(
+                    world,
+                    dt,
+                    noise_params.noise_time_constant_s,
+                    noise_params.noise_warmup_samples,
+                )
+                if spacing_s > 0.0:
+                    density = (r0 + r1 + r2) / 3.0 * spacing_s
+            else:
+                noise.break_chain()
             state = slow_mod.slow_accel_step(
                 state,
                 params,
                 dt_s=dt,
                 stamp_s=stamp,
                 accel_body_mps2=(float(a[0]) - bx, float(a[1]) - by, float(a[2]) - bz),
-                R_world_body=rows_from_quat_wxyz(tuple(data.quat_wxyz[i].tolist())),
+                R_world_body=R,
                 phase=phase,
                 mocap_world_m=None,
                 rest_mean_body_mps2=rest.rest_mean_body_mps2 if phase == "rest" else None,
+                accel_density_m2ps3=density,
             )
             out[i] = state.quasi_static
             airborne[i] = phase == "air"

@@ -70,9 +70,6 @@ HOVER_SPEED_LEAK_S = 2.0
 """Without motion capture the hover test's speed is the corrected acceleration's leaky
 integral with this time constant, s (twice ``HOVER_MEAN_S``: it forgets the integral's
 drift, keeps a manoeuvre of a second or two)."""
-VIBRATION_MEAN_S = 2.0
-"""Memory of the vibration variance around the 1 s mean that scales the hover test's
-thresholds (``SlowAccelParams.quasi_static_sigmas``), s."""
 Phase = Literal["rest", "air", "hold"]
 """``rest``: on the floor, disarmed and still (v = 0 and b measured exactly); ``air``:
 flying (the filter observes); ``hold``: anything else (spool-up, landing, armed on the
@@ -99,7 +96,8 @@ class SlowAccelParams:
             the filter, else the corrected acceleration's 2 s leaky integral).
         quasi_static_sigmas: the hover test's thresholds follow the noise too: the 1 s
             mean's is ``max(quasi_static_accel_mps2, quasi_static_sigmas·σ₁)``, σ₁ its
-            standard deviation from the vibration measured around it; the speed's (the
+            standard deviation from the accelerometer's noise density (the tension
+            filter's measure of the vibration, ``accel_density_m2ps3``); the speed's (the
             accelerometer's leaky integral, not motion capture's) likewise with that
             integral's σ (0, the default: the fixed thresholds alone; config ``[filter]
             accel_hover_noise_sigmas``). At 2 m/s² of vibration (100 Hz) σ₁ ≈ 0.15 m/s² and
@@ -165,8 +163,6 @@ class SlowAccelState:
             motion capture is in use, else the corrected acceleration's leaky integral
             (``velocity_time_constant_s``).
         accel_1s_body_mps2: the 1 s mean of ``f − β − Rᵀ·g·e3``, body frame, m/s².
-        vibration_var_mps4: the variance per axis of ``f − β − Rᵀ·g·e3`` around its 1 s
-            mean (the vibration), (m/s²)², a 2 s mean.
         quasi_static: the drone hovers (both below their thresholds).
         regime_velocity_world_mps: the velocity the hover test uses: the filter's while
             motion capture is in use, else the corrected acceleration's leaky integral with a
@@ -185,7 +181,6 @@ class SlowAccelState:
     in_air: bool = False
     drag_velocity_world_mps: Vec3 = _ZERO3
     accel_1s_body_mps2: Vec3 = _ZERO3
-    vibration_var_mps4: float = 0.0
     quasi_static: bool = False
     regime_velocity_world_mps: Vec3 = _ZERO3
     hover_hold_s: float = 0.0
@@ -268,9 +263,10 @@ def slow_accel_step(
             one test of stillness), body frame, m/s²; None: β is kept.
         accel_density_m2ps3: the accelerometer's noise as a density, (m/s²)²·s: its
             long-run variance per sample times the mean spacing (the service: the tension
-            filter's measure, which sees the same vibration); None: this stage's own
-            vibration measure times ``dt_s`` (taken as white). Read only at a block's end
-            (:data:`groundstation.bias_kalman.BLOCK_S`).
+            filter's measure over m², which sees the same vibration; one measure of it,
+            colour included). It scales the hover test's thresholds
+            (``quasi_static_sigmas``) and weighs the bias filter's block step. None (not
+            yet measured): the fixed thresholds alone, and the block step waits for it.
         gravity_mps2: g, m/s².
 
     Returns:
@@ -323,10 +319,8 @@ def slow_accel_step(
             kind = "position"
     elif p is None and block >= bk.BLOCK_S:
         kind = "bound"
-    if kind is not None:
-        density = accel_density_m2ps3
-        if density is None:
-            density = state.vibration_var_mps4 * dt
+    density = accel_density_m2ps3
+    if kind is not None and density is not None:
         kf, v, p = bk.block_update(
             kf,
             params.flight,
@@ -368,23 +362,20 @@ def slow_accel_step(
         leak2 = math.exp(-dt_s / HOVER_SPEED_LEAK_S)
         rv = (ox * leak2 + awx * dt_s, oy * leak2 + awy * dt_s, oz * leak2 + awz * dt_s)
     a1 = (a1x + k1 * (ex - a1x), a1y + k1 * (ey - a1y), a1z + k1 * (ez - a1z))
-    # The vibration around the 1 s mean (per axis): the mean's standard deviation is the
-    # vibration's times sqrt(k / (2 − k)) for an exponential mean of gain k over white noise.
-    dx, dy, dz = ex - a1[0], ey - a1[1], ez - a1[2]
-    kv = min(dt_s / VIBRATION_MEAN_S, 1.0)
-    var = state.vibration_var_mps4
-    var += kv * ((dx * dx + dy * dy + dz * dz) / 3.0 - var)
     limit1 = params.quasi_static_accel_mps2**2
     limit_v = params.quasi_static_speed_mps**2
     sigmas2 = params.quasi_static_sigmas**2
-    if sigmas2 > 0.0:
+    if sigmas2 > 0.0 and density is not None:
         # The 1 s mean's threshold: never below the fixed one, and at least
-        # quasi_static_sigmas of its own standard deviation (σ₁² = var·k1/(2 − k1) per axis).
-        limit1 = max(limit1, sigmas2 * var * k1 / (2.0 - k1))
+        # quasi_static_sigmas of its own standard deviation. An exponential mean of gain
+        # k1 = dt/T over a noise of long-run variance r = D/dt per sample (D the density)
+        # has variance r·k1/(2 − k1) = D/((2 − k1)·T) per axis, T = HOVER_MEAN_S (long
+        # against the vibration's correlation time, which r's colour accounts for).
+        limit1 = max(limit1, sigmas2 * density / ((2.0 - k1) * HOVER_MEAN_S))
         # The speed's likewise when it is the accelerometer's leaky integral (v ← leak·v +
-        # e·dt: σ_v² = var·dt²/(1 − leak²) per axis), not motion capture's.
+        # e·dt: σ_v² = r·dt²/(1 − leak²) = D·dt/(1 − leak²) per axis), not motion capture's.
         if leak2 < 1.0:
-            limit_v = max(limit_v, sigmas2 * var * dt_s * dt_s / (1.0 - leak2 * leak2))
+            limit_v = max(limit_v, sigmas2 * density * dt_s / (1.0 - leak2 * leak2))
     if state.quasi_static:
         # In the hover, times the exit ratio (hysteresis: the noise around the threshold
         # does not switch it).
@@ -411,7 +402,6 @@ def slow_accel_step(
         in_air=True,
         drag_velocity_world_mps=velocity,
         accel_1s_body_mps2=a1,
-        vibration_var_mps4=var,
         quasi_static=quasi,
         regime_velocity_world_mps=(rv[0], rv[1], rv[2]),
         hover_hold_s=hold,

@@ -1147,6 +1147,13 @@ class TensionFilter:
         self._prior_std = (math.sqrt(v0), math.sqrt(v1), math.sqrt(v2))
         self._noise = NoiseEstimate(self._prior_var, p.noise_prior_samples)
         self._dt_mean = math.nan
+        self.noise_density_n2s: float | None = None
+        """The observation's noise as a density, N²·s: the long-run variance r (the mean of
+        the three axes') times the mean sample spacing, as of the last observation (or
+        floor sample, :meth:`learn_noise`); None before a spacing is known. The slow stage
+        takes it over m² as the accelerometer's, for its hover test's thresholds and its
+        velocity filter (``groundstation.bias_kalman``): the same vibration, measured once.
+        Kept as a value, not computed when read: the slow stage reads it every message."""
         # (dt_mean, the test's youth floor at it, the youth factor's fade-out count at it)
         self._allowances = (math.nan, 1.0, math.inf)
         self.trace: list[FilterStep] | None = None
@@ -1280,7 +1287,10 @@ class TensionFilter:
             return
         if not 0.0 < dt <= GAP_S:
             self._noise.break_chain()
-        self._noise.push(y, dt, p.noise_time_constant_s, p.noise_warmup_samples)
+        r0, r1, r2 = self._noise.push(y, dt, p.noise_time_constant_s, p.noise_warmup_samples)
+        spacing = self._dt_mean
+        if spacing == spacing:  # the spacing of the flight (the floor's is not tracked)
+            self.noise_density_n2s = (r0 + r1 + r2) / 3.0 * spacing
 
     def start_trace(self) -> list[FilterStep]:
         """Records every step from now on in :attr:`trace` (for :mod:`groundstation.smoother`).
@@ -1313,17 +1323,6 @@ class TensionFilter:
         if not self.params.estimate_noise:
             return self._prior_var, (0.0, 0.0, 0.0), self._prior_var
         return self._noise.model()
-
-    def noise_density_n2s(self) -> float | None:
-        """The observation's noise as a density, N²·s: the long-run variance r (the mean of
-        the three axes') times the mean sample spacing; None before a spacing is known. The
-        slow stage's velocity filter takes it over m² as the accelerometer's
-        (``groundstation.bias_kalman``): the same vibration, measured once."""
-        spacing = self._dt_mean
-        if not (spacing == spacing and spacing > 0.0):
-            return None
-        r0, r1, r2 = self.noise_model()[2]
-        return (r0 + r1 + r2) / 3.0 * spacing
 
     def vertical_noise_var_n2(self) -> float | None:
         """The observation's vertical noise as a test of it must allow for, N^2, or None
@@ -1423,6 +1422,9 @@ class TensionFilter:
             r = self._prior_var
         # R = the long-run variance r, not the per-sample s2: what the filter averages.
         r0, r1, r2 = r
+        spacing = self._dt_mean
+        if spacing == spacing:  # known (NaN before the first spacing)
+            self.noise_density_n2s = (r0 + r1 + r2) / 3.0 * spacing
 
         if first:
             self._initialized = True

@@ -45,9 +45,12 @@ def _run(
     mocap_fn=lambda i: None,  # type: ignore[no-untyped-def]
     dt: float = 0.01,
     t0: float = 0.0,
+    accel_noise_mps2: float = 0.0,
 ) -> SlowAccelState:
     """n samples in one phase; a rest runs through the rest detector as the drone does
-    (its window mean is β once the window has lasted ``RestCriteria.min_still_s``)."""
+    (its window mean is β once the window has lasted ``RestCriteria.min_still_s``). The
+    accelerometer's noise density is its white noise's, ``accel_noise_mps2² · dt`` (the
+    service's tension filter measures it)."""
     rest = RestCalibrator()
     for i in range(n):
         rest_mean = None
@@ -66,6 +69,7 @@ def _run(
             phase=phase,  # type: ignore[arg-type]
             mocap_world_m=mocap_fn(i),
             rest_mean_body_mps2=rest_mean,
+            accel_density_m2ps3=accel_noise_mps2**2 * dt,
         )
     return state
 
@@ -131,6 +135,7 @@ def test_started_in_the_air_the_filter_finds_the_bias() -> None:
         1000,
         "air",
         lambda i: tuple(np.add((0.0, 0.0, G), BIAS) + rng.normal(0, 0.3, 3)),
+        accel_noise_mps2=0.3,
     )
     assert not st.learnt_at_rest
     assert np.allclose(st.bias_body_mps2, BIAS, atol=0.03)
@@ -227,14 +232,16 @@ def test_the_hover_test_finds_a_hover_and_ends_it_at_a_manoeuvre() -> None:
         n = rng.normal(0.0, 0.2, 3)
         return (drift[0] + n[0], drift[1] + n[1], G + drift[2] + n[2])
 
-    st = _run(st, params, 500, "air", hover)
+    st = _run(st, params, 500, "air", hover, accel_noise_mps2=0.2)
     assert st.quasi_static
     reading = (drift[0], drift[1], G + drift[2])
     corrected = correct_accel_body_mps2(st, reading)
     assert np.allclose(np.subtract(reading, corrected), st.bias_body_mps2, atol=1e-15)
     st = _run(st, params, 300, "air", lambda i: (1.0, 0.0, G), t0=5.0)
     assert not st.quasi_static
-    off = _run(SlowAccelState(), SlowAccelParams(hover=False), 500, "air", hover)
+    off = _run(
+        SlowAccelState(), SlowAccelParams(hover=False), 500, "air", hover, accel_noise_mps2=0.2
+    )
     assert not off.quasi_static
 
 
@@ -265,6 +272,7 @@ def _hover_then_push(
             R_world_body=LEVEL,
             phase="air",
             mocap_world_m=None,
+            accel_density_m2ps3=vibration_mps2**2 * dt_s,
         )
         flags.append(state.quasi_static)
     return flags
@@ -371,3 +379,37 @@ def test_the_retired_bias_time_constant_is_accepted_with_one_warning(
     assert slow_accel_params(settings.for_drone("cf1")) == slow_accel_params(
         load_settings(None, {}, use_env=False).for_drone("cf1")
     )
+
+
+def test_the_hover_thresholds_scale_with_the_long_run_noise_not_the_per_sample() -> None:
+    """The hover test's thresholds take the accelerometer's noise as a density (the tension
+    filter's long-run measure, colour included): a 1 s mean of AR(1) vibration (ρ = 0.8,
+    2 m/s² per sample, 100 Hz) scatters with r = s²·(1 + ρ)/(1 − ρ) = 9 s², not s². Told the
+    long-run density the hover holds; told the per-sample variance (what a white measure
+    such as the stage's former own reads) its thresholds are 3× too tight and it drops."""
+    params = SlowAccelParams(quasi_static_sigmas=4.0, quasi_static_exit_ratio=1.5)
+    s, rho, dt = 2.0, 0.8, 0.01
+
+    def held(density_m2ps3: float, seed: int) -> float:
+        rng = np.random.default_rng(seed)
+        state, e, flags = SlowAccelState(), np.zeros(3), []
+        for i in range(1500):
+            e = rho * e + rng.normal(0.0, s * math.sqrt(1.0 - rho * rho), 3)
+            state = slow_accel_step(
+                state,
+                params,
+                dt_s=dt,
+                stamp_s=i * dt,
+                accel_body_mps2=(float(e[0]), float(e[1]), G + float(e[2])),
+                R_world_body=LEVEL,
+                phase="air",
+                mocap_world_m=None,
+                accel_density_m2ps3=density_m2ps3,
+            )
+            flags.append(state.quasi_static)
+        return float(np.mean(flags[300:]))
+
+    long_run = s * s * (1.0 + rho) / (1.0 - rho) * dt
+    for seed in (3, 4, 5):
+        assert held(long_run, seed) > 0.95
+    assert np.mean([held(s * s * dt, seed) for seed in (3, 4, 5)]) < 0.7

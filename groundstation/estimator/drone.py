@@ -41,7 +41,6 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from groundstation import bias_kalman
 from groundstation import contact as contact_mod
 from groundstation import follow as follow_mod
 from groundstation import slow_accel as slow_mod
@@ -498,11 +497,11 @@ class DroneEstimator:
             assert self.slow_params is not None
             was_hovering = self.slow.quasi_static
             still = not msg.armed and self.rest_detector.still  # armed: no property calls
-            # The vibration the velocity filter's block step needs (read only then): the
-            # tension filter's measure of it, over the mass squared.
+            # The vibration the hover test's thresholds and the velocity filter's block step
+            # need: the tension filter's measure of it, over the mass squared (one measure).
             density = None
-            if self.slow.in_air and self.slow.block_s + dt_s >= bias_kalman.BLOCK_S:
-                density_n2s = self.filter.noise_density_n2s()
+            if self.slow.in_air:
+                density_n2s = self.filter.noise_density_n2s
                 if density_n2s is not None:
                     density = density_n2s / (mass_kg * mass_kg)
             self.slow = learn_slow(
