@@ -81,14 +81,10 @@ filter's noise model and change windows (:class:`TensionFilter`), the rest detec
 window (:class:`~groundstation.calibration.RestCalibrator`) and a hover run of
 ``calibrate`` (:class:`~groundstation.calibration.HoverCriteria`). Hand-set: 25 samples at
 100 Hz, longer than real telemetry's own gaps (motion capture's up to 150 ms)."""
-SPACING_CAP_RATIO = 4.0
-"""A sample spacing enters the filter's mean spacing capped at this multiple of the mean
-(a late sample does not drag the mean that sets Q and the change test's windows)."""
-SPACING_GAIN = 0.02
-"""Gain of the mean sample spacing's exponential average (a memory of ~50 samples)."""
 RESCALE_TOLERANCE = 0.01
-"""P is rescaled to a revised noise R only once R has moved by more than this fraction
-(a cost saving: P proportional to R to within 1 %)."""
+"""A revised measurement is applied only once it has moved by more than this fraction (a
+cost saving): P is rescaled to a revised noise R (P proportional to R to within 1 %), and
+the change test's threshold is derived again at a revised mean spacing."""
 _EYE3 = np.eye(3)
 _EYE3.setflags(write=False)
 
@@ -1147,6 +1143,10 @@ class TensionFilter:
         self._prior_std = (math.sqrt(v0), math.sqrt(v1), math.sqrt(v2))
         self._noise = NoiseEstimate(self._prior_var, p.noise_prior_samples)
         self._dt_mean = math.nan
+        # The mean spacing over the noise level's memory: the spacings' and the samples'
+        # sums, each weighed by exp(-age / noise_time_constant_s).
+        self._spacing_sum_s = 0.0
+        self._spacing_count = 0.0
         self.noise_density_n2s: float | None = None
         """The observation's noise as a density, N²·s: the long-run variance r (the mean of
         the three axes') times the mean sample spacing, as of the last observation (or
@@ -1404,14 +1404,15 @@ class TensionFilter:
             dt = 0.0
         gap = dt > GAP_S
         if not first and not gap and dt > 0.0:
-            # Mean sample spacing, s (a gap is not a sample spacing).
-            dt_mean = self._dt_mean
-            if dt_mean != dt_mean:
-                self._dt_mean = dt
-            else:
-                cap = SPACING_CAP_RATIO * dt_mean
-                capped = cap if cap < dt else dt  # min(dt, 4 dt_mean)
-                self._dt_mean = dt_mean + SPACING_GAIN * (capped - dt_mean)
+            # Mean sample spacing, s (a gap is not a sample spacing): the time the last
+            # noise_time_constant_s of samples took over their number, each sample weighed
+            # by exp(-age / noise_time_constant_s). Over the memory of the noise level r,
+            # since Q and the change test take r dt_mean, the noise's density: one
+            # measurement over one memory. A late sample is one of some 500 (100 Hz): no cap.
+            keep = math.exp(-dt / p.noise_time_constant_s)
+            self._spacing_sum_s = total_s = self._spacing_sum_s * keep + dt
+            self._spacing_count = count = self._spacing_count * keep + 1.0
+            self._dt_mean = total_s / count
         if gap:
             self._new_regime()  # the state stays; P grows by Q dt below
         noise = self._noise
@@ -1475,7 +1476,8 @@ class TensionFilter:
         lo, hi = self._fast_band
         spacing = self._dt_mean
         if not lo < spacing < hi and spacing > 0.0:  # False for a NaN spacing
-            self._fast_band = (0.99 * spacing, 1.01 * spacing)
+            tol = RESCALE_TOLERANCE
+            self._fast_band = ((1.0 - tol) * spacing, (1.0 + tol) * spacing)
             self._change.set_threshold(self.fast_threshold(spacing))
         # This step's time constant: the hover one, shortened by the drift adaptation.
         dt_mean = self._dt_mean
