@@ -39,7 +39,7 @@ from groundstation.tension_change import (
     youth_factor,
 )
 from groundstation.tension_change import _Ring as _Ring
-from groundstation.tension_drift import DriftAdaptation
+from groundstation.tension_drift import RESCALE_TOLERANCE, DriftAdaptation
 from groundstation.tension_kalman import DiagonalKalman, HoverVelocity, MovingTension
 from groundstation.tension_noise import NoiseEstimate, NoiseStatus
 from groundstation.thrust_model import (
@@ -81,10 +81,6 @@ filter's noise model and change windows (:class:`TensionFilter`), the rest detec
 window (:class:`~groundstation.calibration.RestCalibrator`) and a hover run of
 ``calibrate`` (:class:`~groundstation.calibration.HoverCriteria`). Hand-set: 25 samples at
 100 Hz, longer than real telemetry's own gaps (motion capture's up to 150 ms)."""
-RESCALE_TOLERANCE = 0.01
-"""A revised measurement is applied only once it has moved by more than this fraction (a
-cost saving): P is rescaled to a revised noise R (P proportional to R to within 1 %), and
-the change test's threshold is derived again at a revised mean spacing."""
 _EYE3 = np.eye(3)
 _EYE3.setflags(write=False)
 

@@ -11,11 +11,15 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["DriftAdaptation", "relaxed_scale"]
+__all__ = ["RESCALE_TOLERANCE", "DriftAdaptation", "relaxed_scale"]
 
-SCALE_SNAP = 1e-3
-"""A process-noise scale within this of 1 is taken as 1 (Q within 0.1 % of the hover one:
-the decayed adaptation ends instead of fading for ever)."""
+RESCALE_TOLERANCE = 0.01
+"""The tension filter's one cost tolerance: a revised value is applied only once it has
+moved by more than this fraction. P is rescaled to a revised noise R (P proportional to R
+to within 1 %); the change test's threshold is derived again at a revised mean spacing; and
+a process-noise scale within this of 1 is taken as 1 (Q within 1 % of the hover one: the
+decayed adaptation ends instead of fading for ever; it was 0.1 %, ``SCALE_SNAP``, and 1 %
+moved the sensitivity harness's figures by less than 1e-4 of themselves)."""
 
 
 def relaxed_scale(scale: float, dt_s: float, memory_s: float) -> float:
@@ -128,7 +132,7 @@ class DriftAdaptation:
                 inst = ratio**self.exponent
         relaxed = relaxed_scale(self.scale, dt, self.memory_s)
         scale = max(inst, relaxed)
-        if scale < 1.0 + SCALE_SNAP:
+        if scale < 1.0 + RESCALE_TOLERANCE:
             scale = 1.0
         self.scale = scale
         if not evidence:
