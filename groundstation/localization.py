@@ -97,13 +97,12 @@ _SIGMA_SCALE = math.sqrt(_N)  # sqrt(n + kappa), kappa = 0
 _SIGMA_WEIGHT = 1.0 / (2 * _N)
 _SIGMA_SCALE_2D = math.sqrt(2.0)  # the elevation fusion's: sqrt(n + kappa), n = 2, kappa = 0
 _SIGMA_WEIGHT_2D = 1.0 / (2 * 2)  # 1 / (2 n), n = 2
-PLUMB_BLEND_FULL = 0.5
-"""The plumb blend is full while the azimuth's standard deviation is at most this over
-``plumb_k`` rad (half the determined limit ``1 / plumb_k``); the tension-free
-localization takes the tension's direction only below the same limit."""
-PLUMB_BLEND_NONE = 2.0
-"""The plumb blend is zero from an azimuth standard deviation of this over ``plumb_k`` rad
-(twice the determined limit)."""
+PLUMB_BLEND_RATIO = 2.0
+"""The plumb blend spans this factor either side of the determined limit ``1 / plumb_k``
+(on a log scale, around it): full while the azimuth's standard deviation is at most
+``1 / (ratio·plumb_k)`` rad (half the limit; the tension-free localization takes the
+tension's direction only below the same), zero from ``ratio / plumb_k`` (twice it). One
+value where there were two (0.5 and 2.0 over ``plumb_k``: the same band)."""
 
 
 @dataclass(frozen=True)
@@ -719,7 +718,7 @@ def _try_localize(
     # a plumb threshold (a fixed threshold did, near r = 0.2 m). Not rho = exp(-std^2 / 2),
     # the mean of a wrapped normal: it would bias every determined estimate a little, and
     # the tension's linearised std (sideways sigma / H) says too little when H ~ sigma.
-    rho = _blend(std_beta, PLUMB_BLEND_FULL / plumb_k, PLUMB_BLEND_NONE / plumb_k)
+    rho = _blend(std_beta, 1.0 / (PLUMB_BLEND_RATIO * plumb_k), PLUMB_BLEND_RATIO / plumb_k)
     ux, uy = math.cos(beta), math.sin(beta)
     vx, vy = -uy, ux
     # Covariance with the azimuth known (cov_det): the unscented transform over the
@@ -862,7 +861,7 @@ def _localize_tension_free(
     var_side = uy_t * uy_t * cxx - 2.0 * ux_t * uy_t * cxy + ux_t * ux_t * cyy
     std_t = sqrt(0.0 if var_side < 0.0 else var_side) / horizontal_n  # max(var_side, 0.0)
     # rho = 1 (std <= 1 / (2 k)), which implies a determined azimuth (std <= 1 / k).
-    if not (0.0 < std_t <= PLUMB_BLEND_FULL / plumb_k):
+    if not (0.0 < std_t <= 1.0 / (PLUMB_BLEND_RATIO * plumb_k)):
         return None
     beta_t = math.atan2(uy_t + 0.0, ux_t)
     beta = beta_t + 0.0 / 1.0
@@ -1290,7 +1289,7 @@ def _localize_arrays_body(
     beta = np.array(list(map(math.atan2, np.sin(beta).tolist(), np.cos(beta).tolist())))
     std_beta = std_t / math.sqrt(1.0)
     determined = std_beta <= 1.0 / plumb_k
-    rho = _blend_array(std_beta, PLUMB_BLEND_FULL / plumb_k, PLUMB_BLEND_NONE / plumb_k)
+    rho = _blend_array(std_beta, 1.0 / (PLUMB_BLEND_RATIO * plumb_k), PLUMB_BLEND_RATIO / plumb_k)
     ux, uy = np.cos(beta), np.sin(beta)
     vx, vy = -uy, ux
     w_t = (std_beta / std_t) ** 2
