@@ -955,7 +955,7 @@ class TensionFilter:
     error (``1 + 3 sqrt(2 / k)`` after k samples, fading out as k reaches the level's
     equilibrium count, 2τ/dt − 1), and never by less than
     the warm estimate's own scatter allows for
-    (:func:`~groundstation.tension_change.level_scatter_factor`, 1.17 at ~95 Hz: without
+    (:func:`~groundstation.tension_change.level_scatter_factor`, 1.26 at ~95 Hz: without
     it thresholds set for a known noise fired 4 times in 90 h of simulated hover); and
     the test waits for
     ``noise_warmup_samples`` = 30 samples (0.3 s at 100 Hz) whose innovations were
