@@ -19,7 +19,9 @@ trusted, and a touch-down is noticed where it can be:
   g upward whatever the thrust (the floor pushes with ``m g - F``), so the world vertical
   acceleration is ~0; in the air the drone falls at ``(F + T_z) / m - g``, below
   ``-(1 - ratio) g`` plus what the tether holds (-4.9 m/s^2 at the ratio; -10.4 m/s^2 in
-  that dip). So the vertical acceleration, smoothed over ``accel_time_constant_s`` (50 ms)
+  that dip). So the vertical acceleration, smoothed over ``floor_time_s`` (0.1 s, the
+  stage's one time scale; it was a time constant of its own, 50 ms, which no benchmark
+  flight told from 0.1 s)
   and less the bias learnt at rest, must stay within half of ``(1 - ratio) g`` (derived:
   2.45 m/s^2 at the ratio 0.5, halfway between a rest and the slowest fall) for
   ``rest_hold_s`` (0.2 s: longer than a motor's spin-down, during which the thrust reads
@@ -43,8 +45,8 @@ trusted, and a touch-down is noticed where it can be:
 
   - *the floor carries nothing*: the floor's load ``m g - F`` (what the observation of
     ``eq:NE_tether`` reads vertically for a drone at rest, from the same calibrated thrust
-    ``F``), smoothed over ``push_time_s``, stays below ``push_free_weight_ratio`` of the weight
-    (10 mN at 30 g) for ``push_time_s`` too (one time scale of the load's judgement). Whatever
+    ``F``), smoothed over ``floor_time_s``, stays below ``push_free_weight_ratio`` of the weight
+    (10 mN at 30 g) for ``floor_time_s`` too (one time scale of the floor's judgement). Whatever
     rests on the floor then, what is published as tension is below that, which is the point; in
     the air the tether pulls down (or a hand pulls), so a hovering drone whose service restarts
     is found in the air in 0.1 s. A thrust reading low by more than the tether's downward pull
@@ -112,7 +114,7 @@ it (a drone flying below the surface it last rested on, beside a table, is not o
 The state starts on the ground, but until the drone has once been *certainly* on the
 ground (disarmed or below the ratio) the push rule is looser: a load below
 ``climb_push_max_weight_ratio`` (50 mN at 30 g) instead of ``push_free_weight_ratio`` for
-``push_time_s`` says the drone is
+``floor_time_s`` says the drone is
 flying (``reason = "flying_at_start"``: the service (re)started while it was in the air).
 With the strict bound a hover under a tether that pulls *up* (a base above the drone, the
 paper's coin bench: 12.7 mN up) would be held on the ground forever. The price: a service
@@ -173,12 +175,11 @@ class ContactParams:
             scales with the weight), dimensionless.
         push_free_weight_ratio: No motion capture: lift-off when the smoothed floor load
             stays below this fraction of the weight, dimensionless ...
-        push_time_s: ... for this long, s; also the floor load's smoothing time constant
-            (one time scale over which the load is judged; they were two values, both
-            0.1 s).
+        floor_time_s: ... for this long, s; also the floor load's smoothing time constant,
+            and the vertical acceleration's (rest against fall): the one time scale over
+            which the stage judges the floor (``push_hold_s``, ``push_time_constant_s`` and
+            ``accel_time_constant_s`` were three values, 0.1, 0.1 and 0.05 s).
         bias_time_constant_s: Averaging time of the vertical accelerometer bias at rest, s.
-        accel_time_constant_s: Smoothing of the vertical acceleration that tells a rest on
-            the floor (~0) from a fall (below ``-(1 - ground_thrust_ratio) g``), s.
         rest_hold_s: At rest the smoothed vertical acceleration, less the bias, stays within
             half of ``(1 - ground_thrust_ratio) g`` of 0 (below minus that the drone
             falls) for this long, s (a rest, or a fall, is seen only then).
@@ -192,9 +193,8 @@ class ContactParams:
     climb_sigmas: float = 4.0
     climb_push_max_weight_ratio: float = 0.17
     push_free_weight_ratio: float = 0.034
-    push_time_s: float = 0.1
+    floor_time_s: float = 0.1
     bias_time_constant_s: float = 1.0
-    accel_time_constant_s: float = 0.05
     rest_hold_s: float = 0.2
 
     def __post_init__(self) -> None:
@@ -213,9 +213,8 @@ class ContactParams:
             "speed_time_constant_s",
             "climb_push_max_weight_ratio",
             "push_free_weight_ratio",
-            "push_time_s",
+            "floor_time_s",
             "bias_time_constant_s",
-            "accel_time_constant_s",
             "rest_hold_s",
         ):
             value = getattr(self, name)
@@ -245,7 +244,7 @@ class ContactState:
         rest_seen: The drone has once been disarmed or seen at rest on the ground (below
             the thrust ratio, held still); before that an armed drone at hover thrust is
             taken to be flying.
-        accel_smooth_mps2: Vertical acceleration smoothed over ``accel_time_constant_s``,
+        accel_smooth_mps2: Vertical acceleration smoothed over ``floor_time_s``,
             m/s^2, or None before the first finite one.
         still_s: How long the smoothed acceleration (less the bias) has been within
             half of ``(1 - ground_thrust_ratio) g`` of 0, s.
@@ -358,7 +357,7 @@ def contact_step(
     smooth = state.accel_smooth_mps2
     still_s, falling_s = 0.0, 0.0
     if math.isfinite(accel):
-        w = min(1.0, dt / params.accel_time_constant_s) if smooth is not None else 1.0
+        w = min(1.0, dt / params.floor_time_s) if smooth is not None else 1.0
         smooth = accel if smooth is None else smooth + w * (accel - smooth)
         rel = smooth - (state.accel_bias_z_mps2 or 0.0)
         if low_thrust and abs(rel) < rest_accel:
@@ -441,7 +440,7 @@ def contact_step(
     # eq:NE_tether reads there (the accelerometer adds only its noise), from the same thrust.
     load = weight_n - thrust_n
     push = state.push_n
-    w = min(1.0, dt / params.push_time_s) if push is not None else 1.0
+    w = min(1.0, dt / params.floor_time_s) if push is not None else 1.0
     push = load if push is None else push + w * (load - push)
     # Before any rest was seen the drone is most likely flying (the service started
     # mid-flight), perhaps under a tether that pulls up: a looser bound on the load.
@@ -450,7 +449,7 @@ def contact_step(
     free_s = state.push_free_s + dt if push < push_limit_n else 0.0
     if speed > climb_limit and push < climb_push_max_n:
         return evolve(state, on_ground=False, reason="climbing", climb_speed_mps=0.0)
-    if push < push_limit_n and free_s >= params.push_time_s:
+    if push < push_limit_n and free_s >= params.floor_time_s:
         reason: Reason = "push_free" if state.rest_seen else "flying_at_start"
         return evolve(state, on_ground=False, reason=reason, climb_speed_mps=0.0)
     return evolve(

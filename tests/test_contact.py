@@ -224,8 +224,8 @@ def test_params_are_checked() -> None:
         ContactParams(ground_thrust_ratio=1.0)
     with pytest.raises(ValueError, match="touchdown_height_m"):
         ContactParams(touchdown_height_m=0.05, liftoff_height_m=0.03)
-    with pytest.raises(ValueError, match="push_time_s"):
-        ContactParams(push_time_s=0.0)
+    with pytest.raises(ValueError, match="floor_time_s"):
+        ContactParams(floor_time_s=0.0)
 
 
 def _vibrating(

@@ -41,7 +41,7 @@ def _truths(run: Run) -> Callable[[float], dict[str, Any]]:
 START_S = 0.15
 """A service started with the drone in the air and no motion capture (yet: the realistic
 profile's first frames come later) takes it for on the ground until the floor is seen to
-carry nothing for ``push_time_s`` (0.1 s): the initial guess, not a latch."""
+carry nothing for ``floor_time_s`` (0.1 s): the initial guess, not a latch."""
 
 
 def _check_airborne(run: Run, status: dict[str, Any] | None, seconds: float) -> None:
