@@ -46,6 +46,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from groundstation.tension import GAP_S
+from groundstation.tension_noise import NoiseEstimate
 
 __all__ = [
     "BIAS_PRIOR_STD_MPS2",
@@ -65,12 +66,17 @@ Vec3 = tuple[float, float, float]
 Rows = tuple[Vec3, Vec3, Vec3]
 _ZERO3: Vec3 = (0.0, 0.0, 0.0)
 
-BLOCK_S = 0.1
-"""The covariance is propagated and the state observed once per this much flight, s: a
-block is short beside T_V (0.4–1 s fitted on NanoBench) and the bias's time to be learnt
-(seconds), long beside the IMU's period (4–10 ms), so the per-message cost is the nominal
-integration and two sums. Numerical, not a model value: the block's update is the exact
-one of the model observed once per block."""
+BLOCK_S = NoiseEstimate.BLOCK_S
+"""The covariance is propagated and the state observed once per this much flight, s: the
+noise estimate's block (0.25 s), the estimator's one block length for its slow per-block
+work (it was 0.1 s of its own). A block is long beside the IMU's period (4–10 ms), so the
+per-message cost is the nominal integration and two sums, and short beside the bias's time
+to be learnt (seconds); against T_V (0.64–1.4 s fitted on NanoBench) the observation
+``v = 0`` is weighed per block by ``σ_V²·T_V/T``, the same information per second at any T.
+Numerical, not a model value: the block's update is the exact one of the model observed
+once per block. 0.1 → 0.25 s moved no figure of ``python -m benchmarks.sensitivity
+--variant bias_kalman.BLOCK_S=2.5`` by more than 1 % (at a977029), nor a realistic hover
+with motion capture."""
 
 MOCAP_HOLD_S = GAP_S
 """Motion capture stays in use for this long (telemetry stamp) after the frame that brought
