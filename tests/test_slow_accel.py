@@ -254,15 +254,25 @@ def _hover_then_push(
     dt_s: float = 0.004,
     samples: int = 2000,
     push_from: int = 1250,
+    rho: float = 0.0,
+    density_m2ps3: float | None = None,
 ) -> list[bool]:
-    """Hover with white vibration (no motion capture) for ``push_from`` samples (5 s by
-    default), then a sustained push along x: the quasi-static flag at each sample."""
+    """Hover with vibration (no motion capture) for ``push_from`` samples (5 s by default),
+    then a sustained push along x: the quasi-static flag at each sample. The vibration is
+    AR(1) with lag-1 correlation ``rho`` (0: white) and ``vibration_mps2`` per sample; the
+    stage is told ``density_m2ps3`` as its noise density (None: the white noise's,
+    ``vibration_mps2² · dt_s``)."""
     rng = np.random.default_rng(seed)
+    if density_m2ps3 is None:
+        density_m2ps3 = vibration_mps2**2 * dt_s
+    innovation_mps2 = vibration_mps2 * math.sqrt(1.0 - rho * rho)
     state = SlowAccelState()
+    e = np.zeros(3)
     flags = []
     for i in range(samples):
         push = push_mps2 if i >= push_from else 0.0
-        ax, ay, az = rng.normal(0.0, vibration_mps2, 3)
+        e = rho * e + rng.normal(0.0, innovation_mps2, 3)
+        ax, ay, az = e
         state = slow_accel_step(
             state,
             params,
@@ -272,7 +282,7 @@ def _hover_then_push(
             R_world_body=LEVEL,
             phase="air",
             mocap_world_m=None,
-            accel_density_m2ps3=vibration_mps2**2 * dt_s,
+            accel_density_m2ps3=density_m2ps3,
         )
         flags.append(state.quasi_static)
     return flags
@@ -391,22 +401,10 @@ def test_the_hover_thresholds_scale_with_the_long_run_noise_not_the_per_sample()
     s, rho, dt = 2.0, 0.8, 0.01
 
     def held(density_m2ps3: float, seed: int) -> float:
-        rng = np.random.default_rng(seed)
-        state, e, flags = SlowAccelState(), np.zeros(3), []
-        for i in range(1500):
-            e = rho * e + rng.normal(0.0, s * math.sqrt(1.0 - rho * rho), 3)
-            state = slow_accel_step(
-                state,
-                params,
-                dt_s=dt,
-                stamp_s=i * dt,
-                accel_body_mps2=(float(e[0]), float(e[1]), G + float(e[2])),
-                R_world_body=LEVEL,
-                phase="air",
-                mocap_world_m=None,
-                accel_density_m2ps3=density_m2ps3,
-            )
-            flags.append(state.quasi_static)
+        flags = _hover_then_push(
+            params, 0.0, s, seed, dt_s=dt, samples=1500, push_from=1500, rho=rho,
+            density_m2ps3=density_m2ps3,
+        )  # fmt: skip
         return float(np.mean(flags[300:]))
 
     long_run = s * s * (1.0 + rho) / (1.0 - rho) * dt
