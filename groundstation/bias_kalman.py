@@ -75,8 +75,9 @@ to be learnt (seconds); against T_V (0.64–1.4 s fitted on NanoBench) the obser
 ``v = 0`` is weighed per block by ``σ_V²·T_V/T``, the same information per second at any T.
 Numerical, not a model value: the block's update is the exact one of the model observed
 once per block. 0.1 → 0.25 s moved no figure of ``python -m benchmarks.sensitivity
---variant bias_kalman.BLOCK_S=2.5`` by more than 1 % (at a977029), nor a realistic hover
-with motion capture."""
+--variant bias_kalman.BLOCK_S=2.5`` by more than 1 % (at a977029); the realistic page's
+follow flights with motion capture moved by at most 0.3 % (docs/realistic_benchmark.md, 337e450 →
+35dd67e)."""
 
 MOCAP_HOLD_S = GAP_S
 """Motion capture stays in use for this long (telemetry stamp) after the frame that brought
