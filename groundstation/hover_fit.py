@@ -188,9 +188,11 @@ def flight_phases(
             if not armed and rest.still:
                 phase = "rest"
             R = rows_from_quat_wxyz(tuple(data.quat_wxyz[i].tolist()))
+            # The specific force less the configured bias, body frame: the hover test's input
+            # and, rotated to the world, the vibration's measure.
+            f = (float(a[0]) - bx, float(a[1]) - by, float(a[2]) - bz)
             density = None
             if air:
-                f = (float(a[0]) - bx, float(a[1]) - by, float(a[2]) - bz)
                 world = [r[0] * f[0] + r[1] * f[1] + r[2] * f[2] for r in R]
                 r0, r1, r2 = noise.push(
                     world,
@@ -207,7 +209,7 @@ def flight_phases(
                 params,
                 dt_s=dt,
                 stamp_s=stamp,
-                accel_body_mps2=(float(a[0]) - bx, float(a[1]) - by, float(a[2]) - bz),
+                accel_body_mps2=f,
                 R_world_body=R,
                 phase=phase,
                 mocap_world_m=None,

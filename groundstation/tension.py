@@ -33,6 +33,7 @@ from groundstation.attitude import GRAVITY_MPS2, QUAT_MIN_NORM, Rows, rows_from_
 from groundstation.tension_change import (
     ChangeTest,
     LazyChangeStatistic,
+    exceedance_sigmas,
     level_samples,
     level_scatter_factor,
     scan_threshold,
@@ -1152,6 +1153,8 @@ class TensionFilter:
         Kept as a value, not computed when read: the slow stage reads it every message."""
         # (dt_mean, the test's youth floor at it, the youth factor's fade-out count at it)
         self._allowances = (math.nan, 1.0, math.inf)
+        # (the spacing band it holds for, the climb test's sigmas there): climb_sigmas
+        self._climb_sigmas = (math.nan, math.nan, math.inf)
         self.trace: list[FilterStep] | None = None
         """Every step from :meth:`start_trace` on (None: not recorded, the default)."""
         self._restart_pending = 0
@@ -1344,6 +1347,27 @@ class TensionFilter:
         if floor > factor:
             factor = floor
         return noise.long_run()[2] * factor
+
+    def climb_sigmas(self, dt_s: float) -> float:
+        """The standard deviations a per-sample test must ask so that it fires by chance at
+        most ``false_alarms_per_h``, dimensionless: the contact stage's climb test
+        (:func:`~groundstation.tension_change.exceedance_sigmas`, one false-alarm rate for
+        every test of the estimator; 5.55 at 100 Hz), at the flight's mean spacing, or at
+        the sample's ``dt_s`` before one is known (on the floor before the first flight:
+        :meth:`learn_noise` does not track the floor's spacing). Derived again once the
+        spacing has moved by ``RESCALE_TOLERANCE``; infinite with no spacing.
+        """
+        spacing = self._dt_mean
+        if not spacing > 0.0:  # no mean spacing (NaN)
+            spacing = dt_s
+            if not spacing > 0.0:
+                return math.inf
+        cached = self._climb_sigmas
+        if not cached[0] < spacing < cached[1]:
+            tol = RESCALE_TOLERANCE
+            z = exceedance_sigmas(self.params.false_alarms_per_h, spacing)
+            cached = self._climb_sigmas = ((1.0 - tol) * spacing, (1.0 + tol) * spacing, z)
+        return cached[2]
 
     # -- steps -------------------------------------------------------------------------
 

@@ -18,6 +18,7 @@ warm. Pure: numpy and Python floats.
 from __future__ import annotations
 
 import math
+from statistics import NormalDist
 
 import numpy as np
 from numpy.typing import NDArray
@@ -25,6 +26,7 @@ from numpy.typing import NDArray
 __all__ = [
     "ChangeTest",
     "LazyChangeStatistic",
+    "exceedance_sigmas",
     "level_samples",
     "level_scatter_factor",
     "scan_threshold",
@@ -32,6 +34,7 @@ __all__ = [
 ]
 
 FloatArray = NDArray[np.float64]
+_STANDARD_NORMAL = NormalDist()
 
 
 def scan_threshold(
@@ -77,6 +80,28 @@ def scan_threshold(
         if abs(step) < 1e-9 * h:
             break
     return h
+
+
+def exceedance_sigmas(false_alarms_per_h: float, dt_s: float) -> float:
+    """The one-sided Gaussian quantile a sample exceeds by chance at ``false_alarms_per_h``
+    per hour when one sample is judged every ``dt_s``, standard deviations: ``z`` with
+    ``Q(z) = rate·dt / 3600 s`` (Q the normal tail).
+
+    A test that compares each sample of a Gaussian statistic with ``z`` of its standard
+    deviation fires at most that often: an exceedance that lasts several samples is one
+    alarm, counted here as several, so the bound holds for any correlation between samples
+    (a leaky integral's with a time constant of ~25 samples at 100 Hz: within ~1.3× of it,
+    its lag-1 correlation 0.96). The false-alarm rate is the estimator's one knob
+    (``TensionFilterParams.false_alarms_per_h``); this turns it into a per-sample threshold
+    for the contact stage's climb test: 5.55 at 100 Hz, 5.72 at 250 Hz for 0.005 per hour.
+    Infinite (never fires) for a rate of 0 or no spacing.
+    """
+    p = false_alarms_per_h * dt_s / 3600.0
+    if not (p > 0.0 and math.isfinite(p)):
+        return math.inf
+    if p >= 0.5:
+        return 0.0
+    return -_STANDARD_NORMAL.inv_cdf(p)
 
 
 ESTIMATE_SIGMAS = 3.0

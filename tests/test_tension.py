@@ -27,7 +27,7 @@ from groundstation.tension import (
     rotation_world_body,
     scan_threshold,
 )
-from groundstation.tension_change import level_scatter_factor
+from groundstation.tension_change import exceedance_sigmas, level_scatter_factor
 
 MASS_KG = 0.030
 DT_S = 0.004  # 250 Hz
@@ -990,6 +990,38 @@ def test_scan_threshold_solves_the_false_alarm_rate() -> None:
     assert scan_threshold(0.005, 225.0, 900.0, 0.002) == pytest.approx(h, rel=1e-9)
     with pytest.raises(ValueError, match="scan_threshold"):
         scan_threshold(0.005, 180.0, 45.0, 0.01)
+
+
+def test_exceedance_sigmas_is_the_normal_tail_at_the_rate() -> None:
+    """z with Q(z) = rate·dt / 3600 (scipy's normal tail as the reference); a lower rate or
+    a denser sampling asks more; no rate or no spacing: never."""
+    from scipy.stats import norm
+
+    z = exceedance_sigmas(0.005, 0.01)
+    assert norm.sf(z) == pytest.approx(0.005 * 0.01 / 3600.0, rel=1e-9)
+    assert 5.5 < z < 5.6
+    assert exceedance_sigmas(0.005, 0.004) > z
+    assert exceedance_sigmas(0.0005, 0.01) > z
+    assert exceedance_sigmas(0.0, 0.01) == math.inf
+    assert exceedance_sigmas(0.005, 0.0) == math.inf
+    assert exceedance_sigmas(0.005, math.nan) == math.inf
+
+
+def test_climb_sigmas_follow_the_one_knob_at_the_spacing() -> None:
+    """The contact stage's climb test asks the standard deviations of the filter's
+    false-alarm rate at the flight's mean spacing, or at the sample's before one is
+    measured (the floor before the first flight), and none without a spacing."""
+    rng = np.random.default_rng(5)
+    filt = TensionFilter()
+    rate = filt.params.false_alarms_per_h
+    assert filt.climb_sigmas(math.nan) == math.inf
+    assert filt.climb_sigmas(0.008) == pytest.approx(exceedance_sigmas(rate, 0.008))
+    for _ in range(400):
+        filt.update(HOVER_TENSION_N + rng.normal(0.0, 0.03, 3), 0.01)
+    # The flight's spacing (0.01 s), not the sample's, once measured.
+    assert filt.climb_sigmas(0.004) == pytest.approx(exceedance_sigmas(rate, 0.01), rel=1e-3)
+    quiet = TensionFilter(TensionFilterParams(false_alarms_per_h=0.0))
+    assert quiet.climb_sigmas(0.01) == math.inf
 
 
 def test_the_false_alarm_rate_is_the_change_tests_one_knob() -> None:

@@ -15,6 +15,7 @@ latch it there): the contact state decides. Pure functions of frozen inputs.
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 from groundstation import contact as contact_mod
@@ -48,6 +49,8 @@ def contact_decide(
     floor_z_m: float,
     rotation_rows_world_body: Rows,
     vertical_noise_var_mps4: float | None = None,
+    climb_sigmas: float = math.inf,
+    bias_step_std_mps2: float,
 ) -> ContactOut:
     """One message's evidence into the contact state (module doc).
 
@@ -62,6 +65,10 @@ def contact_decide(
         rotation_rows_world_body: the message's attitude as ``R_world_body`` rows.
         vertical_noise_var_mps4: the vertical vibration the tension filter measured,
             (m/s^2)^2 (``contact_step``'s), or None.
+        climb_sigmas: the climb test's standard deviations (``contact_step``'s; the
+            tension filter's ``climb_sigmas``); infinite: no climb is judged.
+        bias_step_std_mps2: σ_δ, the accelerometer bias's step from rest to flight, m/s^2
+            (``contact_step``'s).
     """
     position = msg.position_m
     new = contact_mod.contact_step(
@@ -77,5 +84,7 @@ def contact_decide(
         height_m=position[2] if position is not None else None,
         floor_z_m=floor_z_m,
         vertical_noise_var_mps4=vertical_noise_var_mps4,
+        climb_sigmas=climb_sigmas,
+        bias_step_std_mps2=bias_step_std_mps2,
     )
     return ContactOut(new, new.on_ground or not msg.armed)

@@ -283,6 +283,10 @@ class DroneEstimator:
             ground_thrust_ratio=params.filter.ground_thrust_ratio
         )
         self.contact = contact_mod.ContactState()
+        self.bias_step_std_mps2 = flight_params(params.calibration).flight_bias_std_mps2
+        """σ_δ, m/s²: how far the accelerometer's bias strays from the rest's once the
+        propellers spin (``[calibration] flight_bias_std_mps2``, fitted by ``calibrate``;
+        the default where nothing was): the contact stage's climb test allows for it."""
         self.slow_params = (
             slow_accel_params(params, settings.localization.mocap_std_m)
             if params.calibration.accel_slow
@@ -479,6 +483,7 @@ class DroneEstimator:
         # (read on the ground and armed only, where the test runs).
         on_floor_armed = self.contact.on_ground and msg.armed
         noise_n2 = self.filter.vertical_noise_var_n2() if on_floor_armed else None
+        climb_sigmas = self.filter.climb_sigmas(dt_s) if noise_n2 is not None else math.inf
         contact, on_ground = contact_decide(
             self.contact,
             self.contact_params,
@@ -489,6 +494,8 @@ class DroneEstimator:
             floor_z_m=self.params.base.floor_z_m,
             rotation_rows_world_body=observed.rotation_rows_world_body,
             vertical_noise_var_mps4=None if noise_n2 is None else noise_n2 / (mass_kg * mass_kg),
+            climb_sigmas=climb_sigmas,
+            bias_step_std_mps2=self.bias_step_std_mps2,
         )
         self.contact = contact
         self._check_battery(msg.vbat_v, on_ground, now_s)
