@@ -1216,14 +1216,6 @@ def main(argv: list[str] | None = None) -> int:
         "= 0, before it followed the noise), for comparison; with --only",
     )
     ap.add_argument(
-        "--hover-noise-sigmas",
-        type=float,
-        help="the service with [filter] accel_hover_noise_sigmas = this and "
-        "accel_hover_exit_ratio = 1.5 (the hover test that follows the vibration; the "
-        "default is 4), or with 0 the fixed thresholds and no hysteresis (the default "
-        "before); with --only",
-    )
-    ap.add_argument(
         "--levels",
         help="comma-separated accelerometer noise levels, m/s^2 (0.5,1.0,2.0); with --only",
     )
@@ -1246,20 +1238,6 @@ def main(argv: list[str] | None = None) -> int:
         drone_mod.TensionFilterParams = functools.partial(  # type: ignore[misc,assignment]
             TensionFilterParams, hover_wander_n2_per_s=0.0
         )
-    if args.hover_noise_sigmas is not None:
-        if args.only is None:
-            ap.error("--hover-noise-sigmas needs --only (the page is the default filter's)")
-        import groundstation.slow_accel as slow_mod
-
-        default_slow = slow_mod.SlowAccelParams
-        sigmas = args.hover_noise_sigmas
-
-        def aware(**kwargs: Any) -> Any:
-            ratio = 1.5 if sigmas > 0.0 else 1.0
-            kwargs.update(quasi_static_sigmas=sigmas, quasi_static_exit_ratio=ratio)
-            return default_slow(**kwargs)
-
-        slow_mod.SlowAccelParams = aware  # type: ignore[misc,assignment]
     t0 = time.time()
     spots = [0, 3] if quick else list(range(6))
     hover_s = 14.0 if quick else 20.0

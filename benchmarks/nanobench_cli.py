@@ -291,13 +291,6 @@ def main(argv: list[str] | None = None) -> int:
                 [],
                 HOVER_VELOCITY_DEFAULT,
             ),
-            (
-                "airframe + slow accelerometer, hover test with fixed thresholds "
-                "(`[filter] accel_hover_noise_sigmas = 0`, `accel_hover_exit_ratio = 1`: the "
-                "default before the test followed the vibration)",
-                [],
-                "[filter]\naccel_hover_noise_sigmas = 0.0\naccel_hover_exit_ratio = 1.0\n",
-            ),
         ]
         results: dict[str, dict[str, list[Judged]]] = {v[0]: {} for v in variants}
         keys = (
@@ -307,7 +300,6 @@ def main(argv: list[str] | None = None) -> int:
             "no_rotor_drag",
             "default",
             "hover_velocity_default",
-            "hover_fixed",
         )
         figures: dict[str, dict[str, Any]] = {}
         reports: dict[str, str] = {}

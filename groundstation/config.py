@@ -261,8 +261,9 @@ class FilterSection(_Section):
     flight_velocity_std_mps``, ``flight_velocity_time_s``, ``flight_bias_std_mps2``)."""
     accel_hover_crossover_s: float = Field(0.3, ge=0.0)
     """(added) 0 turns the hover off: the tension filter then observes the accelerometer
-    model alone. Otherwise, while the drone hovers (1 s mean acceleration < 0.2 m/s², speed
-    < 0.3 m/s), the filter also takes the thrust balance ``m·g·e3 − R·u·F`` through the
+    model alone. Otherwise, while the drone hovers (its 1 s mean acceleration and its speed
+    what the hover's own velocity and the vibration give, at the estimator's one
+    false-alarm rate), the filter also takes the thrust balance ``m·g·e3 − R·u·F`` through the
     drone's velocity (groundstation.tension_kalman.HoverVelocity). Any other value than 0 or
     0.3 is accepted with a warning: it was the crossover below which the hover model
     replaced the accelerometer, s, which the velocity state replaced."""
@@ -276,17 +277,17 @@ class FilterSection(_Section):
     benchmarks.hover_exit`` at commit 7168cba, whose page docs/hover_exit.md was removed
     with the window)."""
     accel_hover_noise_sigmas: float = Field(4.0, ge=0.0)
-    """(added) The hover test's thresholds follow the vibration: the 1 s mean acceleration
-    must stay below ``max(0.2 m/s², this × its own σ)`` and the accelerometer's speed below
-    ``max(0.3 m/s, this × its σ)`` (σ from the vibration the tension filter measures in
-    flight, its long-run noise); 0: the fixed
-    thresholds alone. 4 (with ``accel_hover_exit_ratio = 1.5``) holds the hover through
-    1–2 m/s² of vibration and leaves real manoeuvres (NanoBench) to the accelerometer
-    (docs/estimator_design.md, *A hover test that follows the vibration*)."""
+    """(added) No longer used: a value other than 4 is accepted with one warning. It was the
+    hover test's thresholds in standard deviations of what they test, beside fixed floors
+    of 0.2 m/s² and 0.3 m/s; the test now allows for the hover's own velocity (``[calibration]
+    hover_velocity_std_mps`` / ``hover_velocity_time_s``, fitted by ``calibrate``) and the
+    measured vibration, judged at the estimator's one false-alarm rate (``false_alarms_per_h``,
+    groundstation.slow_accel)."""
     accel_hover_exit_ratio: float = Field(1.5, ge=1.0)
-    """(added) Hysteresis of the hover test: in the hover it ends only above this many times
-    the thresholds for entering it; 1: none (a noise-aware test then flickers on its own
-    noise near the threshold)."""
+    """(added) No longer used: a value other than 1.5 is accepted with one warning. It was the
+    hover test's hysteresis (a hover ended only above this many times the thresholds for
+    entering one); at the one false-alarm rate the noise ends a hover by chance at most
+    that often, with no hysteresis."""
     drag_velocity_time_constant_s: float = Field(8.0, gt=0.0)
     """(added) Without motion capture the rotor-drag term's velocity is the accelerometer's
     leaky integral with this time constant, s (groundstation.slow_accel)."""
@@ -301,6 +302,20 @@ class FilterSection(_Section):
                 "flight_velocity_std_mps, flight_velocity_time_s and flight_bias_std_mps2 "
                 "(fitted by groundstation calibrate), which replaced the low-pass"
             )
+        return self
+
+    @model_validator(mode="after")
+    def _hover_thresholds_without_meaning(self) -> FilterSection:
+        for key, default in (("accel_hover_noise_sigmas", 4.0), ("accel_hover_exit_ratio", 1.5)):
+            value = getattr(self, key)
+            if value != default:
+                _warn_once(
+                    f"[filter] {key} = {value:g} is not used: the hover test allows for the "
+                    "hover's own velocity ([calibration] hover_velocity_std_mps and "
+                    "hover_velocity_time_s, fitted by groundstation calibrate) and the "
+                    "measured vibration at the estimator's one false-alarm rate, which "
+                    "replaced its thresholds and their hysteresis"
+                )
         return self
 
     @model_validator(mode="after")

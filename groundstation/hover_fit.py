@@ -47,6 +47,7 @@ from groundstation.calibration import (
     _integrated_autocorr_time,
 )
 from groundstation.tension import TensionFilterParams
+from groundstation.tension_change import exceedance_chi2
 from groundstation.tension_noise import NoiseEstimate
 
 __all__ = [
@@ -165,6 +166,9 @@ def flight_phases(
         noise = NoiseEstimate((prior_var,) * 3, noise_params.noise_prior_samples)
         steps = np.diff(data.stamp_s[data.segment == seg])
         spacing_s = float(np.median(steps)) if steps.size else math.nan
+        # The hover test's threshold at the recording's spacing (the service's, at its
+        # measured one): the one false-alarm rate.
+        hover_chi2 = exceedance_chi2(noise_params.false_alarms_per_h, spacing_s)
         last: float | None = None
         latest_rest = (math.nan, math.nan, math.nan)
         for i in np.flatnonzero(data.segment == seg).tolist():
@@ -215,6 +219,7 @@ def flight_phases(
                 mocap_world_m=None,
                 rest_mean_body_mps2=rest.rest_mean_body_mps2 if phase == "rest" else None,
                 accel_density_m2ps3=density,
+                hover_chi2=hover_chi2,
             )
             out[i] = state.quasi_static
             airborne[i] = phase == "air"

@@ -45,7 +45,7 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import Literal
+from typing import Literal, NamedTuple
 
 from groundstation import bias_kalman as bk
 from groundstation.attitude import GRAVITY_MPS2
@@ -54,11 +54,13 @@ from groundstation.frozen import evolve
 
 __all__ = [
     "MOCAP_HOLD_S",
+    "HoverProcess",
     "SlowAccelParams",
     "SlowAccelState",
     "correct_accel_body_mps2",
     "drag_velocity_world_mps",
     "end_hover",
+    "hover_process",
     "slow_accel_step",
 ]
 
@@ -76,6 +78,35 @@ flying (the filter observes); ``hold``: anything else (spool-up, landing, armed 
 floor): b kept, v = 0."""
 
 
+class HoverProcess(NamedTuple):
+    """The hover's own velocity as the hover test allows for it, per world axis.
+
+    The tension filter observes ``v = 0`` while the drone hovers, weighed by the velocity's
+    scatter σ_v and correlation time T_c (``TensionFilterParams.hover_velocity_std_mps`` /
+    ``hover_velocity_time_s``, fitted by ``calibrate``): a velocity process of variance σ_v²
+    and correlation time T_c. The hover test asks whether the drone's motion is consistent
+    with that process (and the measurement's noise), so these are the motion it must
+    tolerate (:func:`hover_process`).
+
+    Attributes:
+        speed_var_m2ps2: σ_v², the speed's (an upper bound for the accelerometer's leaky
+            speed, which high-passes it: σ_v²·τ/(τ + T_c)), (m/s)².
+        accel_mean_var_m2ps4: the variance of the 1 s exponential mean of that velocity's
+            derivative, ``σ_v² / (T·(T_c + T))`` with T = :data:`HOVER_MEAN_S`, (m/s²)²:
+            the mean is ``(v − v̄)/T`` with v̄ the exponential mean of v, and for a velocity
+            of correlation time T_c ``Var(v − v̄) = σ_v²·T/(T_c + T)``.
+    """
+
+    speed_var_m2ps2: float
+    accel_mean_var_m2ps4: float
+
+
+def hover_process(velocity_std_mps: float, velocity_time_s: float) -> HoverProcess:
+    """:class:`HoverProcess` from σ_v (m/s) and T_c (s)."""
+    var = velocity_std_mps * velocity_std_mps
+    return HoverProcess(var, var / (HOVER_MEAN_S * (velocity_time_s + HOVER_MEAN_S)))
+
+
 @dataclass(frozen=True, slots=True)
 class SlowAccelParams:
     """Settings (config ``[filter]`` for the hover test, ``[calibration]`` for the flight's
@@ -87,57 +118,24 @@ class SlowAccelParams:
             bias's offset in the air from the rest's, the motion capture's noise).
         velocity_time_constant_s: τ_v of the accelerometer's leaky velocity (the rotor
             drag's velocity without motion capture), s.
-        hover: run the hover test (False: never quasi-static, the tension filter then
-            observes the accelerometer model alone; config ``[filter]
-            accel_hover_crossover_s = 0``).
-        quasi_static_accel_mps2: quasi-static while the accelerometer's 1 s mean
-            acceleration (bias removed) stays below this, m/s² ...
-        quasi_static_speed_mps: ... and the speed below this, m/s (motion capture's through
-            the filter, else the corrected acceleration's 2 s leaky integral).
-        quasi_static_sigmas: the hover test's thresholds follow the noise too: the 1 s
-            mean's is ``max(quasi_static_accel_mps2, quasi_static_sigmas·σ₁)``, σ₁ its
-            standard deviation from the accelerometer's noise density (the tension
-            filter's measure of the vibration, ``accel_density_m2ps3``); the speed's (the
-            accelerometer's leaky integral, not motion capture's) likewise with that
-            integral's σ (0, the default: the fixed thresholds alone; config ``[filter]
-            accel_hover_noise_sigmas``). At 2 m/s² of vibration (100 Hz) σ₁ ≈ 0.15 m/s² and
-            the speed's σ ≈ 0.2 m/s per axis: fixed 0.2 and 0.3 are met a fraction of the
-            time and the hover test switches on and off.
-        quasi_static_exit_ratio: hysteresis: in the hover, it ends only when the 1 s mean
-            or the speed exceeds this many times its threshold for starting one (1, the
-            default: none; ``[filter] accel_hover_exit_ratio``). Without it a noise-aware
-            test flickers on its own noise near the threshold (5–6 switches/s at 1–2 m/s²).
+        hover: the hover test, and the hover's velocity it allows for
+            (:class:`HoverProcess`; the default from the tension filter's default σ_v and
+            T_c, 0.02 m/s and 0.5 s); None: no hover test, never quasi-static (the tension
+            filter then observes the accelerometer model alone; config ``[filter]
+            accel_hover_crossover_s = 0``). The test's thresholds have no value of their
+            own (:func:`slow_accel_step`).
     """
 
     flight: BiasKalmanParams = field(default_factory=BiasKalmanParams)
     velocity_time_constant_s: float = 8.0
-    hover: bool = True
-    quasi_static_accel_mps2: float = 0.2
-    quasi_static_speed_mps: float = 0.3
-    quasi_static_sigmas: float = 0.0
-    quasi_static_exit_ratio: float = 1.0
+    hover: HoverProcess | None = field(default_factory=lambda: hover_process(0.02, 0.5))
 
     def __post_init__(self) -> None:
-        sigmas = self.quasi_static_sigmas
-        if not (sigmas >= 0.0 and math.isfinite(sigmas)):
-            raise ValueError(
-                f"SlowAccelParams.quasi_static_sigmas must be finite and >= 0, got {sigmas!r}"
-            )
-        if not (
-            self.quasi_static_exit_ratio >= 1.0 and math.isfinite(self.quasi_static_exit_ratio)
-        ):
-            raise ValueError(
-                "SlowAccelParams.quasi_static_exit_ratio must be finite and >= 1, got "
-                f"{self.quasi_static_exit_ratio!r}"
-            )
-        for name in (
-            "quasi_static_accel_mps2",
-            "quasi_static_speed_mps",
-            "velocity_time_constant_s",
-        ):
-            value = getattr(self, name)
-            if not (value > 0.0):  # inf allowed, NaN refused
-                raise ValueError(f"SlowAccelParams.{name} must be > 0, got {value!r}")
+        value = self.velocity_time_constant_s
+        if not (value > 0.0):  # inf allowed, NaN refused
+            raise ValueError(f"SlowAccelParams.velocity_time_constant_s must be > 0, got {value!r}")
+        if self.hover is not None and not all(v >= 0.0 and math.isfinite(v) for v in self.hover):
+            raise ValueError(f"SlowAccelParams.hover must be finite and >= 0, got {self.hover!r}")
 
 
 _NEW_KF = BiasKalman()
@@ -244,6 +242,7 @@ def slow_accel_step(
     mocap_world_m: Vec3 | None,
     rest_mean_body_mps2: Vec3 | None = None,
     accel_density_m2ps3: float | None = None,
+    hover_chi2: float,
     gravity_mps2: float = GRAVITY_MPS2,
 ) -> SlowAccelState:
     """Learn β and the velocity from one sample, and run the hover test (module doc).
@@ -264,9 +263,14 @@ def slow_accel_step(
         accel_density_m2ps3: the accelerometer's noise as a density, (m/s²)²·s: its
             long-run variance per sample times the mean spacing (the service: the tension
             filter's measure over m², which sees the same vibration; one measure of it,
-            colour included). It scales the hover test's thresholds
-            (``quasi_static_sigmas``) and weighs the bias filter's block step. None (not
-            yet measured): the fixed thresholds alone, and the block step waits for it.
+            colour included). The hover test allows for it, and it weighs the bias
+            filter's block step. None (not yet measured): the hover test allows for the
+            hover's own motion alone, and the block step waits for it.
+        hover_chi2: the hover test's threshold on each of its two 3-D statistics (the 1 s
+            mean acceleration and the speed, squared over their per-axis variance): the
+            estimator's one false-alarm rate at the sample spacing
+            (``TensionFilter.sample_chi2``, :func:`~groundstation.tension_change.
+            exceedance_chi2`: 39.5 at 100 Hz); infinite: no test, no hover.
         gravity_mps2: g, m/s².
 
     Returns:
@@ -362,36 +366,36 @@ def slow_accel_step(
         leak2 = math.exp(-dt_s / HOVER_SPEED_LEAK_S)
         rv = (ox * leak2 + awx * dt_s, oy * leak2 + awy * dt_s, oz * leak2 + awz * dt_s)
     a1 = (a1x + k1 * (ex - a1x), a1y + k1 * (ey - a1y), a1z + k1 * (ez - a1z))
-    limit1 = params.quasi_static_accel_mps2**2
-    limit_v = params.quasi_static_speed_mps**2
-    sigmas2 = params.quasi_static_sigmas**2
-    if sigmas2 > 0.0 and density is not None:
-        # The 1 s mean's threshold: never below the fixed one, and at least
-        # quasi_static_sigmas of its own standard deviation. An exponential mean of gain
-        # k1 = dt/T over a noise of long-run variance r = D/dt per sample (D the density)
-        # has variance r·k1/(2 − k1) = D/((2 − k1)·T) per axis, T = HOVER_MEAN_S (long
-        # against the vibration's correlation time, which r's colour accounts for).
-        limit1 = max(limit1, sigmas2 * density / ((2.0 - k1) * HOVER_MEAN_S))
-        # The speed's likewise when it is the accelerometer's leaky integral (v ← leak·v +
-        # e·dt: σ_v² = r·dt²/(1 − leak²) = D·dt/(1 − leak²) per axis), not motion capture's.
-        if leak2 < 1.0:
-            limit_v = max(limit_v, sigmas2 * density * dt_s / (1.0 - leak2 * leak2))
-    if state.quasi_static:
-        # In the hover, times the exit ratio (hysteresis: the noise around the threshold
-        # does not switch it).
-        ratio2 = params.quasi_static_exit_ratio**2
-        limit1 *= ratio2
-        limit_v *= ratio2
+    # The thresholds: the drone hovers while its 1 s mean acceleration and its speed are
+    # what the hover's own velocity (the process the tension filter's v = 0 models, σ_v and
+    # T_c fitted by calibrate) and the measurement's noise give, judged by chi-square at the
+    # estimator's one false-alarm rate: a hover ends by chance at most that often; no value
+    # of the test's own. Per axis, independent parts in sum:
+    # - the 1 s mean, an exponential mean of gain k1 = dt/T over a noise of long-run
+    #   variance r = D/dt per sample (D the density, colour included): r·k1/(2 − k1) =
+    #   D/((2 − k1)·T), T = HOVER_MEAN_S; and the hover velocity's derivative's mean;
+    # - the speed: the hover velocity's σ_v²; and when it is the accelerometer's leaky
+    #   integral (v ← leak·v + e·dt), not motion capture's, that integral's noise, r·dt²/(1 −
+    #   leak²) = D·dt/(1 − leak²), and the bias's step since the rest (σ_δ, fitted), which
+    #   the leak holds at σ_δ·τ.
+    hover = params.hover
+    quasi = False
     hold = state.hover_hold_s
     if hold > 0.0:
         hold = hold - dt_s if hold > dt_s else 0.0
-    vx, vy, vz = rv
-    quasi = (
-        params.hover
-        and hold == 0.0
-        and a1[0] * a1[0] + a1[1] * a1[1] + a1[2] * a1[2] < limit1
-        and vx * vx + vy * vy + vz * vz < limit_v
-    )
+    if hover is not None and hold == 0.0 and hover_chi2 < math.inf:
+        var1 = hover.accel_mean_var_m2ps4
+        var_v = hover.speed_var_m2ps2
+        if density is not None:
+            var1 += density / ((2.0 - k1) * HOVER_MEAN_S)
+            if leak2 < 1.0:
+                held = params.flight.flight_bias_std_mps2 * HOVER_SPEED_LEAK_S
+                var_v += density * dt_s / (1.0 - leak2 * leak2) + held * held
+        vx, vy, vz = rv
+        quasi = (
+            a1[0] * a1[0] + a1[1] * a1[1] + a1[2] * a1[2] < hover_chi2 * var1
+            and vx * vx + vy * vy + vz * vz < hover_chi2 * var_v
+        )
     return evolve(
         state,
         kf=kf,

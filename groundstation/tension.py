@@ -33,6 +33,7 @@ from groundstation.attitude import GRAVITY_MPS2, QUAT_MIN_NORM, Rows, rows_from_
 from groundstation.tension_change import (
     ChangeTest,
     LazyChangeStatistic,
+    exceedance_chi2,
     exceedance_sigmas,
     level_samples,
     level_scatter_factor,
@@ -1153,6 +1154,13 @@ class TensionFilter:
         Kept as a value, not computed when read: the slow stage reads it every message."""
         # (dt_mean, the test's youth floor at it, the youth factor's fade-out count at it)
         self._allowances = (math.nan, 1.0, math.inf)
+        self.sample_chi2 = math.inf
+        """The threshold a 3-degree-of-freedom chi-square statistic judged at every sample
+        exceeds by chance at ``false_alarms_per_h`` at the measured spacing, dimensionless
+        (:func:`~groundstation.tension_change.exceedance_chi2`: 39.5 at 100 Hz; derived
+        again with the change test's threshold once the spacing has moved by
+        ``RESCALE_TOLERANCE``; infinite before a spacing is known): the slow stage's hover
+        test takes it, one false-alarm rate for every test of the estimator."""
         # (the spacing band it holds for, the climb test's sigmas there): climb_sigmas
         self._climb_sigmas = (math.nan, math.nan, math.inf)
         self.trace: list[FilterStep] | None = None
@@ -1499,6 +1507,7 @@ class TensionFilter:
             tol = RESCALE_TOLERANCE
             self._fast_band = ((1.0 - tol) * spacing, (1.0 + tol) * spacing)
             self._change.set_threshold(self.fast_threshold(spacing))
+            self.sample_chi2 = exceedance_chi2(p.false_alarms_per_h, spacing)
         # This step's time constant: the hover one, shortened by the drift adaptation.
         dt_mean = self._dt_mean
         tau_hover = self.hover_time_constant(r, dt_mean)

@@ -18,9 +18,12 @@ from scipy.spatial.transform import Rotation
 from groundstation import bias_kalman as bk
 from groundstation import slow_accel as slow_mod
 from groundstation.attitude import GRAVITY_MPS2
+from groundstation.tension import TensionFilterParams
+from groundstation.tension_change import exceedance_chi2
 
 G = GRAVITY_MPS2
 DT = 0.004
+HOVER_CHI2 = exceedance_chi2(TensionFilterParams().false_alarms_per_h, DT)  # the one knob's
 
 
 def _rows(rot: Rotation) -> bk.Rows:
@@ -121,7 +124,7 @@ def _fly(
     state = slow_mod.slow_accel_step(
         slow_mod.SlowAccelState(), slow, dt_s=0.0, stamp_s=0.0, accel_body_mps2=(0.0, 0.0, G),
         R_world_body=_rows(Rotation.identity()), phase="rest", mocap_world_m=None,
-        rest_mean_body_mps2=(0.0, 0.0, 0.0),
+        rest_mean_body_mps2=(0.0, 0.0, 0.0), hover_chi2=HOVER_CHI2,
     )  # fmt: skip
     omega = 0.0 if circle_mps == 0.0 else 1.0
     radius = circle_mps / omega if omega else 0.0
@@ -142,7 +145,7 @@ def _fly(
         state = slow_mod.slow_accel_step(
             state, slow, dt_s=DT, stamp_s=t, accel_body_mps2=reading,
             R_world_body=_rows(rot), phase="air", mocap_world_m=frame,
-            accel_density_m2ps3=noise_mps2**2 * DT,
+            accel_density_m2ps3=noise_mps2**2 * DT, hover_chi2=HOVER_CHI2,
         )  # fmt: skip
     return state
 
@@ -217,7 +220,7 @@ def test_motion_capture_lost_hands_over_to_the_bound_and_back() -> None:
     def step(state: slow_mod.SlowAccelState, frame: bk.Vec3 | None) -> slow_mod.SlowAccelState:
         return slow_mod.slow_accel_step(
             state, slow, dt_s=DT, stamp_s=0.0, accel_body_mps2=level, R_world_body=rows,
-            phase="air", mocap_world_m=frame, accel_density_m2ps3=1e-3,
+            phase="air", mocap_world_m=frame, accel_density_m2ps3=1e-3, hover_chi2=HOVER_CHI2,
         )  # fmt: skip
 
     state = step(slow_mod.SlowAccelState(), (0.0, 0.0, 1.0))

@@ -18,6 +18,8 @@ from groundstation.slow_accel import (
     end_hover,
     slow_accel_step,
 )
+from groundstation.tension import TensionFilterParams
+from groundstation.tension_change import exceedance_chi2
 from tests.test_perf_equivalence import HOVER_N, _telemetry, pinned_settings
 
 DT_S = 0.01
@@ -42,6 +44,7 @@ def _hovering(
             R_world_body=LEVEL,
             phase="air",
             mocap_world_m=None,
+            hover_chi2=exceedance_chi2(TensionFilterParams().false_alarms_per_h, DT_S),
         )
         states.append(state)
     return states

@@ -121,12 +121,13 @@ def slow_accel_params(
     """The slow stage's settings from ``[filter]`` and ``[calibration]`` (the service's, and
     ``calibrate``'s when it runs the same hover test over a recording); ``mocap_std_m``:
     ``[localization] mocap_std_m`` (None: the bias filter's default, the same 2 mm)."""
+    hover = None
+    if params.filter.accel_hover_crossover_s > 0.0:
+        hover = slow_mod.hover_process(*hover_velocity_params(params.calibration))
     return slow_mod.SlowAccelParams(
         flight=flight_params(params.calibration, mocap_std_m),
         velocity_time_constant_s=params.filter.drag_velocity_time_constant_s,
-        hover=params.filter.accel_hover_crossover_s > 0.0,
-        quasi_static_sigmas=params.filter.accel_hover_noise_sigmas,
-        quasi_static_exit_ratio=params.filter.accel_hover_exit_ratio,
+        hover=hover,
     )
 
 
@@ -506,9 +507,12 @@ class DroneEstimator:
             still = not msg.armed and self.rest_detector.still  # armed: no property calls
             # The vibration the hover test's thresholds and the velocity filter's block step
             # need: the tension filter's measure of it, over the mass squared (one measure).
-            density = None
+            # And the hover test's threshold: the one false-alarm rate at the spacing.
+            density, hover_chi2 = None, math.inf
             if self.slow.in_air:
-                density_n2s = self.filter.noise_density_n2s
+                filt = self.filter_control.filter
+                density_n2s = filt.noise_density_n2s
+                hover_chi2 = filt.sample_chi2
                 if density_n2s is not None:
                     density = density_n2s / (mass_kg * mass_kg)
             self.slow = learn_slow(
@@ -522,6 +526,7 @@ class DroneEstimator:
                 still=still,
                 rest_mean_body_mps2=self.rest_detector.rest_mean_body_mps2 if still else None,
                 accel_density_m2ps3=density,
+                hover_chi2=hover_chi2,
             )
             if self.slow.quasi_static != was_hovering:
                 detections = self.filter_control.change_detections

@@ -20,6 +20,7 @@ Pure functions of frozen inputs; a malformed reading raises
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 from groundstation import slow_accel as slow_mod
@@ -144,12 +145,14 @@ def learn_slow(
     still: bool,
     rest_mean_body_mps2: Vec3 | None,
     accel_density_m2ps3: float | None = None,
+    hover_chi2: float = math.inf,
 ) -> slow_mod.SlowAccelState:
     """One accepted sample into the slow stage: at rest (disarmed and still: ``still`` and
     ``rest_mean_body_mps2`` from the rest detector, :class:`~groundstation.calibration.
     RestCalibrator`, the one test of stillness), in the air (observing a tension), or held
     (spool-up, landing, a dip). ``accel_density_m2ps3``: the accelerometer's noise density
-    for the velocity filter (``slow_accel_step``), None: the stage's own measure."""
+    for the velocity filter and the hover test, and ``hover_chi2`` the hover test's threshold
+    (``slow_accel_step``'s; infinite: no hover)."""
     accel_read = observed.accel_read_body_mps2
     phase: slow_mod.Phase
     if not msg.armed and still:
@@ -173,4 +176,5 @@ def learn_slow(
         mocap_world_m=msg.position_m,
         rest_mean_body_mps2=rest_mean_body_mps2 if phase == "rest" else None,
         accel_density_m2ps3=accel_density_m2ps3,
+        hover_chi2=hover_chi2,
     )
