@@ -599,3 +599,34 @@ def test_real_take_off_and_landing_nanobench(name: str, mocap: bool) -> None:
             bias_step_std_mps2=BIAS_STEP_STD_MPS2,
         )
     assert s.on_ground and s.reason == "low_thrust"
+
+
+@pytest.mark.parametrize("factor", [0.9, 1.1])
+def test_a_climb_must_stand_out_of_the_bias_step_the_leak_holds(factor: float) -> None:
+    """On a quiet floor the climb's bound is the bias's step since the rest (σ_δ) as the leak
+    holds it, σ_δ·τ, times the sigmas of the one false-alarm rate: a steady acceleration
+    whose leaky speed settles just below it is no climb, just above it is one."""
+    sigmas, step_std = 5.55, 0.05
+    limit_mps = sigmas * step_std * DEFAULT.speed_time_constant_s
+    accel = factor * limit_mps / DEFAULT.speed_time_constant_s  # the speed settles at a·τ
+    s = ContactState(rest_seen=True)
+    for _ in range(round(3.0 / DT_S)):
+        s = contact_step(
+            s,
+            DEFAULT,
+            dt_s=DT_S,
+            armed=True,
+            thrust_n=0.9 * WEIGHT_N,
+            mass_kg=MASS_KG,
+            vertical_accel_mps2=accel,
+            height_m=None,
+            floor_z_m=0.0,
+            vertical_noise_var_mps4=1e-12,
+            climb_sigmas=sigmas,
+            bias_step_std_mps2=step_std,
+        )
+        if not s.on_ground:
+            break
+    assert s.on_ground is (factor < 1.0), s
+    if factor > 1.0:
+        assert s.reason == "climbing"

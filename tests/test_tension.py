@@ -27,7 +27,7 @@ from groundstation.tension import (
     rotation_world_body,
     scan_threshold,
 )
-from groundstation.tension_change import exceedance_sigmas, level_scatter_factor
+from groundstation.tension_change import exceedance_chi2, exceedance_sigmas, level_scatter_factor
 
 MASS_KG = 0.030
 DT_S = 0.004  # 250 Hz
@@ -1005,6 +1005,26 @@ def test_exceedance_sigmas_is_the_normal_tail_at_the_rate() -> None:
     assert exceedance_sigmas(0.0, 0.01) == math.inf
     assert exceedance_sigmas(0.005, 0.0) == math.inf
     assert exceedance_sigmas(0.005, math.nan) == math.inf
+
+
+def test_exceedance_chi2_is_the_three_dof_tail_at_the_rate() -> None:
+    """h with P(chi2_3 > h) = rate·dt / 3600 (scipy's chi-square as the reference) over six
+    decades of the per-sample probability; the filter derives it at its measured spacing
+    for the hover test (``sample_chi2``), infinite before a spacing is known."""
+    from scipy.stats import chi2
+
+    for rate, dt in ((0.005, 0.01), (0.005, 0.004), (0.5, 0.01), (5.0, 1.0), (0.005, 1e-4)):
+        h = exceedance_chi2(rate, dt)
+        assert chi2.sf(h, 3) == pytest.approx(rate * dt / 3600.0, rel=1e-8)
+    assert 39.0 < exceedance_chi2(0.005, 0.01) < 40.0
+    assert exceedance_chi2(0.0, 0.01) == math.inf
+    assert exceedance_chi2(0.005, math.nan) == math.inf
+    rng = np.random.default_rng(6)
+    filt = TensionFilter()
+    assert filt.sample_chi2 == math.inf
+    for _ in range(400):
+        filt.update(HOVER_TENSION_N + rng.normal(0.0, 0.03, 3), 0.01)
+    assert filt.sample_chi2 == pytest.approx(exceedance_chi2(0.005, 0.01), rel=1e-3)
 
 
 def test_climb_sigmas_follow_the_one_knob_at_the_spacing() -> None:
