@@ -129,8 +129,11 @@ BUDGET: dict[str, tuple[int, int, int, int]] = {
     # 154.8 C calls (two max() fewer), 7,421 -> 7,424 bytecodes; every airborne regime one
     # Python call fewer; on the ground, disarmed, 2,697 -> 2,712 bytecodes (the contact
     # stage's climb test handed its two inputs, the one false-alarm rate's sigmas and the
-    # fitted bias step, where it had two bounds of its own); budgets kept.
-    "hover": (107, 168, 11, 7801),
+    # fitted bias step, where it had two bounds of its own). The hover budget re-based then
+    # to that count plus ~2 %, rounded up (Python 107 -> 106, C 168 -> 160): with 2.7 calls of
+    # headroom test_the_count_sees_a_slowdown's one dataclasses.replace per message (+2.0
+    # Python, +11 C) no longer counted over it.
+    "hover": (106, 160, 11, 7801),
     # (101.4, 160.0, 10.1, 7429) [104.3, 154.8, 10.3, 7424]
     "hover, motion capture, follow on": (153, 223, 15, 9786),
     # (145.4, 212.0, 14.1, 9320) [135.3, 203.8, 14.3, 9106]
