@@ -51,6 +51,7 @@ from groundstation import bias_kalman as bk
 from groundstation.attitude import GRAVITY_MPS2
 from groundstation.bias_kalman import MOCAP_HOLD_S, BiasKalman, BiasKalmanParams
 from groundstation.frozen import evolve
+from groundstation.tension import TensionFilterParams
 
 __all__ = [
     "MOCAP_HOLD_S",
@@ -107,6 +108,12 @@ def hover_process(velocity_std_mps: float, velocity_time_s: float) -> HoverProce
     return HoverProcess(var, var / (HOVER_MEAN_S * (velocity_time_s + HOVER_MEAN_S)))
 
 
+_DEFAULT_HOVER = hover_process(
+    TensionFilterParams.hover_velocity_std_mps, TensionFilterParams.hover_velocity_time_s
+)
+"""The hover's velocity where nothing was fitted: the tension filter's default σ_v and T_c."""
+
+
 @dataclass(frozen=True, slots=True)
 class SlowAccelParams:
     """Settings (config ``[filter]`` for the hover test, ``[calibration]`` for the flight's
@@ -120,7 +127,8 @@ class SlowAccelParams:
             drag's velocity without motion capture), s.
         hover: the hover test, and the hover's velocity it allows for
             (:class:`HoverProcess`; the default from the tension filter's default σ_v and
-            T_c, 0.02 m/s and 0.5 s); None: no hover test, never quasi-static (the tension
+            T_c, ``TensionFilterParams.hover_velocity_std_mps`` / ``hover_velocity_time_s``);
+            None: no hover test, never quasi-static (the tension
             filter then observes the accelerometer model alone; config ``[filter]
             accel_hover_crossover_s = 0``). The test's thresholds have no value of their
             own (:func:`slow_accel_step`).
@@ -128,7 +136,7 @@ class SlowAccelParams:
 
     flight: BiasKalmanParams = field(default_factory=BiasKalmanParams)
     velocity_time_constant_s: float = 8.0
-    hover: HoverProcess | None = field(default_factory=lambda: hover_process(0.02, 0.5))
+    hover: HoverProcess | None = field(default_factory=lambda: _DEFAULT_HOVER)
 
     def __post_init__(self) -> None:
         value = self.velocity_time_constant_s
