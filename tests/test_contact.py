@@ -332,9 +332,10 @@ def test_take_off_under_vibration_is_seen(
     floor while the floor's load (as read) is above ``push_free_n``; the take-off is seen:
     calibrated at hover thrust (the floor carries nothing), with the thrust reading 15 %
     low by the thrust surge by 5 cm up; 25 % low (no surge shows) by the climb alone, by
-    10 cm up at 1 m/s^2 of vibration (6 cm in this flight: the climb must stand out by
-    5.55 deviations, the one false-alarm rate's, where 4 by hand read 5 cm), later at 2
-    m/s^2 (the leaky speed's noise is ~0.12 m/s there: some 0.3-0.7 s, 10-100 cm)."""
+    10 cm up at 1 m/s^2 of vibration (6.0 cm in this flight: the climb must stand out by
+    5.55 deviations, the one false-alarm rate's, where 4 set by hand read 2.4 cm), later
+    at 2 m/s^2 (the leaky speed's noise is ~0.12 m/s there: 17.8 cm in this flight, 8.9
+    with the 4 by hand)."""
 
     def thrust(t: float) -> float:
         return WEIGHT_N * (min(1.0, t / 2.0) if t < 5.0 else 1.25)
