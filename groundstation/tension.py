@@ -1161,8 +1161,11 @@ class TensionFilter:
         again with the change test's threshold once the spacing has moved by
         ``RESCALE_TOLERANCE``; infinite before a spacing is known): the slow stage's hover
         test takes it, one false-alarm rate for every test of the estimator."""
-        # (the spacing band it holds for, the climb test's sigmas there): climb_sigmas
-        self._climb_sigmas = (math.nan, math.nan, math.inf)
+        self.sample_sigmas = math.inf
+        """The one-sided counterpart of :attr:`sample_chi2`: the standard deviations a
+        per-sample Gaussian test exceeds by chance at ``false_alarms_per_h`` at the measured
+        spacing (:func:`~groundstation.tension_change.exceedance_sigmas`: 5.55 at 100 Hz),
+        derived with it; the contact stage's climb test (:meth:`climb_sigmas`)."""
         self.trace: list[FilterStep] | None = None
         """Every step from :meth:`start_trace` on (None: not recorded, the default)."""
         self._restart_pending = 0
@@ -1360,22 +1363,14 @@ class TensionFilter:
         """The standard deviations a per-sample test must ask so that it fires by chance at
         most ``false_alarms_per_h``, dimensionless: the contact stage's climb test
         (:func:`~groundstation.tension_change.exceedance_sigmas`, one false-alarm rate for
-        every test of the estimator; 5.55 at 100 Hz), at the flight's mean spacing, or at
-        the sample's ``dt_s`` before one is known (on the floor before the first flight:
-        :meth:`learn_noise` does not track the floor's spacing). Derived again once the
-        spacing has moved by ``RESCALE_TOLERANCE``; infinite with no spacing.
+        every test of the estimator; 5.55 at 100 Hz). At the flight's mean spacing
+        (:attr:`sample_sigmas`, derived with the change test's threshold), or at the
+        sample's ``dt_s`` before any flight measured one (:meth:`learn_noise` does not
+        track the floor's spacing); infinite with neither.
         """
-        spacing = self._dt_mean
-        if not spacing > 0.0:  # no mean spacing (NaN)
-            spacing = dt_s
-            if not spacing > 0.0:
-                return math.inf
-        cached = self._climb_sigmas
-        if not cached[0] < spacing < cached[1]:
-            tol = RESCALE_TOLERANCE
-            z = exceedance_sigmas(self.params.false_alarms_per_h, spacing)
-            cached = self._climb_sigmas = ((1.0 - tol) * spacing, (1.0 + tol) * spacing, z)
-        return cached[2]
+        if self._dt_mean > 0.0:  # False for NaN: no flight yet
+            return self.sample_sigmas
+        return exceedance_sigmas(self.params.false_alarms_per_h, dt_s)
 
     # -- steps -------------------------------------------------------------------------
 
@@ -1508,6 +1503,7 @@ class TensionFilter:
             self._fast_band = ((1.0 - tol) * spacing, (1.0 + tol) * spacing)
             self._change.set_threshold(self.fast_threshold(spacing))
             self.sample_chi2 = exceedance_chi2(p.false_alarms_per_h, spacing)
+            self.sample_sigmas = exceedance_sigmas(p.false_alarms_per_h, spacing)
         # This step's time constant: the hover one, shortened by the drift adaptation.
         dt_mean = self._dt_mean
         tau_hover = self.hover_time_constant(r, dt_mean)
