@@ -38,9 +38,13 @@ trusted, and a touch-down is noticed where it can be:
   in the air (``reason = "falling"``). The floor cannot accelerate the drone downward, so
   no ground state outlives this; on the floor the 50 ms mean of 2 m/s^2 of vibration
   wanders by ~1 m/s^2 and would have to stay 2.5 sigma low for 0.2 s.
-* **Lift-off with motion capture:** the height rises ``liftoff_height_m`` (3 cm) above
-  the resting height (or the floor when no rest was seen); touch-down below
-  ``touchdown_height_m`` (1.5 cm) above it. The band between is the hysteresis.
+* **Lift-off with motion capture:** the height stands out of the motion capture's noise
+  above the resting height (or the floor when no rest was seen): more than
+  ``sample_sigmas`` of ``height_std_m`` (σ_p, ``[localization] mocap_std_m``) above it, the
+  estimator's one false-alarm rate as a per-sample threshold (5.55 σ_p at 100 Hz: 1.1 cm
+  at 2 mm); touch-down within that band again. One band, no hysteresis of its own: a
+  resting marker leaves it by chance once per 1/``false_alarms_per_h`` hours, and a
+  descent crosses it in a sample or two.
 * **Lift-off without motion capture**, either of:
 
   - *the floor carries nothing*: the floor's load ``m g - F`` (what the observation of
@@ -114,9 +118,9 @@ trusted, and a touch-down is noticed where it can be:
   In the air, without motion capture, only the rest seen above (or a disarm) brings the
   drone back to the ground (a hand holding the drone still pushes up like the floor would).
 
-With motion capture the height decides between the rests: on the ground within
-``touchdown_height_m`` of the resting height, but not more than ``liftoff_height_m`` *below*
-it (a drone flying below the surface it last rested on, beside a table, is not on it).
+With motion capture the height decides between the rests: on the ground within the band
+above the resting height, but not more than the band *below* it (a drone flying below the
+surface it last rested on, beside a table, is not on it).
 
 The state starts on the ground, but until the drone has once been *certainly* on the
 ground (disarmed or below the ratio) the push rule is looser: a load below
@@ -169,12 +173,9 @@ class ContactParams:
     Attributes:
         ground_thrust_ratio: Below this fraction of the weight the drone is on the ground,
             in (0, 1) (``[filter] ground_thrust_ratio``).
-        liftoff_height_m: Motion capture: lift-off above the resting height plus this, m.
-        touchdown_height_m: Motion capture: touch-down below the resting height plus this,
-            m (< ``liftoff_height_m``: the hysteresis).
         speed_time_constant_s: No motion capture: lift-off when the leaky vertical speed
             from the IMU, with this leak (s), stands out of its noise and of what the
-            accelerometer's bias can hold it at (:func:`contact_step`'s ``climb_sigmas``
+            accelerometer's bias can hold it at (:func:`contact_step`'s ``sample_sigmas``
             and ``bias_step_std_mps2``).
         climb_push_max_weight_ratio: No motion capture: a climb counts only while the
             smoothed floor load is below this fraction of the weight ``m·g`` (a floor load
@@ -192,8 +193,6 @@ class ContactParams:
     """
 
     ground_thrust_ratio: float = 0.5
-    liftoff_height_m: float = 0.03
-    touchdown_height_m: float = 0.015
     speed_time_constant_s: float = 0.25
     climb_push_max_weight_ratio: float = 0.17
     push_free_weight_ratio: float = 0.034
@@ -206,11 +205,6 @@ class ContactParams:
             raise ValueError(
                 f"ContactParams.ground_thrust_ratio must be in (0, 1), "
                 f"got {self.ground_thrust_ratio!r}"
-            )
-        if not (0.0 <= self.touchdown_height_m < self.liftoff_height_m < math.inf):
-            raise ValueError(
-                f"ContactParams: need 0 <= touchdown_height_m < liftoff_height_m, got "
-                f"{self.touchdown_height_m!r}, {self.liftoff_height_m!r}"
             )
         for name in (
             "speed_time_constant_s",
@@ -317,8 +311,9 @@ def contact_step(
     floor_z_m: float = -math.inf,
     gravity_mps2: float = GRAVITY_MPS2,
     vertical_noise_var_mps4: float | None = None,
-    climb_sigmas: float,
+    sample_sigmas: float,
     bias_step_std_mps2: float,
+    height_std_m: float,
 ) -> ContactState:
     """One sample of the ground/air state machine (module docstring).
 
@@ -338,13 +333,18 @@ def contact_step(
             with the allowance for its estimate's error, (m/s^2)^2: the tension filter's
             (``TensionFilter.vertical_noise_var_n2`` over the mass squared). None: not
             measured yet, no climb is judged.
-        climb_sigmas: Standard deviations of the leaky speed's uncertainty a climb must
-            exceed: the estimator's one false-alarm rate at the sample spacing
-            (``TensionFilter.climb_sigmas``; infinite: no climb is judged).
+        sample_sigmas: Standard deviations a per-sample statistic must exceed: the
+            estimator's one false-alarm rate at the sample spacing
+            (``TensionFilter.sigmas_at``; infinite: nothing is judged). The climb test's
+            (the leaky speed against its uncertainty) and the motion-capture height's
+            (against ``height_std_m``).
         bias_step_std_mps2: How far the accelerometer's bias may have moved since the rest
             it was learnt at, m/s^2: ``[calibration] flight_bias_std_mps2`` (σ_δ, fitted by
             ``calibrate``; ``BiasKalmanParams.flight_bias_std_mps2``). A bias error ε holds
             the leaky speed at ε·``speed_time_constant_s``.
+        height_std_m: σ_p, the motion-capture height's noise, m (``[localization]
+            mocap_std_m``; the rest height it is compared with is a 1 s mean, its own
+            error a tenth of σ_p at 100 Hz, not counted). Used only with ``height_m``.
 
     Returns:
         The next state; ``on_ground`` says whether the floor carries the drone.
@@ -405,12 +405,14 @@ def contact_step(
         ground_m = state.rest_height_m if state.rest_height_m is not None else floor_z_m
         if math.isfinite(ground_m):
             above_m = height - ground_m
-            if state.on_ground:
-                on_ground = not above_m > params.liftoff_height_m
+            # The band a resting marker leaves by chance at the one false-alarm rate.
+            band_m = sample_sigmas * height_std_m
+            if band_m < math.inf:  # False for NaN: no spacing yet, the state holds
+                on_ground = not above_m > band_m
+                if state.rest_height_m is not None and above_m < -band_m:
+                    on_ground = False  # below the surface it rested on: not on it
             else:
-                on_ground = above_m < params.touchdown_height_m
-            if state.rest_height_m is not None and above_m < -params.liftoff_height_m:
-                on_ground = False  # below the surface it rested on: not on it
+                on_ground = state.on_ground
             return evolve(
                 state,
                 on_ground=on_ground,
@@ -444,7 +446,7 @@ def contact_step(
         # and the bias's step since the rest, which the leak holds at ε·τ (the steady
         # state of v ← (1 − dt/τ)·v + ε·dt), independent of the noise.
         held = bias_step_std_mps2 * params.speed_time_constant_s
-        climb_limit = climb_sigmas * math.sqrt(var_a * speed_gain + held * held)
+        climb_limit = sample_sigmas * math.sqrt(var_a * speed_gain + held * held)
     # The floor's load, were the drone at rest: m g - F. It is what the observation of
     # eq:NE_tether reads there (the accelerometer adds only its noise), from the same thrust.
     load = weight_n - thrust_n

@@ -644,7 +644,6 @@ class TensionFilterParams:
         change_max_window_s: Cap on the change test's longest window, s: long enough for
             a 30 mN step at 2 m/s^2 of vibration, 100 Hz, to reach the threshold (~4 s at
             the information limit, class docstring).
-        ring_size: Capacity of the change test's history, samples (8 s at 512 Hz).
         drift_time_constant_s: Time constant of the innovation-bias average that drives
             the drift adaptation, s.
         drift_threshold: Level of the normalised innovation-bias statistic (chi-square,
@@ -674,7 +673,6 @@ class TensionFilterParams:
     change_min_window: int = 4
     change_min_step_weight_ratio: float = 0.068
     change_max_window_s: float = 8.0
-    ring_size: int = 4096
     drift_time_constant_s: float = 0.5
     drift_threshold: float = 9.0
     drift_min_time_constant_s: float = 0.1
@@ -720,10 +718,9 @@ class TensionFilterParams:
                 "TensionFilterParams needs drift_min_time_constant_s <= hover_time_constant_s, "
                 f"got {self.drift_min_time_constant_s} and {self.hover_time_constant_s}"
             )
-        if not (1 <= self.change_min_window <= self.ring_size):
+        if not self.change_min_window >= 1:
             raise ValueError(
-                "TensionFilterParams needs 1 <= change_min_window <= ring_size, got "
-                f"{self.change_min_window} and {self.ring_size}"
+                f"TensionFilterParams.change_min_window must be >= 1, got {self.change_min_window}"
             )
         if self.noise_warmup_samples < 1:
             raise ValueError(
@@ -1121,8 +1118,13 @@ class TensionFilter:
         self._kf = DiagonalKalman()  # A = C = I, Q and R diagonal (eq:Kalman_vars)
         self._hover_v = HoverVelocity()  # v beside T while the drone hovers
         p = self.params
+        # The history's capacity follows the spacing (ChangeTest.reserve): a few windows'
+        # room until the first spacing is measured, whose threshold is infinite till then.
         self._change = ChangeTest(
-            p.change_min_window, p.change_max_window_s, p.ring_size, self.fast_threshold(None)
+            p.change_min_window,
+            p.change_max_window_s,
+            1 << p.change_min_window.bit_length(),
+            self.fast_threshold(None),
         )
         # Spacings within 1 % of the one the change test's threshold was derived at.
         self._fast_band = (math.nan, math.nan)
@@ -1165,7 +1167,7 @@ class TensionFilter:
         """The one-sided counterpart of :attr:`sample_chi2`: the standard deviations a
         per-sample Gaussian test exceeds by chance at ``false_alarms_per_h`` at the measured
         spacing (:func:`~groundstation.tension_change.exceedance_sigmas`: 5.55 at 100 Hz),
-        derived with it; the contact stage's climb test (:meth:`climb_sigmas`)."""
+        derived with it; the contact stage's climb and height tests (:meth:`sigmas_at`)."""
         self.trace: list[FilterStep] | None = None
         """Every step from :meth:`start_trace` on (None: not recorded, the default)."""
         self._restart_pending = 0
@@ -1359,7 +1361,7 @@ class TensionFilter:
             factor = floor
         return noise.long_run()[2] * factor
 
-    def climb_sigmas(self, dt_s: float) -> float:
+    def sigmas_at(self, dt_s: float) -> float:
         """The standard deviations a per-sample test must ask so that it fires by chance at
         most ``false_alarms_per_h``, dimensionless: the contact stage's climb test
         (:func:`~groundstation.tension_change.exceedance_sigmas`, one false-alarm rate for
@@ -1501,6 +1503,8 @@ class TensionFilter:
         if not lo < spacing < hi and spacing > 0.0:  # False for a NaN spacing
             tol = RESCALE_TOLERANCE
             self._fast_band = ((1.0 - tol) * spacing, (1.0 + tol) * spacing)
+            # Room for the longest window at any spacing in the band (window_cap's).
+            self._change.reserve(int(p.change_max_window_s / self._fast_band[0]) + 1)
             self._change.set_threshold(self.fast_threshold(spacing))
             self.sample_chi2 = exceedance_chi2(p.false_alarms_per_h, spacing)
             self.sample_sigmas = exceedance_sigmas(p.false_alarms_per_h, spacing)
@@ -1574,7 +1578,8 @@ class TensionFilter:
                 r_max = r0 if r0 > r1 else r1
                 r_max = r_max if r_max > r2 else r2
                 n_cap = self._change.threshold * test_youth * r_max * self._inv_min_step_n2
-                self._change.set_cap(int(n_cap) if n_cap < p.ring_size else p.ring_size)
+                size = self._change.ring.size
+                self._change.set_cap(int(n_cap) if n_cap < size else size)
                 stat, window = self._change.evaluate(self._dt_mean, test_youth)
         change = stat > self._change.threshold
         if change:
@@ -1672,18 +1677,18 @@ class TensionFilter:
 
         :func:`~groundstation.tension_change.scan_threshold` for ``false_alarms_per_h``
         over the windows
-        [``change_min_window``, ``change_max_window_s`` / dt] samples (at most the ring);
-        with no spacing known, at ``change_max_window_s`` / ``ring_size`` (the highest rate
-        the ring serves: the highest threshold). Infinite when ``false_alarms_per_h`` is 0.
+        [``change_min_window``, ``change_max_window_s`` / dt] samples (the history grows to
+        hold them, :meth:`ChangeTest.reserve`). Infinite with no spacing known (nothing can
+        be judged before one) and when ``false_alarms_per_h`` is 0.
         """
         p = self.params
         if p.false_alarms_per_h == 0.0:
             return math.inf
-        dt = p.change_max_window_s / p.ring_size
-        if dt_mean_s is not None and dt_mean_s == dt_mean_s and dt_mean_s > 0.0:
-            dt = dt_mean_s
+        if not (dt_mean_s is not None and dt_mean_s == dt_mean_s and dt_mean_s > 0.0):
+            return math.inf
+        dt = dt_mean_s
         n_lo = float(p.change_min_window)
-        n_hi = min(float(p.ring_size), max(n_lo, float(int(p.change_max_window_s / dt))))
+        n_hi = max(n_lo, float(int(p.change_max_window_s / dt)))
         return scan_threshold(p.false_alarms_per_h, n_lo, max(n_hi, n_lo + 1.0), dt)
 
     def _restart(self, mean_n: list[float], window: int, r: tuple[float, ...]) -> None:

@@ -288,6 +288,26 @@ class _Ring:
         if self.count < self.size:
             self.count += 1
 
+    def grown(self, size: int) -> _Ring:
+        """A ring of capacity ``size`` (> :attr:`size`) holding this one's history: its
+        live observations and rows ``C``, differences unchanged (so every window's sum is
+        the same), ``count`` kept."""
+        new = _Ring(size)
+        n = self.count
+        obs = [self.obs[i] for i in self.latest_first(n).tolist()[::-1]]  # oldest first
+        new.obs[:n] = obs
+        new.head = n % size
+        live = self.cum[:, self.pos - n : self.pos + 1]
+        new.cum[:, : n + 1] = live
+        new.pos = n
+        new.c = self.c
+        new._t = n
+        for k in range(n + 1):
+            new._recent[k] = self.back(n - k)
+        new.count = n
+        new.moves = self.moves + 1  # C's rows moved: a certificate anchored on them is void
+        return new
+
     def back(self, n: int) -> tuple[float, float, float]:
         """``C_(t-n)``, 0 <= n <= count."""
         return self._recent[(self._t - n) % (self.size + 1)]
@@ -430,6 +450,20 @@ class ChangeTest:
         self._radius = np.sqrt(threshold * self._n) * (1.0 - 1e-9) - 1e-12
         self._radius_min = float(self._radius[0])
         self._sigma = -1.0  # the slack; < 0: no certificate
+
+    def reserve(self, n: int) -> None:
+        """Room for windows of ``n`` samples at least: the history grows (to the next power
+        of two, so that a spacing that keeps shrinking grows it a few times in all), keeping
+        what it holds; the certificate is dropped. A capacity, not a tunable: the windows
+        the test judges are set by ``max_window_s`` and :attr:`cap_n`."""
+        if n <= self.ring.size:
+            return
+        size = 1 << (n - 1).bit_length()
+        self.ring = self.ring.grown(size)
+        self._n = np.arange(self.min_window, size + 1, dtype=np.float64)
+        self.inv_n = 1.0 / self._n
+        self.set_threshold(self.threshold)  # the radii of the new windows; no certificate
+        self._cert_n = size
 
     def set_cap(self, n: int) -> None:
         """The longest window in use from now on, samples; a cap beyond the windows the

@@ -18,6 +18,7 @@ from groundstation.contact import (
     vertical_accel_mps2,
 )
 from groundstation.tension import TensionFilter, TensionFilterParams
+from groundstation.tension_change import exceedance_sigmas
 
 MASS_KG = 0.030
 G = 9.81
@@ -25,6 +26,9 @@ WEIGHT_N = MASS_KG * G
 DT_S = 0.004
 DEFAULT = ContactParams()
 BIAS_STEP_STD_MPS2 = BiasKalmanParams().flight_bias_std_mps2  # σ_δ's default, as served
+HEIGHT_STD_M = BiasKalmanParams().mocap_std_m  # σ_p's default, as served
+# The per-sample tests' threshold at this spacing and the one false-alarm rate (5.6).
+SAMPLE_SIGMAS = exceedance_sigmas(TensionFilterParams().false_alarms_per_h, DT_S)
 
 
 def test_import_does_not_pull_io_libraries() -> None:
@@ -51,8 +55,8 @@ class _Vibration:
 
     def sigmas(self, dt_s: float) -> float:
         """The climb test's standard deviations at the sample spacing (the one
-        false-alarm rate; ``TensionFilter.climb_sigmas``)."""
-        return self.filt.climb_sigmas(dt_s)
+        false-alarm rate; ``TensionFilter.sigmas_at``)."""
+        return self.filt.sigmas_at(dt_s)
 
     def learn(
         self, state: ContactState, *, armed: bool, thrust_n: float, accel_z: float, dt_s: float
@@ -84,8 +88,9 @@ def _step(
         vertical_accel_mps2=accel_z,
         height_m=height_m,
         floor_z_m=0.0,
-        climb_sigmas=math.inf,
+        sample_sigmas=SAMPLE_SIGMAS,
         bias_step_std_mps2=BIAS_STEP_STD_MPS2,
+        height_std_m=HEIGHT_STD_M,
     )
 
 
@@ -125,16 +130,63 @@ def test_disarmed_is_ground_and_low_thrust_is_ground_only_when_seen_at_rest() ->
     assert s.on_ground and s.reason == "resting", "above the ratio: still on the floor"
 
 
-def test_mocap_height_has_hysteresis_about_the_resting_height() -> None:
-    # The marker sits 4 cm above the floor at rest.
+def test_mocap_height_band_is_the_noise_at_the_one_false_alarm_rate() -> None:
+    """The marker sits 4 cm above the floor at rest; lift-off once the height stands out of
+    σ_p by the per-sample threshold of the one false-alarm rate (5.6 σ_p at 250 Hz: 1.1 cm
+    at 2 mm), touch-down within that band again; the band follows σ_p."""
     s = ContactState()
     for _ in range(300):
         s = _step(s, thrust_ratio=0.0, height_m=0.04)
     assert s.rest_height_m == pytest.approx(0.04)
-    expected = [(0.06, True), (0.08, False), (0.06, False), (0.05, True), (0.065, True)]
+    band_m = SAMPLE_SIGMAS * HEIGHT_STD_M
+    assert 0.010 < band_m < 0.012
+    expected = [
+        (0.04 + 0.9 * band_m, True),
+        (0.04 + 1.1 * band_m, False),
+        (0.04 + 2.0 * band_m, False),
+        (0.04 + 0.9 * band_m, True),
+        (0.04 - 0.9 * band_m, True),
+    ]
     for height, ground in expected:
         s = _step(s, thrust_ratio=0.9, height_m=height)
         assert s.on_ground is ground, (height, s)
+    # A noisier motion capture widens the band: 2 cm up is still the floor at σ_p = 5 mm.
+    wide = contact_step(
+        s, DEFAULT, dt_s=DT_S, armed=True, thrust_n=0.9 * WEIGHT_N, mass_kg=MASS_KG,
+        vertical_accel_mps2=0.0, height_m=0.06, floor_z_m=0.0, sample_sigmas=SAMPLE_SIGMAS,
+        bias_step_std_mps2=BIAS_STEP_STD_MPS2, height_std_m=0.005,
+    )  # fmt: skip
+    assert wide.on_ground
+    # No spacing yet (an infinite threshold): the height decides nothing, the state holds.
+    for before in (s, replace(s, on_ground=False, reason="air")):
+        held = contact_step(
+            before, DEFAULT, dt_s=DT_S, armed=True, thrust_n=0.9 * WEIGHT_N,
+            mass_kg=MASS_KG, vertical_accel_mps2=0.0, height_m=0.3, floor_z_m=0.0,
+            sample_sigmas=math.inf, bias_step_std_mps2=BIAS_STEP_STD_MPS2,
+            height_std_m=HEIGHT_STD_M,
+        )  # fmt: skip
+        assert held.on_ground is before.on_ground
+
+
+def test_a_resting_marker_stays_on_the_floor_through_its_noise() -> None:
+    """Two minutes of a resting marker with Gaussian noise σ_p at 250 Hz, armed at 0.9 of
+    the weight (the height alone decides): at the one false-alarm rate (0.005 per hour) the
+    expected number of samples out of the band is 2e-4, so none."""
+    rng = np.random.default_rng(7)
+    s = ContactState()
+    for _ in range(300):
+        s = _step(s, thrust_ratio=0.0, height_m=0.04)
+    heights = 0.04 + rng.normal(0.0, HEIGHT_STD_M, int(120.0 / DT_S))
+    lifted = 0
+    for h in heights.tolist():
+        s = _step(s, thrust_ratio=0.9, height_m=h)
+        lifted += not s.on_ground
+    assert lifted == 0
+    # The same marker with a noise 3x the configured σ_p does leave it: the band is σ_p's.
+    noisy = 0
+    for h in (0.04 + rng.normal(0.0, 3 * HEIGHT_STD_M, 5000)).tolist():
+        noisy += not _step(s, thrust_ratio=0.9, height_m=h).on_ground
+    assert noisy > 0
 
 
 def _spool_up(
@@ -176,8 +228,9 @@ def _spool_up(
             height_m=None,
             floor_z_m=0.0,
             vertical_noise_var_mps4=vib.var(state),
-            climb_sigmas=vib.sigmas(DT_S),
+            sample_sigmas=vib.sigmas(DT_S),
             bias_step_std_mps2=BIAS_STEP_STD_MPS2,
+            height_std_m=HEIGHT_STD_M,
         )
         vib.learn(state, armed=armed, thrust_n=read, accel_z=f_z - G, dt_s=DT_S)
         out.append((t, push, z, state.on_ground))
@@ -233,8 +286,6 @@ def test_hovering_drone_found_in_the_air_at_start() -> None:
 def test_params_are_checked() -> None:
     with pytest.raises(ValueError, match="ground_thrust_ratio"):
         ContactParams(ground_thrust_ratio=1.0)
-    with pytest.raises(ValueError, match="touchdown_height_m"):
-        ContactParams(touchdown_height_m=0.05, liftoff_height_m=0.03)
     with pytest.raises(ValueError, match="floor_time_s"):
         ContactParams(floor_time_s=0.0)
 
@@ -247,7 +298,7 @@ def _vibrating(
     thrust_read_ratio: float,
     seed: int,
     params: ContactParams = DEFAULT,
-    climb_sigmas: float | None = None,
+    sample_sigmas: float | None = None,
 ) -> list[tuple[float, float, bool, str]]:
     """A 1-D drone at the realistic profile's vibration: rest disarmed 1 s, then the true
     thrust profile (N, of time since arming). IMU samples 8-12 ms apart; accelerometer noise
@@ -284,8 +335,9 @@ def _vibrating(
             height_m=None,
             floor_z_m=0.0,
             vertical_noise_var_mps4=vib.var(state),
-            climb_sigmas=vib.sigmas(dt) if climb_sigmas is None else climb_sigmas,
+            sample_sigmas=vib.sigmas(dt) if sample_sigmas is None else sample_sigmas,
             bias_step_std_mps2=BIAS_STEP_STD_MPS2,
+            height_std_m=HEIGHT_STD_M,
         )
         read = thrust * thrust_read_ratio
         vib.learn(state, armed=armed, thrust_n=read, accel_z=a + noise, dt_s=dt)
@@ -316,7 +368,7 @@ def test_vibration_at_hover_thrust_on_the_floor_is_no_climb(seed: int) -> None:
         thrust_read_ratio=0.85,
         seed=seed,
         params=loose,
-        climb_sigmas=1.0,
+        sample_sigmas=1.0,
     )
     assert not all(g for _, _, g, _ in before), "a bound of one deviation lifts it on noise"
 
@@ -424,8 +476,9 @@ def _fly_1d(
             height_m=z + 0.04 if height else None,
             floor_z_m=0.0,
             vertical_noise_var_mps4=vib.var(s),
-            climb_sigmas=vib.sigmas(dt),
+            sample_sigmas=vib.sigmas(dt),
             bias_step_std_mps2=BIAS_STEP_STD_MPS2,
+            height_std_m=HEIGHT_STD_M,
         )
         vib.learn(s, armed=True, thrust_n=cmd, accel_z=a + noise, dt_s=dt)
         out.append((t, z, cmd / WEIGHT_N, s.on_ground, s.reason))
@@ -555,19 +608,24 @@ def test_real_take_off_and_landing_nanobench(name: str, mocap: bool) -> None:
     last_armed = len(armed) - 1 - int(np.argmax(armed[::-1]))
     s = ContactState()
     out = []
+    rate = TensionFilterParams().false_alarms_per_h
     for k in range(len(z)):
+        dt = 0.0 if k == 0 else float(data.stamp_s[k] - data.stamp_s[k - 1])
         s = contact_step(
             s,
             DEFAULT,
-            dt_s=0.0 if k == 0 else float(data.stamp_s[k] - data.stamp_s[k - 1]),
+            dt_s=dt,
             armed=bool(armed[k]),
             thrust_n=float(thrust[k]),
             mass_kg=MASS_KG,
             vertical_accel_mps2=accel[k],
             height_m=float(z[k]) if mocap else None,
             floor_z_m=0.0,
-            climb_sigmas=math.inf,
+            # The per-sample threshold at the sample's spacing (5.3 at 25 Hz), as the
+            # pipeline hands it (TensionFilter.sigmas_at) where a height is given.
+            sample_sigmas=exceedance_sigmas(rate, dt) if mocap else math.inf,
             bias_step_std_mps2=BIAS_STEP_STD_MPS2,
+            height_std_m=HEIGHT_STD_M,
         )
         out.append(s)
         if k == first_armed - 1:
@@ -596,8 +654,9 @@ def test_real_take_off_and_landing_nanobench(name: str, mocap: bool) -> None:
             vertical_accel_mps2=accel[k],
             height_m=None,
             floor_z_m=0.0,
-            climb_sigmas=math.inf,
+            sample_sigmas=math.inf,
             bias_step_std_mps2=BIAS_STEP_STD_MPS2,
+            height_std_m=HEIGHT_STD_M,
         )
     assert s.on_ground and s.reason == "low_thrust"
 
@@ -623,8 +682,9 @@ def test_a_climb_must_stand_out_of_the_bias_step_the_leak_holds(factor: float) -
             height_m=None,
             floor_z_m=0.0,
             vertical_noise_var_mps4=1e-12,
-            climb_sigmas=sigmas,
+            sample_sigmas=sigmas,
             bias_step_std_mps2=step_std,
+            height_std_m=HEIGHT_STD_M,
         )
         if not s.on_ground:
             break

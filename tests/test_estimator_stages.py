@@ -237,7 +237,8 @@ def test_contact_stage_hands_contact_step_this_messages_evidence() -> None:
     )
     got = contact_decide(state, params, msg, thrust_n=0.31, mass_kg=MASS_KG, dt_s=0.004,
                          floor_z_m=0.0, rotation_rows_world_body=_rows(msg),
-                         climb_sigmas=5.0, bias_step_std_mps2=0.05)  # fmt: skip
+                         sample_sigmas=5.0, bias_step_std_mps2=0.05,
+                         height_std_m=0.002)  # fmt: skip
     want = contact_mod.contact_step(
         state,
         params,
@@ -248,8 +249,9 @@ def test_contact_stage_hands_contact_step_this_messages_evidence() -> None:
         vertical_accel_mps2=contact_mod.vertical_accel_mps2(msg.accel_mps2, msg.quat_wxyz),
         height_m=0.7,
         floor_z_m=0.0,
-        climb_sigmas=5.0,
+        sample_sigmas=5.0,
         bias_step_std_mps2=0.05,
+        height_std_m=0.002,
     )
     assert got.state == want and got.on_ground == want.on_ground
 
@@ -275,8 +277,9 @@ def test_contact_stage_judges_a_climb_against_the_vibration_it_is_given() -> Non
                 floor_z_m=0.0,
                 rotation_rows_world_body=_rows(msg),
                 vertical_noise_var_mps4=var,
-                climb_sigmas=5.55,
+                sample_sigmas=5.55,
                 bias_step_std_mps2=0.05,
+                height_std_m=0.002,
             )
             if not state.on_ground:
                 break
@@ -300,7 +303,9 @@ def test_contact_stage_a_disarmed_drone_is_on_the_ground_and_a_dip_is_not() -> N
             dt_s=0.004,
             floor_z_m=0.0,
             rotation_rows_world_body=_rows(msg),
+            sample_sigmas=5.55,
             bias_step_std_mps2=0.05,
+            height_std_m=0.002,
         )
     assert not on_ground
     # A thrust dip in the air (the specific force is thrust / m, far below g): still air.
@@ -315,14 +320,17 @@ def test_contact_stage_a_disarmed_drone_is_on_the_ground_and_a_dip_is_not() -> N
             dt_s=0.004,
             floor_z_m=0.0,
             rotation_rows_world_body=_rows(msg),
+            sample_sigmas=5.55,
             bias_step_std_mps2=0.05,
+            height_std_m=0.002,
         )
         assert not on_ground, k
     # Disarmed: the rest of the step takes it as ground, whatever the state says.
     msg = _telemetry(seq=150, stamp_s=0.6, armed=False, position_m=(0.0, 0.0, 1.0))
     out = contact_decide(state, params, msg, thrust_n=0.0, mass_kg=MASS_KG, dt_s=0.004,
                          floor_z_m=0.0, rotation_rows_world_body=_rows(msg),
-                         bias_step_std_mps2=0.05)  # fmt: skip
+                         sample_sigmas=5.55, bias_step_std_mps2=0.05,
+                         height_std_m=0.002)  # fmt: skip
     assert out.on_ground
 
 

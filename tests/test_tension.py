@@ -461,7 +461,7 @@ def test_invalid_observation_in_filter_raises() -> None:
         {"accel_noise_mps2": -1.0},
         {"thrust_noise_n": math.nan},
         {"hover_time_constant_s": 0.0},
-        {"change_min_window": 10, "ring_size": 5},
+        {"change_min_window": 0},
         {"drift_min_time_constant_s": 7.0},
         {"noise_prior_samples": 0.0},
         {"false_alarms_per_h": -1.0},
@@ -1034,14 +1034,28 @@ def test_climb_sigmas_follow_the_one_knob_at_the_spacing() -> None:
     rng = np.random.default_rng(5)
     filt = TensionFilter()
     rate = filt.params.false_alarms_per_h
-    assert filt.climb_sigmas(math.nan) == math.inf
-    assert filt.climb_sigmas(0.008) == pytest.approx(exceedance_sigmas(rate, 0.008))
+    assert filt.sigmas_at(math.nan) == math.inf
+    assert filt.sigmas_at(0.008) == pytest.approx(exceedance_sigmas(rate, 0.008))
     for _ in range(400):
         filt.update(HOVER_TENSION_N + rng.normal(0.0, 0.03, 3), 0.01)
     # The flight's spacing (0.01 s), not the sample's, once measured.
-    assert filt.climb_sigmas(0.004) == pytest.approx(exceedance_sigmas(rate, 0.01), rel=1e-3)
+    assert filt.sigmas_at(0.004) == pytest.approx(exceedance_sigmas(rate, 0.01), rel=1e-3)
     quiet = TensionFilter(TensionFilterParams(false_alarms_per_h=0.0))
-    assert quiet.climb_sigmas(0.01) == math.inf
+    assert quiet.sigmas_at(0.01) == math.inf
+
+
+def test_the_change_tests_history_holds_its_longest_window_at_any_rate() -> None:
+    """The history is sized from the measured spacing, not by hand: at 1 kHz the longest
+    window is the full ``change_max_window_s`` (8,000 samples; a fixed 4,096-sample ring
+    cut it at 4.1 s), at 100 Hz the ring stays small."""
+    rng = np.random.default_rng(8)
+    for dt_s, at_least in ((0.001, 8_000), (0.01, 800)):
+        filt = TensionFilter()
+        for _ in range(50):
+            filt.update(HOVER_TENSION_N + rng.normal(0.0, 0.03, 3), dt_s)
+        size = filt._change.ring.size
+        assert at_least < size <= 2 * at_least / 0.99
+        assert filt._change.window_cap(dt_s, 10**6, size) >= at_least
 
 
 def test_the_false_alarm_rate_is_the_change_tests_one_knob() -> None:
@@ -1051,9 +1065,8 @@ def test_the_false_alarm_rate_is_the_change_tests_one_knob() -> None:
     rng = np.random.default_rng(4)
     filt = TensionFilter()
     p = filt.params
-    before = filt.change_threshold  # no spacing yet: the ring's highest rate, the highest h
-    dt_ring = p.change_max_window_s / p.ring_size
-    assert before == pytest.approx(scan_threshold(p.false_alarms_per_h, 4, 4096, dt_ring))
+    before = filt.change_threshold  # no spacing yet: nothing can be judged
+    assert before == math.inf
     for _ in range(400):
         filt.update(HOVER_TENSION_N + rng.normal(0.0, 0.03, 3), 0.01)
     h = filt.change_threshold

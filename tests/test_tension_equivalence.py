@@ -89,6 +89,37 @@ def test_change_test_equals_windows_summed_afresh(seed: int) -> None:
     assert crossings >= 10 and len(deferred) > 300
 
 
+def test_a_history_that_grows_keeps_what_it_held() -> None:
+    """The history's capacity follows the spacing (``ChangeTest.reserve``, called by the
+    filter at each new spacing): a test that starts with room for 8 samples and grows to 32
+    and then 128 midway gives, at every step, the statistic, window and restart mean of one
+    built with 128 from the start, on the same innovations, over the windows it held."""
+    rng = np.random.default_rng(5)
+    grown, whole = ChangeTest(4, 1.0, 8, 50.0), ChangeTest(4, 1.0, 128, 50.0)
+    bias = np.zeros(3)
+    for k in range(2_000):
+        if k in (10, 700):
+            grown.reserve(20 if k == 10 else 100)
+        if k == 1_500:
+            grown.clear()
+            whole.clear()
+        if rng.random() < 0.01:
+            bias = rng.normal(0.0, 0.6, 3) if not bias.any() else np.zeros(3)
+        w = tuple((rng.normal(size=3) + bias).tolist())
+        z = tuple(rng.normal(size=3).tolist())
+        # The windows the grown one holds (what it never held it cannot give back).
+        cap = max(min(grown.ring.count + 1, grown.ring.size), 4)
+        for test in (grown, whole):
+            test.set_cap(cap)
+            test.push(z, w)
+        got, want = grown.evaluate(math.nan, 1.0), whole.evaluate(math.nan, 1.0)
+        assert got[1] == want[1] and got[0] == pytest.approx(want[0], rel=1e-12, abs=1e-12)
+        n = min(grown.ring.count, cap)
+        if n:
+            np.testing.assert_allclose(grown.mean_of_window(n), whole.mean_of_window(n))
+    assert grown.ring.size == 128 and grown.ring.count == whole.ring.count
+
+
 def test_restart_mean_is_the_mean_of_the_window() -> None:
     """The restart's x: the mean of the last n observations, summed afresh."""
     rng = np.random.default_rng(3)

@@ -15,7 +15,6 @@ latch it there): the contact state decides. Pure functions of frozen inputs.
 
 from __future__ import annotations
 
-import math
 from typing import NamedTuple
 
 from groundstation import contact as contact_mod
@@ -49,8 +48,9 @@ def contact_decide(
     floor_z_m: float,
     rotation_rows_world_body: Rows,
     vertical_noise_var_mps4: float | None = None,
-    climb_sigmas: float = math.inf,
+    sample_sigmas: float,
     bias_step_std_mps2: float,
+    height_std_m: float,
 ) -> ContactOut:
     """One message's evidence into the contact state (module doc).
 
@@ -65,10 +65,11 @@ def contact_decide(
         rotation_rows_world_body: the message's attitude as ``R_world_body`` rows.
         vertical_noise_var_mps4: the vertical vibration the tension filter measured,
             (m/s^2)^2 (``contact_step``'s), or None.
-        climb_sigmas: the climb test's standard deviations (``contact_step``'s; the
-            tension filter's ``climb_sigmas``); infinite: no climb is judged.
+        sample_sigmas: the per-sample tests' standard deviations (``contact_step``'s;
+            the tension filter's ``sigmas_at``); infinite: nothing is judged.
         bias_step_std_mps2: σ_δ, the accelerometer bias's step from rest to flight, m/s^2
             (``contact_step``'s).
+        height_std_m: σ_p, the motion-capture height's noise, m (``contact_step``'s).
     """
     position = msg.position_m
     new = contact_mod.contact_step(
@@ -84,7 +85,8 @@ def contact_decide(
         height_m=position[2] if position is not None else None,
         floor_z_m=floor_z_m,
         vertical_noise_var_mps4=vertical_noise_var_mps4,
-        climb_sigmas=climb_sigmas,
+        sample_sigmas=sample_sigmas,
         bias_step_std_mps2=bias_step_std_mps2,
+        height_std_m=height_std_m,
     )
     return ContactOut(new, new.on_ground or not msg.armed)

@@ -284,6 +284,9 @@ class DroneEstimator:
             ground_thrust_ratio=params.filter.ground_thrust_ratio
         )
         self.contact = contact_mod.ContactState()
+        self.mocap_std_m = settings.localization.mocap_std_m
+        """σ_p, m: the motion-capture position's noise per axis (``[localization]
+        mocap_std_m``): the contact stage's height band."""
         self.bias_step_std_mps2 = flight_params(params.calibration).flight_bias_std_mps2
         """σ_δ, m/s²: how far the accelerometer's bias strays from the rest's once the
         propellers spin (``[calibration] flight_bias_std_mps2``, fitted by ``calibrate``;
@@ -484,7 +487,9 @@ class DroneEstimator:
         # (read on the ground and armed only, where the test runs).
         on_floor_armed = self.contact.on_ground and msg.armed
         noise_n2 = self.filter.vertical_noise_var_n2() if on_floor_armed else None
-        climb_sigmas = self.filter.climb_sigmas(dt_s) if noise_n2 is not None else math.inf
+        # The per-sample tests' threshold (the climb's, the motion-capture height's).
+        judged = noise_n2 is not None or msg.position_m is not None
+        sample_sigmas = self.filter.sigmas_at(dt_s) if judged else math.inf
         contact, on_ground = contact_decide(
             self.contact,
             self.contact_params,
@@ -495,8 +500,9 @@ class DroneEstimator:
             floor_z_m=self.params.base.floor_z_m,
             rotation_rows_world_body=observed.rotation_rows_world_body,
             vertical_noise_var_mps4=None if noise_n2 is None else noise_n2 / (mass_kg * mass_kg),
-            climb_sigmas=climb_sigmas,
+            sample_sigmas=sample_sigmas,
             bias_step_std_mps2=self.bias_step_std_mps2,
+            height_std_m=self.mocap_std_m,
         )
         self.contact = contact
         self._check_battery(msg.vbat_v, on_ground, now_s)
