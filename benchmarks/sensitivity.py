@@ -77,7 +77,6 @@ CLASSES = {
 CONTACT_ROWS = frozenset(
     {
         "tension.GAP_S",
-        "TensionFilterParams.noise_warmup_samples",
     }
 )
 """Rows judged on the contact figures besides ``ContactParams.*`` and ``RestCriteria.*``."""

@@ -47,7 +47,7 @@ from groundstation.calibration import (
     _integrated_autocorr_time,
 )
 from groundstation.tension import TensionFilterParams
-from groundstation.tension_change import exceedance_chi2
+from groundstation.tension_change import exceedance_chi2, noise_warmup_samples
 from groundstation.tension_noise import NoiseEstimate
 
 __all__ = [
@@ -202,7 +202,7 @@ def flight_phases(
                     world,
                     dt,
                     noise_params.noise_time_constant_s,
-                    noise_params.noise_warmup_samples,
+                    noise_warmup_samples(),
                 )
                 if spacing_s > 0.0:
                     density = (r0 + r1 + r2) / 3.0 * spacing_s

@@ -37,6 +37,7 @@ from groundstation.tension_change import (
     exceedance_sigmas,
     level_samples,
     level_scatter_factor,
+    noise_warmup_samples,
     scan_threshold,
     youth_factor,
 )
@@ -618,9 +619,6 @@ class TensionFilterParams:
             autocorrelation per axis) on line; False keeps the prior, white.
         noise_time_constant_s: Memory of the noise estimate, s.
         noise_prior_samples: Weight of the prior in the noise estimate, samples.
-        noise_warmup_samples: Samples of noise estimate before the change tests run, and
-            observations after a start or reset before the estimate is reported converged
-            (and localized): the estimate is trusted when its noise is, >= 1.
         hover_time_constant_s: Shortest time constant of the filter at hover, s: the
             process noise is ``Q = r dt_mean / tau^2 * dt`` per axis (r the observation
             noise, dt_mean the mean sample spacing), tau at least this whatever the noise
@@ -666,7 +664,6 @@ class TensionFilterParams:
     estimate_noise: bool = True
     noise_time_constant_s: float = 5.0
     noise_prior_samples: float = 2.0
-    noise_warmup_samples: int = 30
     hover_time_constant_s: float = 6.0
     hover_wander_n2_per_s: float = 4.5e-8
     false_alarms_per_h: float = 0.005
@@ -722,11 +719,6 @@ class TensionFilterParams:
             raise ValueError(
                 f"TensionFilterParams.change_min_window must be >= 1, got {self.change_min_window}"
             )
-        if self.noise_warmup_samples < 1:
-            raise ValueError(
-                "TensionFilterParams.noise_warmup_samples must be >= 1, got "
-                f"{self.noise_warmup_samples}"
-            )
 
 
 _DEFERRED = (LazyChangeStatistic, NoiseStatus)
@@ -772,7 +764,8 @@ class TensionEstimate:
         tension_world_n: Force of the tether on the drone, world frame, N, shape (3,).
         cov_n2: Its covariance (the Kalman filter's P), N^2, shape (3, 3).
         std_n: Standard deviation per axis, ``sqrt(diag(P))``, N, shape (3,).
-        converged: True once ``noise_warmup_samples`` observations have been taken
+        converged: True once the noise estimate's warm-up of observations
+            (:func:`~groundstation.tension_change.noise_warmup_samples`, 19) has been taken
             since start or :meth:`TensionFilter.reset`.
         change_detected: True when this step detected a change of tension (a tug) and
             re-initialised the filter from the samples since the change.
@@ -956,17 +949,19 @@ class TensionFilter:
     the warm estimate's own scatter allows for
     (:func:`~groundstation.tension_change.level_scatter_factor`, 1.26 at ~95 Hz: without
     it thresholds set for a known noise fired 4 times in 90 h of simulated hover); and
-    the test waits for
-    ``noise_warmup_samples`` = 30 samples (0.3 s at 100 Hz) whose innovations were
-    whitened with a noise of a few samples. The largest statistic is compared with
-    the threshold h that :func:`~groundstation.tension_change.scan_threshold` gives for
+    the test waits for the noise estimate's warm-up
+    (:func:`~groundstation.tension_change.noise_warmup_samples`, 19 samples: before it the
+    estimate is not bounded away from zero at ``ESTIMATE_SIGMAS`` standard errors). The
+    largest statistic is compared with the threshold h that
+    :func:`~groundstation.tension_change.scan_threshold` gives for
     ``false_alarms_per_h`` (0.005/h) over the windows [``change_min_window``,
     ``change_max_window_s`` = 8 s] at the measured spacing (the Brownian scan
     approximation of the crossing rate of a sliding chi-square scan: 49.7 at 100 Hz,
-    51.7 at 250 Hz; before a spacing is known, at the rate that fills the ring in 8 s,
-    the highest). The rate per sample goes as ``1/n_lo - 1/n_hi``: long windows add few
-    independent looks, so 8 s costs a threshold 0.1 above a 1 s test's. The false
-    detections are counted in docs/change_test_benchmark.md.
+    51.7 at 250 Hz; infinite before a spacing is known; the history grows to hold the
+    longest window at the spacing, :meth:`ChangeTest.reserve`). The rate per sample goes
+    as ``1/n_lo - 1/n_hi``: long windows add few independent looks, so 8 s costs a
+    threshold 0.1 above a 1 s test's. The false detections are counted in
+    docs/change_test_benchmark.md.
 
     *The longest window, from the noise.* With the level before it known exactly, a GLR
     at threshold h detects a step delta about half the time once ``n delta^2 / r = h``
@@ -976,7 +971,7 @@ class TensionFilter:
     rarely needs that much data. So the longest window is where the smallest step of
     interest, ``change_min_step_weight_ratio`` of the weight (20 mN at 30 g), reaches the
     threshold as applied: ``n_max = h youth r_max / step^2`` samples (r_max the largest
-    axis's long-run variance), at most ``change_max_window_s`` = 8 s and the ring, set at
+    axis's long-run variance), at most ``change_max_window_s`` = 8 s (the history holds it), set at
     each full evaluation: 12 samples (50 ms) on the ideal profile, 2.6 s at 1 m/s^2 and
     100 Hz (r = 2 s2), 8 s at 2 m/s^2 (10.5 s uncapped; a 30 mN step needs ~4 s). Longer
     windows would find no step of interest sooner, and on a ramp (a drone moving) they
@@ -1142,6 +1137,7 @@ class TensionFilter:
         v0, v1, v2 = self._prior_var
         self._prior_std = (math.sqrt(v0), math.sqrt(v1), math.sqrt(v2))
         self._noise = NoiseEstimate(self._prior_var, p.noise_prior_samples)
+        self._warmup = noise_warmup_samples()  # the noise estimate's warm-up, derived
         self._dt_mean = math.nan
         # The mean spacing over the noise level's memory: the spacings' and the samples'
         # sums, each weighed by exp(-age / noise_time_constant_s).
@@ -1299,7 +1295,7 @@ class TensionFilter:
             return
         if not 0.0 < dt <= GAP_S:
             self._noise.break_chain()
-        r0, r1, r2 = self._noise.push(y, dt, p.noise_time_constant_s, p.noise_warmup_samples)
+        r0, r1, r2 = self._noise.push(y, dt, p.noise_time_constant_s, self._warmup)
         spacing = self._dt_mean
         if spacing == spacing:  # the spacing of the flight (the floor's is not tracked)
             self.noise_density_n2s = (r0 + r1 + r2) / 3.0 * spacing
@@ -1443,7 +1439,7 @@ class TensionFilter:
         noise = self._noise
         estimate_noise = p.estimate_noise
         if estimate_noise:
-            r = noise.push(z, dt, p.noise_time_constant_s, p.noise_warmup_samples)
+            r = noise.push(z, dt, p.noise_time_constant_s, self._warmup)
         else:
             r = self._prior_var
         # R = the long-run variance r, not the per-sample s2: what the filter averages.
@@ -1559,7 +1555,7 @@ class TensionFilter:
                 if self.trace is not None:
                     self._merged = (list(kf.x), list(kf.P))
         self._samples += 1
-        warming = estimate_noise and noise.samples < p.noise_warmup_samples
+        warming = estimate_noise and noise.samples < self._warmup
         lazy: LazyChangeStatistic | None = None
         if warming:
             # Innovations whitened with a noise estimate of a few samples are not evidence
@@ -1787,7 +1783,7 @@ class TensionFilter:
                 "tension_world_n": _ndarray(_SHAPE3, _F64, buf, 0),
                 "cov_n2": _ndarray(_SHAPE33, _F64, buf, 48),
                 "std_n": _ndarray(_SHAPE3, _F64, buf, 24),
-                "converged": samples >= self.params.noise_warmup_samples,
+                "converged": samples >= self._warmup,
                 "change_detected": change,
                 "samples": samples,
                 "_lazy_change_statistic": stat,

@@ -144,6 +144,18 @@ NanoBench median read 4.4 mN instead of 4.9 (fewer manoeuvres taken for changes)
 tug, hover or take-off figure moved beyond 2 %."""
 
 
+def noise_warmup_samples() -> int:
+    """The noise estimate's warm-up, samples (differences), derived: the smallest k at
+    which a k-sample mean square is bounded away from zero at ``ESTIMATE_SIGMAS`` standard
+    errors, ``1 - ESTIMATE_SIGMAS·sqrt(2 / k) > 0``, i.e. ``k > 2·ESTIMATE_SIGMAS²`` (19 at
+    3). Before it the estimate may be any fraction of the truth at that confidence, so
+    nothing weighed by it is evidence: the change test waits for it (its youth factor
+    :func:`youth_factor` is the allowance from there), the squared differences are
+    winsorised only from it, and the filter reports ``converged`` (and is localized) from
+    it."""
+    return math.floor(2.0 * ESTIMATE_SIGMAS * ESTIMATE_SIGMAS) + 1
+
+
 def level_samples(memory_samples: float) -> float:
     """The noise level's equilibrium sample count, ``k = 2·M − 1`` (at least 1): an
     exponential mean over ``memory_samples`` = M = tau / dt samples scatters as a k-sample

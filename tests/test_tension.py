@@ -27,7 +27,12 @@ from groundstation.tension import (
     rotation_world_body,
     scan_threshold,
 )
-from groundstation.tension_change import exceedance_chi2, exceedance_sigmas, level_scatter_factor
+from groundstation.tension_change import (
+    exceedance_chi2,
+    exceedance_sigmas,
+    level_scatter_factor,
+    noise_warmup_samples,
+)
 
 MASS_KG = 0.030
 DT_S = 0.004  # 250 Hz
@@ -361,10 +366,15 @@ def test_first_observation_initialises_state() -> None:
     assert not filt.initialized and filt.estimate is None
 
 
-def test_converged_after_min_samples() -> None:
-    filt = TensionFilter(TensionFilterParams(noise_warmup_samples=10))
-    flags = [filt.update(HOVER_TENSION_N, DT_S).converged for _ in range(12)]
-    assert flags == [False] * 9 + [True] * 3
+def test_converged_after_the_noise_warm_up() -> None:
+    """Converged from the noise estimate's warm-up on: 19 observations, the first k at
+    which a k-sample mean square is bounded away from zero at 3 standard errors
+    (1 - 3·sqrt(2/k) > 0)."""
+    k = noise_warmup_samples()
+    assert k == 19 and 1.0 - 3.0 * math.sqrt(2.0 / k) > 0.0 >= 1.0 - 3.0 * math.sqrt(2.0 / (k - 1))
+    filt = TensionFilter()
+    flags = [filt.update(HOVER_TENSION_N, DT_S).converged for _ in range(k + 2)]
+    assert flags == [False] * (k - 1) + [True] * 3
 
 
 def test_coast_grows_covariance_with_elapsed_time() -> None:
