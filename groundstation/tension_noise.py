@@ -12,15 +12,14 @@ from __future__ import annotations
 
 import math
 
+from groundstation.tension_change import exceedance_square
+from groundstation.tension_drift import RESCALE_TOLERANCE
+
 __all__ = ["MIN_NOISE_VAR_N2", "NoiseEstimate", "NoiseStatus", "per_sample"]
 
 MIN_NOISE_VAR_N2 = 1e-10
 """Floor of every noise variance, N^2 (10 uN per sample): keeps S = P- + R positive definite
 on a stream that repeats one value."""
-WINSOR_RATIO = 16.0
-"""Once warm, a squared difference (or a block ratio) enters its mean capped at this many
-times that mean (4 standard deviations of a Gaussian difference): a tug's one large
-difference moves the noise level by a few per mille, not by half."""
 KAPPA_MIN = 0.5
 """Floor of kappa = r / s_d (half of white noise's 1): an anti-correlated stretch cannot
 read the long-run variance as nothing."""
@@ -52,17 +51,24 @@ class NoiseEstimate:
       white noise (kappa = 1) and real vibration (AR(1) with rho = 0.3: 2.65; the realistic
       simulator's: 2.5); the change test's youth factor covers the rest.
 
-    Then ``r = s_d kappa``. Each mean is an exponential average (a running mean for the
-    first samples, started from the prior), winsorised at 16 times its current value once
-    warm, so a tug's one large difference moves it by a few per mille. For ``status`` the
+    Then ``r = s_d kappa``. Each mean is an exponential average (a running mean of the data
+    alone from the first difference: the prior stands only until there is one; the change
+    test's youth factor allows for the young estimate), winsorised once warm where the
+    noise ends: at the ratio to its mean that a Gaussian's square exceeds by chance at the
+    estimator's one false-alarm rate (:func:`~groundstation.tension_change.exceedance_square`:
+    32.2 per sample at 100 Hz, at the spacing the blocks measure; 26.0 per block), so a
+    tug's one large difference moves it by a few per cent at most and Gaussian noise is not
+    capped. For ``status`` the
     per-sample s2 comes from the variance within blocks and ``rho_1 = 1 - s_d / s2``.
 
     Per message this is a few dozen float operations, written out per axis (numpy's
     per-call overhead would cost more than the arithmetic).
 
     Args:
-        prior_var_n2: Prior per-sample variance per world axis, N^2.
-        prior_samples: Weight of the prior, samples.
+        prior_var_n2: Prior per-sample variance per world axis, N^2 (until the first
+            difference).
+        false_alarms_per_h: The estimator's one false-alarm rate, 1/h
+            (``TensionFilterParams.false_alarms_per_h``): the winsorisation's level.
     """
 
     BLOCK_S = 0.25
@@ -70,10 +76,16 @@ class NoiseEstimate:
     KAPPA_PRIOR = 1.5
     KAPPA_PRIOR_BLOCKS = 10.0
 
-    def __init__(self, prior_var_n2: tuple[float, float, float], prior_samples: float) -> None:
+    def __init__(self, prior_var_n2: tuple[float, float, float], false_alarms_per_h: float) -> None:
         self.d1 = [2.0 * v for v in prior_var_n2]
         self.s2 = list(prior_var_n2)
-        self.prior_samples = prior_samples
+        self.false_alarms_per_h = false_alarms_per_h
+        self.sample_cap = math.inf
+        """The squared difference's winsorisation over its mean (:func:`exceedance_square`
+        at the spacing the blocks measured; infinite before a block has)."""
+        self._cap_spacing = math.nan  # the spacing sample_cap was derived at, s
+        self.block_cap = exceedance_square(false_alarms_per_h, self.BLOCK_S)
+        """The block ratio's winsorisation over κ (one judged per block)."""
         self.samples = 0  # differences taken
         self.prev1: tuple[float, float, float] | None = None  # y_(t-1)
         self.alpha_cache = (math.nan, math.nan)
@@ -117,19 +129,20 @@ class NoiseEstimate:
             if self.alpha_cache[0] != dt:
                 self.alpha_cache = (dt, -math.expm1(-dt / time_constant_s))
             a_fast = self.alpha_cache[1]
-            run = 1.0 / (self.samples + self.prior_samples)
+            run = 1.0 / self.samples  # the data's running mean: the prior is replaced
             alpha = a_fast if a_fast > run else run  # max(run, a_fast)
-            # e_i = (y_t - y_(t-1))^2 per axis, winsorised at 16 times its mean once warm
+            # e_i = (y_t - y_(t-1))^2 per axis, winsorised where the noise ends once warm
             e0, e1, e2 = y0 - p1[0], y1 - p1[1], y2 - p1[2]
             e0, e1, e2 = e0 * e0, e1 * e1, e2 * e2
             a0, a1, a2 = self.d1
             if self.samples > warm:
-                if e0 > WINSOR_RATIO * a0:
-                    e0 = WINSOR_RATIO * a0
-                if e1 > WINSOR_RATIO * a1:
-                    e1 = WINSOR_RATIO * a1
-                if e2 > WINSOR_RATIO * a2:
-                    e2 = WINSOR_RATIO * a2
+                cap = self.sample_cap
+                if e0 > cap * a0:
+                    e0 = cap * a0
+                if e1 > cap * a1:
+                    e1 = cap * a1
+                if e2 > cap * a2:
+                    e2 = cap * a2
             # 2 s_d <- 2 s_d + alpha (e - 2 s_d)
             self.d1 = [a0 + alpha * (e0 - a0), a1 + alpha * (e1 - a1), a2 + alpha * (e2 - a2)]
             self.block_t += dt
@@ -147,6 +160,15 @@ class NoiseEstimate:
 
     def _end_block(self, time_constant_s: float) -> None:
         n = self.block_n
+        # The spacing this block measured sets the per-sample cap (derived again once it
+        # has moved by 1 %, the filter's cost tolerance); a first block of a chain has one
+        # spacing fewer than samples.
+        intervals = n if self.means else n - 1
+        spacing = self.block_t / intervals if intervals > 0 else math.nan
+        known = self._cap_spacing
+        if spacing > 0.0 and not abs(spacing - known) <= RESCALE_TOLERANCE * known:
+            self._cap_spacing = spacing
+            self.sample_cap = exceedance_square(self.false_alarms_per_h, spacing)
         mean = [v / n for v in self.block_sum]
         # Within-block variance (for status only), over the same memory as s_d.
         alpha = max(1.0 / (self.blocks + 2.0), self.BLOCK_S / time_constant_s)
@@ -169,7 +191,7 @@ class NoiseEstimate:
             for i in range(3):
                 sd = 0.5 * self.d1[i]
                 e = (m0[i] - 2.0 * m1[i] + m2[i]) ** 2 / weight / sd if sd > 0.0 else 1.0
-                ratio += min(e, WINSOR_RATIO * self.kappa) / 3.0
+                ratio += min(e, self.block_cap * self.kappa) / 3.0
             self.kappa += beta * (ratio - self.kappa)
             del self.means[0]
         self.block_sum = [0.0, 0.0, 0.0]

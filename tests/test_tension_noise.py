@@ -1,0 +1,70 @@
+"""The noise estimate's prior and winsorisation: no weight and no ratio of their own."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.stats import chi2
+
+from groundstation.tension import TensionFilterParams
+from groundstation.tension_change import exceedance_square, noise_warmup_samples
+from groundstation.tension_noise import NoiseEstimate
+
+RATE_PER_H = TensionFilterParams().false_alarms_per_h
+TAU_S = TensionFilterParams().noise_time_constant_s
+WARM = noise_warmup_samples()
+
+
+@pytest.mark.parametrize("dt_s", [0.004, 0.01, 0.04, NoiseEstimate.BLOCK_S])
+def test_exceedance_square_is_the_chi_square_quantile_of_one_degree(dt_s: float) -> None:
+    """z² with P(χ²₁ > z²) = rate·dt / 3600 s: a Gaussian's square over its mean exceeds it
+    by chance at the one false-alarm rate (32.2 per sample at 100 Hz, 26.0 per block)."""
+    p = RATE_PER_H * dt_s / 3600.0
+    assert exceedance_square(RATE_PER_H, dt_s) == pytest.approx(chi2.isf(p, 1), rel=1e-6)
+    assert exceedance_square(0.0, dt_s) == math.inf
+    assert exceedance_square(RATE_PER_H, 0.01) == pytest.approx(32.2, abs=0.05)
+    assert exceedance_square(RATE_PER_H, NoiseEstimate.BLOCK_S) == pytest.approx(26.0, abs=0.05)
+
+
+def test_the_prior_stands_until_the_first_difference() -> None:
+    """Before any difference the level is the prior's; from the first one it is the data's
+    running mean alone (no weight of the prior's)."""
+    noise = NoiseEstimate((4.0, 4.0, 4.0), RATE_PER_H)
+    noise.push((0.0, 0.0, 0.0), 0.01, TAU_S, WARM)
+    assert noise.d1 == [8.0, 8.0, 8.0]  # 2 s_d = 2 × the prior variance
+    noise.push((0.1, -0.2, 0.3), 0.01, TAU_S, WARM)
+    assert noise.d1 == pytest.approx([0.01, 0.04, 0.09])
+    noise.push((0.1, -0.2, 0.0), 0.01, TAU_S, WARM)
+    assert noise.d1 == pytest.approx([0.005, 0.02, 0.09])  # the mean of two
+
+
+@pytest.mark.parametrize("dt_s", [0.004, 0.01])
+def test_winsorisation_is_where_gaussian_noise_ends(dt_s: float) -> None:
+    """Once the blocks have measured the spacing, a squared difference is capped at
+    ``exceedance_square`` at that spacing: 60 s of Gaussian noise is never capped (its level
+    within 10 % of the truth), a tug's single jump of 50 σ moves the level by the cap's share
+    alone, and κ's block ratio is capped at the per-block value."""
+    rng = np.random.default_rng(11)
+    sigma = 0.02
+    noise = NoiseEstimate((1.0, 1.0, 1.0), RATE_PER_H)
+    assert noise.sample_cap == math.inf  # no block yet
+    assert noise.block_cap == pytest.approx(exceedance_square(RATE_PER_H, NoiseEstimate.BLOCK_S))
+    capped = 0
+    for y in rng.normal(0.0, sigma, (int(60.0 / dt_s), 3)).tolist():
+        if noise.samples > WARM:
+            d = [y[i] - noise.prev1[i] for i in range(3)] if noise.prev1 else [0.0] * 3
+            capped += sum(d[i] * d[i] > noise.sample_cap * noise.d1[i] for i in range(3))
+        noise.push(y, dt_s, TAU_S, WARM)
+    assert noise.sample_cap == pytest.approx(exceedance_square(RATE_PER_H, dt_s), rel=1e-3)
+    assert capped == 0
+    # s_d = σ², within 2 standard errors of a 5 s exponential mean (~1,000 samples at 100 Hz)
+    assert 0.5 * np.array(noise.d1) == pytest.approx([sigma**2] * 3, rel=0.1)
+    before = list(noise.d1)
+    last = noise.prev1
+    assert last is not None
+    noise.push((last[0] + 50 * sigma, last[1], last[2]), dt_s, TAU_S, WARM)
+    alpha = -math.expm1(-dt_s / TAU_S)
+    assert noise.d1[0] == pytest.approx(before[0] * (1.0 + alpha * (noise.sample_cap - 1.0)))
+    assert noise.d1[0] < before[0] * 1.1  # uncapped, (50 σ)² would have raised it ~2.5x
