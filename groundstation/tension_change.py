@@ -169,6 +169,17 @@ def noise_warmup_samples() -> int:
     return math.floor(2.0 * ESTIMATE_SIGMAS * ESTIMATE_SIGMAS) + 1
 
 
+def kappa_prior_blocks() -> float:
+    """The weight of κ's prior (``NoiseEstimate.KAPPA_PRIOR``), blocks, derived as
+    :func:`noise_warmup_samples` is for the level: the blocks at which κ's own estimate is
+    bounded away from zero at ``ESTIMATE_SIGMAS`` standard errors, ``1 −
+    ESTIMATE_SIGMAS·sqrt(c / B) > 0`` with c = 35/27 κ's relative variance per block
+    (:data:`_KAPPA_VAR_PER_BLOCK`): B = 9·35/27 = 11.7 blocks (2.9 s). The change test's
+    allowance for κ is its warm scatter (:func:`level_scatter_factor`), so until κ's data
+    can stand on their own the prior holds it."""
+    return ESTIMATE_SIGMAS * ESTIMATE_SIGMAS * _KAPPA_VAR_PER_BLOCK
+
+
 def level_samples(memory_samples: float) -> float:
     """The noise level's equilibrium sample count, ``k = 2·M − 1`` (at least 1): an
     exponential mean over ``memory_samples`` = M = tau / dt samples scatters as a k-sample

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 
-from groundstation.tension_change import exceedance_square
+from groundstation.tension_change import exceedance_square, kappa_prior_blocks
 from groundstation.tension_drift import RESCALE_TOLERANCE
 
 __all__ = ["MIN_NOISE_VAR_N2", "NoiseEstimate", "NoiseStatus", "per_sample"]
@@ -47,9 +47,11 @@ class NoiseEstimate:
       correlation time): for independent blocks of n_j samples
       ``E[(m_j - 2 m_(j-1) + m_(j-2))^2] = r (1/n_j + 4/n_(j-1) + 1/n_(j-2))``, which a
       tension ramp does not reach. Pooled over the axes and averaged over six times as long
-      (30 s, 120 blocks: +-8 %), from a prior kappa = 1.5 (weight 10 blocks, 2.5 s) between
-      white noise (kappa = 1) and real vibration (AR(1) with rho = 0.3: 2.65; the realistic
-      simulator's: 2.5); the change test's youth factor covers the rest.
+      (30 s, 120 blocks: +-8 %), from a prior kappa = 1.5 between white noise (kappa = 1)
+      and real vibration (AR(1) with rho = 0.3: 2.65; the realistic simulator's: 2.5),
+      weighed as the blocks kappa's estimate needs to be bounded away from zero at the
+      change test's allowance (:func:`~groundstation.tension_change.kappa_prior_blocks`:
+      11.7 blocks, 2.9 s).
 
     Then ``r = s_d kappa``. Each mean is an exponential average (a running mean of the data
     alone from the first difference: the prior stands only until there is one; the change
@@ -74,7 +76,6 @@ class NoiseEstimate:
     BLOCK_S = 0.25
     SLOW = 6.0
     KAPPA_PRIOR = 1.5
-    KAPPA_PRIOR_BLOCKS = 10.0
 
     def __init__(self, prior_var_n2: tuple[float, float, float], false_alarms_per_h: float) -> None:
         self.d1 = [2.0 * v for v in prior_var_n2]
@@ -90,7 +91,9 @@ class NoiseEstimate:
         self.prev1: tuple[float, float, float] | None = None  # y_(t-1)
         self.alpha_cache = (math.nan, math.nan)
         # long-run part: kappa, the mean over blocks and axes of r_block / s_d
+        # The prior, weighed as the blocks κ needs to stand on its own (kappa_prior_blocks).
         self.kappa = self.KAPPA_PRIOR
+        self._prior_blocks = kappa_prior_blocks()
         self.blocks = 0
         self.break_chain()
 
@@ -184,7 +187,7 @@ class NoiseEstimate:
             weight = 1.0 / n0 + 4.0 / n1 + 1.0 / n2
             self.blocks += 1
             beta = max(
-                1.0 / (self.blocks + self.KAPPA_PRIOR_BLOCKS),
+                1.0 / (self.blocks + self._prior_blocks),
                 self.BLOCK_S / (self.SLOW * time_constant_s),
             )
             ratio = 0.0

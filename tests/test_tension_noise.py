@@ -9,7 +9,12 @@ import pytest
 from scipy.stats import chi2
 
 from groundstation.tension import TensionFilterParams
-from groundstation.tension_change import exceedance_square, noise_warmup_samples
+from groundstation.tension_change import (
+    ESTIMATE_SIGMAS,
+    exceedance_square,
+    kappa_prior_blocks,
+    noise_warmup_samples,
+)
 from groundstation.tension_noise import NoiseEstimate
 
 RATE_PER_H = TensionFilterParams().false_alarms_per_h
@@ -68,3 +73,26 @@ def test_winsorisation_is_where_gaussian_noise_ends(dt_s: float) -> None:
     alpha = -math.expm1(-dt_s / TAU_S)
     assert noise.d1[0] == pytest.approx(before[0] * (1.0 + alpha * (noise.sample_cap - 1.0)))
     assert noise.d1[0] < before[0] * 1.1  # uncapped, (50 σ)² would have raised it ~2.5x
+
+
+def test_kappas_prior_weighs_the_blocks_kappa_needs_to_stand_alone() -> None:
+    """κ's prior weight is where its own estimate is bounded away from zero at the change
+    test's allowance: 1 - 3·sqrt((35/27)/B) = 0 at B = 9·35/27 = 11.7 blocks; after that many
+    blocks the prior weighs half."""
+    b = kappa_prior_blocks()
+    assert b == pytest.approx(9.0 * 35.0 / 27.0)
+    assert 1.0 - ESTIMATE_SIGMAS * math.sqrt((35.0 / 27.0) / b) == pytest.approx(0.0, abs=1e-12)
+    # White noise (κ = 1) from the prior 1.5: after B whole blocks κ is the running mean of
+    # the prior weighed b and the B block ratios, (1.5·b + B)/(b + B), on average over seeds.
+    rng = np.random.default_rng(12)
+    blocks = round(b)
+    n = (blocks + 2) * 25 + 1  # 100 Hz: the first ratio needs three 0.25 s blocks
+    kappas = []
+    for _ in range(60):
+        noise = NoiseEstimate((1e-4, 1e-4, 1e-4), RATE_PER_H)
+        for y in rng.normal(0.0, 0.01, (n, 3)).tolist():
+            noise.push(y, 0.01, TAU_S, WARM)
+        assert noise.blocks == blocks
+        kappas.append(noise.kappa)
+    want = (NoiseEstimate.KAPPA_PRIOR * b + blocks) / (b + blocks)
+    assert float(np.mean(kappas)) == pytest.approx(want, abs=0.05)
