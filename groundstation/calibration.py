@@ -342,16 +342,23 @@ def hover_mask(
     return out
 
 
+STILL_WINDOW_S = 1.0
+"""The one window over which stillness is judged, s: on the floor the rest detector's
+shortest still window (whose mean is the rest offset and the slow stage's β at rest), in the
+air the hover test's mean acceleration (``slow_accel.HOVER_MEAN_S`` is this value). Hand-set:
+at least 1 s of rest for an offset, long enough that the vibration's mean is small beside a
+manoeuvre's acceleration, short beside a hover."""
+
+
 @dataclass(frozen=True)
 class RestCriteria:
-    """What counts as sitting still on the floor.
+    """What counts as sitting still on the floor (for :data:`STILL_WINDOW_S` at least).
 
     Attributes:
         max_gyro_rps: body-rate limit per sample, rad/s (when the gyro is present).
         max_accel_dev_mps2: largest deviation of a sample from the window's mean, per axis.
         max_gravity_dev_mps2: largest | |f| − g | of the window's mean (an accelerometer
             that does not read about g is not at rest, or is not calibrated at all).
-        min_still_s: shortest still window, s (the issue: ≥ 1 s).
 
     A stamp gap longer than :data:`~groundstation.tension.GAP_S` restarts the window.
     """
@@ -359,7 +366,6 @@ class RestCriteria:
     max_gyro_rps: float = 0.05
     max_accel_dev_mps2: float = 0.15
     max_gravity_dev_mps2: float = 1.0
-    min_still_s: float = 1.0
 
 
 def rest_mask(data: CalibrationData, criteria: RestCriteria = RestCriteria()) -> NDArray[np.bool_]:
@@ -376,7 +382,7 @@ def rest_mask(data: CalibrationData, criteria: RestCriteria = RestCriteria()) ->
                 bool(data.armed[i]),
                 None if not np.all(np.isfinite(data.gyro_rps[i])) else data.gyro_rps[i],
             )
-            if cal.window_samples and cal.window_duration_s >= criteria.min_still_s:
+            if cal.window_samples and cal.window_duration_s >= STILL_WINDOW_S:
                 still[j - cal.window_samples + 1 : j + 1] = True
         out[idx] = still
     return out
@@ -411,7 +417,8 @@ class RestCalibrator:
 
     Feed every telemetry sample to :meth:`update`. While the drone is disarmed and still
     (every sample's gyro within ``max_gyro_rps``, its accelerometer within
-    ``max_accel_dev_mps2`` of the window mean) for at least ``min_still_s``, the offset is::
+    ``max_accel_dev_mps2`` of the window mean) for at least :data:`STILL_WINDOW_S`, the
+    offset is::
 
         o = mean(a − b_cfg − R_world_bodyᵀ · (0, 0, g))     # x, y; z set to 0
 
@@ -459,7 +466,8 @@ class RestCalibrator:
     @property
     def rest_mean_body_mps2(self) -> tuple[float, float, float] | None:
         """The still window's mean of ``a − b_cfg − R_world_bodyᵀ·(0, 0, g)`` on all three
-        axes, body frame, m/s², once the window has lasted ``min_still_s`` and reads about g
+        axes, body frame, m/s², once the window has lasted :data:`STILL_WINDOW_S` and reads
+        about g
         (None before, and from the next sample that is not still)."""
         return self._mean
 
@@ -537,7 +545,7 @@ class RestCalibrator:
         self._sum += d
         self._sum2 += d * d
         self._still = True
-        if self.window_duration_s >= c.min_still_s:
+        if self.window_duration_s >= STILL_WINDOW_S:
             mean = self._sum / self._n
             gravity_dev = abs(
                 float(np.linalg.norm(mean + self._bias + down_body * self._g)) - self._g

@@ -78,11 +78,13 @@ __all__ = [
     "thrust_axis_body",
 ]
 
-GAP_S = 0.25
+GAP_S = NoiseEstimate.BLOCK_S
 """A stamp gap longer than this breaks a stream's chain of samples, s: the tension
 filter's noise model and change windows (:class:`TensionFilter`), the rest detector's still
 window (:class:`~groundstation.calibration.RestCalibrator`) and a hover run of
-``calibrate`` (:class:`~groundstation.calibration.HoverCriteria`). Hand-set: 25 samples at
+``calibrate`` (:class:`~groundstation.calibration.HoverCriteria`). One block of the noise
+estimate (0.25 s): a stream silent for a whole block leaves a block without samples, and
+the chain of block means the noise's shape is read from needs every block. 25 samples at
 100 Hz, longer than real telemetry's own gaps (motion capture's up to 150 ms)."""
 _EYE3 = np.eye(3)
 _EYE3.setflags(write=False)

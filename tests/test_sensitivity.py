@@ -23,18 +23,18 @@ def test_the_rows_are_the_tables_hand_set_rows() -> None:
 
 
 def test_a_field_is_scaled_in_new_instances_and_in_a_default_argument() -> None:
-    before = calibration.RestCriteria().min_still_s
+    before = calibration.RestCriteria().max_gyro_rps
     default = calibration.RestCalibrator.__init__.__defaults__[0]  # type: ignore[index]
-    undo = sens.patch("RestCriteria.min_still_s", 2.0)
+    undo = sens.patch("RestCriteria.max_gyro_rps", 2.0)
     try:
-        assert calibration.RestCriteria().min_still_s == 2.0 * before
+        assert calibration.RestCriteria().max_gyro_rps == 2.0 * before
         patched = calibration.RestCalibrator.__init__.__defaults__[0]  # type: ignore[index]
-        assert patched.min_still_s == 2.0 * before  # scaled once, not twice
+        assert patched.max_gyro_rps == 2.0 * before  # scaled once, not twice
         assert tension.TensionFilterParams().hover_wander_n2_per_s > 0.0  # others untouched
     finally:
         for step in reversed(undo):
             step()
-    assert calibration.RestCriteria().min_still_s == before
+    assert calibration.RestCriteria().max_gyro_rps == before
     assert calibration.RestCalibrator.__init__.__defaults__[0] is default  # type: ignore[index]
 
 
