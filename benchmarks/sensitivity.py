@@ -74,7 +74,7 @@ CLASSES = {
 }
 """The parameter classes of docs/constants.md and their modules."""
 
-CONTACT_ROWS = frozenset({"calibration.STILL_WINDOW_S"})
+CONTACT_ROWS = frozenset({"attitude.STILL_WINDOW_S"})
 """Rows judged on the contact figures besides ``ContactParams.*`` and ``RestCriteria.*``
 (the one window of stillness is the rest's; the hover test's too, which the estimator
 figures see)."""

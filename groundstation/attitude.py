@@ -38,6 +38,14 @@ GRAVITY_MPS2 = 9.81
 the 0.02 % difference is 6 µN of a 30 g drone's weight). The one g of the estimator,
 calibration and dashboard."""
 
+STILL_WINDOW_S = 1.0
+"""The one window over which stillness is judged, s (hand-set): on the floor the rest
+detector's shortest still window (whose mean is the rest offset and the slow stage's β at
+rest) and the contact stage's averaging of the resting vertical bias and height; in the air
+the hover test's mean acceleration (``slow_accel.HOVER_MEAN_S`` is this value). At least
+1 s of rest for an offset; long enough that the vibration's mean is small beside a
+manoeuvre's acceleration, short beside a hover."""
+
 Vec3 = tuple[float, float, float]
 Rows = tuple[Vec3, Vec3, Vec3]
 """``R_world_body`` as three rows of floats."""

@@ -44,6 +44,7 @@ from scipy.optimize import least_squares
 from groundstation.attitude import (
     GRAVITY_MPS2,
     QUAT_MIN_NORM,
+    STILL_WINDOW_S,
     rotations_world_body,
     rows_from_quat_wxyz,
 )
@@ -340,14 +341,6 @@ def hover_mask(
         ok = _erode(t, ok, c.settle_s)
         out[idx] = _keep_long_runs(t, ok, c.min_run_s, GAP_S)
     return out
-
-
-STILL_WINDOW_S = 1.0
-"""The one window over which stillness is judged, s: on the floor the rest detector's
-shortest still window (whose mean is the rest offset and the slow stage's β at rest), in the
-air the hover test's mean acceleration (``slow_accel.HOVER_MEAN_S`` is this value). Hand-set:
-at least 1 s of rest for an offset, long enough that the vibration's mean is small beside a
-manoeuvre's acceleration, short beside a hover."""
 
 
 @dataclass(frozen=True)

@@ -140,7 +140,7 @@ import math
 from dataclasses import dataclass
 from typing import Literal
 
-from groundstation.attitude import GRAVITY_MPS2, Rows, rows_from_quat_wxyz
+from groundstation.attitude import GRAVITY_MPS2, STILL_WINDOW_S, Rows, rows_from_quat_wxyz
 from groundstation.frozen import evolve
 
 __all__ = [
@@ -186,7 +186,6 @@ class ContactParams:
             and the vertical acceleration's (rest against fall): the one time scale over
             which the stage judges the floor (``push_hold_s``, ``push_time_constant_s`` and
             ``accel_time_constant_s`` were three values, 0.1, 0.1 and 0.05 s).
-        bias_time_constant_s: Averaging time of the vertical accelerometer bias at rest, s.
         rest_hold_s: At rest the smoothed vertical acceleration, less the bias, stays within
             half of ``(1 - ground_thrust_ratio) g`` of 0 (below minus that the drone
             falls) for this long, s (a rest, or a fall, is seen only then).
@@ -197,7 +196,6 @@ class ContactParams:
     climb_push_max_weight_ratio: float = 0.17
     push_free_weight_ratio: float = 0.034
     floor_time_s: float = 0.1
-    bias_time_constant_s: float = 1.0
     rest_hold_s: float = 0.2
 
     def __post_init__(self) -> None:
@@ -211,7 +209,6 @@ class ContactParams:
             "climb_push_max_weight_ratio",
             "push_free_weight_ratio",
             "floor_time_s",
-            "bias_time_constant_s",
             "rest_hold_s",
         ):
             value = getattr(self, name)
@@ -375,16 +372,17 @@ def contact_step(
     at_rest = still_s >= params.rest_hold_s
 
     # On the ground: disarmed, or low thrust seen at rest. Learn the resting accelerometer
-    # bias and height only at rest (a drone stopped in mid-air falls).
+    # bias and height only at rest (a drone stopped in mid-air falls), averaged over the one
+    # window of stillness (attitude.STILL_WINDOW_S, the rest detector's).
     if not armed or at_rest:
         bias = state.accel_bias_z_mps2
         rest = state.rest_height_m
         if at_rest:
             if math.isfinite(accel):
-                w = min(1.0, dt / params.bias_time_constant_s) if bias is not None else 1.0
+                w = min(1.0, dt / STILL_WINDOW_S) if bias is not None else 1.0
                 bias = accel if bias is None else bias + w * (accel - bias)
             if height is not None:
-                w = min(1.0, dt / params.bias_time_constant_s) if rest is not None else 1.0
+                w = min(1.0, dt / STILL_WINDOW_S) if rest is not None else 1.0
                 rest = height if rest is None else rest + w * (height - rest)
         return evolve(
             _START,

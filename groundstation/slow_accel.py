@@ -48,9 +48,8 @@ from types import MappingProxyType
 from typing import Literal, NamedTuple
 
 from groundstation import bias_kalman as bk
-from groundstation.attitude import GRAVITY_MPS2
+from groundstation.attitude import GRAVITY_MPS2, STILL_WINDOW_S
 from groundstation.bias_kalman import MOCAP_HOLD_S, BiasKalman, BiasKalmanParams
-from groundstation.calibration import STILL_WINDOW_S
 from groundstation.frozen import evolve
 from groundstation.tension import TensionFilterParams
 
@@ -70,7 +69,7 @@ Vec3 = tuple[float, float, float]
 _ZERO3: Vec3 = (0.0, 0.0, 0.0)
 HOVER_MEAN_S = STILL_WINDOW_S
 """The hover test's mean acceleration window, s: the one window of stillness
-(:data:`groundstation.calibration.STILL_WINDOW_S`, the rest's too)."""
+(:data:`groundstation.attitude.STILL_WINDOW_S`, the rest's too)."""
 HOVER_SPEED_LEAK_S = 2.0
 """Without motion capture the hover test's speed is the corrected acceleration's leaky
 integral with this time constant, s (twice ``HOVER_MEAN_S``: it forgets the integral's

@@ -174,7 +174,7 @@ def _learn(state: SlowAccelState, rest: RestCalibrator, msg: Telemetry) -> SlowA
 
 def test_learn_slow_learns_at_rest_only_when_disarmed_and_still() -> None:
     """β at rest is the rest detector's window mean (the one test of stillness), once the
-    window has lasted ``calibration.STILL_WINDOW_S``; a sample that is not still holds β."""
+    window has lasted ``attitude.STILL_WINDOW_S``; a sample that is not still holds β."""
     state = SlowAccelState()
     rest = RestCalibrator()
     still = _telemetry(armed=False, thrust_n=0.0, accel_mps2=(0.2, 0.0, G), gyro_rps=(0, 0, 0))

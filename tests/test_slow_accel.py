@@ -57,7 +57,7 @@ def _run(
     accel_noise_mps2: float = 0.0,
 ) -> SlowAccelState:
     """n samples in one phase; a rest runs through the rest detector as the drone does
-    (its window mean is β once the window has lasted ``calibration.STILL_WINDOW_S``). The
+    (its window mean is β once the window has lasted ``attitude.STILL_WINDOW_S``). The
     accelerometer's noise density is its white noise's, ``accel_noise_mps2² · dt`` (the
     service's tension filter measures it)."""
     rest = RestCalibrator()
