@@ -198,12 +198,8 @@ def flight_phases(
             density = None
             if air:
                 world = [r[0] * f[0] + r[1] * f[1] + r[2] * f[2] for r in R]
-                r0, r1, r2 = noise.push(
-                    world,
-                    dt,
-                    noise_params.noise_time_constant_s,
-                    noise_warmup_samples(),
-                )
+                tau = noise_params.noise_time_constant_s
+                r0, r1, r2 = noise.push(world, dt, math.exp(-dt / tau), tau, noise_warmup_samples())
                 if spacing_s > 0.0:
                     density = (r0 + r1 + r2) / 3.0 * spacing_s
             else:

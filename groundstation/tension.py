@@ -1294,7 +1294,8 @@ class TensionFilter:
             return
         if not 0.0 < dt <= GAP_S:
             self._noise.break_chain()
-        r0, r1, r2 = self._noise.push(y, dt, p.noise_time_constant_s, self._warmup)
+        tau = p.noise_time_constant_s
+        r0, r1, r2 = self._noise.push(y, dt, math.exp(-dt / tau), tau, self._warmup)
         spacing = self._dt_mean
         if spacing == spacing:  # the spacing of the flight (the floor's is not tracked)
             self.noise_density_n2s = (r0 + r1 + r2) / 3.0 * spacing
@@ -1423,6 +1424,7 @@ class TensionFilter:
         if first:
             dt = 0.0
         gap = dt > GAP_S
+        keep = 1.0  # exp(-dt / noise_time_constant_s): the noise level's decay too
         if not first and not gap and dt > 0.0:
             # Mean sample spacing, s (a gap is not a sample spacing): the time the last
             # noise_time_constant_s of samples took over their number, each sample weighed
@@ -1438,7 +1440,7 @@ class TensionFilter:
         noise = self._noise
         estimate_noise = p.estimate_noise
         if estimate_noise:
-            r = noise.push(z, dt, p.noise_time_constant_s, self._warmup)
+            r = noise.push(z, dt, keep, p.noise_time_constant_s, self._warmup)
         else:
             r = self._prior_var
         # R = the long-run variance r, not the per-sample s2: what the filter averages.

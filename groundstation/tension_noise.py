@@ -89,7 +89,6 @@ class NoiseEstimate:
         """The block ratio's winsorisation over κ (one judged per block)."""
         self.samples = 0  # differences taken
         self.prev1: tuple[float, float, float] | None = None  # y_(t-1)
-        self.alpha_cache = (math.nan, math.nan)
         # long-run part: kappa, the mean over blocks and axes of r_block / s_d
         # The prior, weighed as the blocks κ needs to stand on its own (kappa_prior_blocks).
         self.kappa = self.KAPPA_PRIOR
@@ -110,6 +109,7 @@ class NoiseEstimate:
         self,
         y: tuple[float, float, float] | list[float],
         dt: float,
+        keep: float,
         time_constant_s: float,
         warm: int,
     ) -> tuple[float, float, float]:
@@ -118,6 +118,8 @@ class NoiseEstimate:
         Args:
             y: The observation per world axis, N.
             dt: Time since the previous one, s.
+            keep: ``exp(-dt / time_constant_s)``, the level's decay over ``dt`` (the
+                caller's: the filter decays its mean spacing by the same factor).
             time_constant_s: Memory of the level ``s_d``, s.
             warm: Differences after which the squared differences are winsorised.
 
@@ -129,9 +131,7 @@ class NoiseEstimate:
         self.prev1 = (y0, y1, y2)
         if p1 is not None:
             self.samples += 1
-            if self.alpha_cache[0] != dt:
-                self.alpha_cache = (dt, -math.expm1(-dt / time_constant_s))
-            a_fast = self.alpha_cache[1]
+            a_fast = 1.0 - keep
             run = 1.0 / self.samples  # the data's running mean: the prior is replaced
             alpha = a_fast if a_fast > run else run  # max(run, a_fast)
             # e_i = (y_t - y_(t-1))^2 per axis, winsorised where the noise ends once warm

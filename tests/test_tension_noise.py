@@ -20,6 +20,7 @@ from groundstation.tension_noise import NoiseEstimate
 RATE_PER_H = TensionFilterParams().false_alarms_per_h
 TAU_S = TensionFilterParams().noise_time_constant_s
 WARM = noise_warmup_samples()
+KEEP = math.exp(-0.01 / TAU_S)  # the level's decay over a 100 Hz spacing
 
 
 @pytest.mark.parametrize("dt_s", [0.004, 0.01, 0.04, NoiseEstimate.BLOCK_S])
@@ -37,11 +38,11 @@ def test_the_prior_stands_until_the_first_difference() -> None:
     """Before any difference the level is the prior's; from the first one it is the data's
     running mean alone (no weight of the prior's)."""
     noise = NoiseEstimate((4.0, 4.0, 4.0), RATE_PER_H)
-    noise.push((0.0, 0.0, 0.0), 0.01, TAU_S, WARM)
+    noise.push((0.0, 0.0, 0.0), 0.01, KEEP, TAU_S, WARM)
     assert noise.d1 == [8.0, 8.0, 8.0]  # 2 s_d = 2 × the prior variance
-    noise.push((0.1, -0.2, 0.3), 0.01, TAU_S, WARM)
+    noise.push((0.1, -0.2, 0.3), 0.01, KEEP, TAU_S, WARM)
     assert noise.d1 == pytest.approx([0.01, 0.04, 0.09])
-    noise.push((0.1, -0.2, 0.0), 0.01, TAU_S, WARM)
+    noise.push((0.1, -0.2, 0.0), 0.01, KEEP, TAU_S, WARM)
     assert noise.d1 == pytest.approx([0.005, 0.02, 0.09])  # the mean of two
 
 
@@ -61,7 +62,7 @@ def test_winsorisation_is_where_gaussian_noise_ends(dt_s: float) -> None:
         if noise.samples > WARM:
             d = [y[i] - noise.prev1[i] for i in range(3)] if noise.prev1 else [0.0] * 3
             capped += sum(d[i] * d[i] > noise.sample_cap * noise.d1[i] for i in range(3))
-        noise.push(y, dt_s, TAU_S, WARM)
+        noise.push(y, dt_s, math.exp(-dt_s / TAU_S), TAU_S, WARM)
     assert noise.sample_cap == pytest.approx(exceedance_square(RATE_PER_H, dt_s), rel=1e-3)
     assert capped == 0
     # s_d = σ², within 2 standard errors of a 5 s exponential mean (~1,000 samples at 100 Hz)
@@ -69,7 +70,7 @@ def test_winsorisation_is_where_gaussian_noise_ends(dt_s: float) -> None:
     before = list(noise.d1)
     last = noise.prev1
     assert last is not None
-    noise.push((last[0] + 50 * sigma, last[1], last[2]), dt_s, TAU_S, WARM)
+    noise.push((last[0] + 50 * sigma, last[1], last[2]), dt_s, math.exp(-dt_s / TAU_S), TAU_S, WARM)
     alpha = -math.expm1(-dt_s / TAU_S)
     assert noise.d1[0] == pytest.approx(before[0] * (1.0 + alpha * (noise.sample_cap - 1.0)))
     assert noise.d1[0] < before[0] * 1.1  # uncapped, (50 σ)² would have raised it ~2.5x
@@ -91,7 +92,7 @@ def test_kappas_prior_weighs_the_blocks_kappa_needs_to_stand_alone() -> None:
     for _ in range(60):
         noise = NoiseEstimate((1e-4, 1e-4, 1e-4), RATE_PER_H)
         for y in rng.normal(0.0, 0.01, (n, 3)).tolist():
-            noise.push(y, 0.01, TAU_S, WARM)
+            noise.push(y, 0.01, KEEP, TAU_S, WARM)
         assert noise.blocks == blocks
         kappas.append(noise.kappa)
     want = (NoiseEstimate.KAPPA_PRIOR * b + blocks) / (b + blocks)
