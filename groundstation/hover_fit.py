@@ -163,7 +163,9 @@ def flight_phases(
     for seg in np.unique(data.segment):
         state = slow_mod.SlowAccelState()
         rest = RestCalibrator(bias_body_mps2=accel_bias_mps2)
-        noise = NoiseEstimate((prior_var,) * 3, noise_params.false_alarms_per_h)
+        noise = NoiseEstimate(
+            (prior_var,) * 3, noise_params.noise_prior_samples, noise_params.false_alarms_per_h
+        )
         steps = np.diff(data.stamp_s[data.segment == seg])
         spacing_s = float(np.median(steps)) if steps.size else math.nan
         # The hover test's threshold at the recording's spacing (the service's, at its

@@ -620,6 +620,7 @@ class TensionFilterParams:
         estimate_noise: Estimate the observation noise (variance and lag-1
             autocorrelation per axis) on line; False keeps the prior, white.
         noise_time_constant_s: Memory of the noise estimate, s.
+        noise_prior_samples: Weight of the prior in the noise estimate, samples.
         hover_time_constant_s: Shortest time constant of the filter at hover, s: the
             process noise is ``Q = r dt_mean / tau^2 * dt`` per axis (r the observation
             noise, dt_mean the mean sample spacing), tau at least this whatever the noise
@@ -664,6 +665,7 @@ class TensionFilterParams:
     thrust_noise_n: float = 0.003
     estimate_noise: bool = True
     noise_time_constant_s: float = 5.0
+    noise_prior_samples: float = 2.0
     hover_time_constant_s: float = 6.0
     hover_wander_n2_per_s: float = 4.5e-8
     false_alarms_per_h: float = 0.005
@@ -683,6 +685,7 @@ class TensionFilterParams:
             "mass_kg": self.mass_kg,
             "accel_noise_mps2": self.accel_noise_mps2,
             "noise_time_constant_s": self.noise_time_constant_s,
+            "noise_prior_samples": self.noise_prior_samples,
             "hover_time_constant_s": self.hover_time_constant_s,
             "change_min_step_weight_ratio": self.change_min_step_weight_ratio,
             "change_max_window_s": self.change_max_window_s,
@@ -1135,7 +1138,7 @@ class TensionFilter:
         self._prior_var = (float(prior[0, 0]), float(prior[1, 1]), float(prior[2, 2]))
         v0, v1, v2 = self._prior_var
         self._prior_std = (math.sqrt(v0), math.sqrt(v1), math.sqrt(v2))
-        self._noise = NoiseEstimate(self._prior_var, p.false_alarms_per_h)
+        self._noise = NoiseEstimate(self._prior_var, p.noise_prior_samples, p.false_alarms_per_h)
         self._warmup = noise_warmup_samples()  # the noise estimate's warm-up, derived
         self._dt_mean = math.nan
         # The mean spacing over the noise level's memory: the spacings' and the samples'

@@ -53,9 +53,8 @@ class NoiseEstimate:
       change test's allowance (:func:`~groundstation.tension_change.kappa_prior_blocks`:
       11.7 blocks, 2.9 s).
 
-    Then ``r = s_d kappa``. Each mean is an exponential average (a running mean of the data
-    alone from the first difference: the prior stands only until there is one; the change
-    test's youth factor allows for the young estimate), winsorised once warm where the
+    Then ``r = s_d kappa``. Each mean is an exponential average (a running mean for the
+    first samples, started from the prior), winsorised once warm where the
     noise ends: at the ratio to its mean that a Gaussian's square exceeds by chance at the
     estimator's one false-alarm rate (:func:`~groundstation.tension_change.exceedance_square`:
     32.2 per sample at 100 Hz, at the spacing the blocks measure; 26.0 per block), so a
@@ -67,8 +66,8 @@ class NoiseEstimate:
     per-call overhead would cost more than the arithmetic).
 
     Args:
-        prior_var_n2: Prior per-sample variance per world axis, N^2 (until the first
-            difference).
+        prior_var_n2: Prior per-sample variance per world axis, N^2.
+        prior_samples: Weight of the prior, samples.
         false_alarms_per_h: The estimator's one false-alarm rate, 1/h
             (``TensionFilterParams.false_alarms_per_h``): the winsorisation's level.
     """
@@ -77,9 +76,15 @@ class NoiseEstimate:
     SLOW = 6.0
     KAPPA_PRIOR = 1.5
 
-    def __init__(self, prior_var_n2: tuple[float, float, float], false_alarms_per_h: float) -> None:
+    def __init__(
+        self,
+        prior_var_n2: tuple[float, float, float],
+        prior_samples: float,
+        false_alarms_per_h: float,
+    ) -> None:
         self.d1 = [2.0 * v for v in prior_var_n2]
         self.s2 = list(prior_var_n2)
+        self.prior_samples = prior_samples
         self.false_alarms_per_h = false_alarms_per_h
         self.sample_cap = math.inf
         """The squared difference's winsorisation over its mean (:func:`exceedance_square`
@@ -132,7 +137,7 @@ class NoiseEstimate:
         if p1 is not None:
             self.samples += 1
             a_fast = 1.0 - keep
-            run = 1.0 / self.samples  # the data's running mean: the prior is replaced
+            run = 1.0 / (self.samples + self.prior_samples)
             alpha = a_fast if a_fast > run else run  # max(run, a_fast)
             # e_i = (y_t - y_(t-1))^2 per axis, winsorised where the noise ends once warm
             e0, e1, e2 = y0 - p1[0], y1 - p1[1], y2 - p1[2]

@@ -474,6 +474,7 @@ def test_invalid_observation_in_filter_raises() -> None:
         {"change_min_window": 0},
         {"drift_min_time_constant_s": 7.0},
         {"false_alarms_per_h": math.nan},
+        {"noise_prior_samples": 0.0},
         {"false_alarms_per_h": -1.0},
         {"change_max_window_s": math.inf},
     ],

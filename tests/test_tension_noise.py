@@ -1,4 +1,4 @@
-"""The noise estimate's prior and winsorisation: no weight and no ratio of their own."""
+"""The noise estimate's prior and its winsorisation (no ratio of its own)."""
 
 from __future__ import annotations
 
@@ -19,6 +19,7 @@ from groundstation.tension_noise import NoiseEstimate
 
 RATE_PER_H = TensionFilterParams().false_alarms_per_h
 TAU_S = TensionFilterParams().noise_time_constant_s
+PRIOR_SAMPLES = TensionFilterParams().noise_prior_samples
 WARM = noise_warmup_samples()
 KEEP = math.exp(-0.01 / TAU_S)  # the level's decay over a 100 Hz spacing
 
@@ -34,16 +35,16 @@ def test_exceedance_square_is_the_chi_square_quantile_of_one_degree(dt_s: float)
     assert exceedance_square(RATE_PER_H, NoiseEstimate.BLOCK_S) == pytest.approx(26.0, abs=0.05)
 
 
-def test_the_prior_stands_until_the_first_difference() -> None:
-    """Before any difference the level is the prior's; from the first one it is the data's
-    running mean alone (no weight of the prior's)."""
-    noise = NoiseEstimate((4.0, 4.0, 4.0), RATE_PER_H)
+def test_the_prior_weighs_its_samples_in_the_running_mean() -> None:
+    """Before any difference the level is the prior's; then the running mean of the prior,
+    weighed as ``prior_samples`` differences, and the data."""
+    noise = NoiseEstimate((4.0, 4.0, 4.0), 2.0, RATE_PER_H)
     noise.push((0.0, 0.0, 0.0), 0.01, KEEP, TAU_S, WARM)
     assert noise.d1 == [8.0, 8.0, 8.0]  # 2 s_d = 2 × the prior variance
     noise.push((0.1, -0.2, 0.3), 0.01, KEEP, TAU_S, WARM)
-    assert noise.d1 == pytest.approx([0.01, 0.04, 0.09])
+    assert noise.d1 == pytest.approx([(16.0 + e) / 3.0 for e in (0.01, 0.04, 0.09)])
     noise.push((0.1, -0.2, 0.0), 0.01, KEEP, TAU_S, WARM)
-    assert noise.d1 == pytest.approx([0.005, 0.02, 0.09])  # the mean of two
+    assert noise.d1 == pytest.approx([(16.0 + e) / 4.0 for e in (0.01, 0.04, 0.18)])
 
 
 @pytest.mark.parametrize("dt_s", [0.004, 0.01])
@@ -54,7 +55,7 @@ def test_winsorisation_is_where_gaussian_noise_ends(dt_s: float) -> None:
     alone, and κ's block ratio is capped at the per-block value."""
     rng = np.random.default_rng(11)
     sigma = 0.02
-    noise = NoiseEstimate((1.0, 1.0, 1.0), RATE_PER_H)
+    noise = NoiseEstimate((1.0, 1.0, 1.0), PRIOR_SAMPLES, RATE_PER_H)
     assert noise.sample_cap == math.inf  # no block yet
     assert noise.block_cap == pytest.approx(exceedance_square(RATE_PER_H, NoiseEstimate.BLOCK_S))
     capped = 0
@@ -90,7 +91,7 @@ def test_kappas_prior_weighs_the_blocks_kappa_needs_to_stand_alone() -> None:
     n = (blocks + 2) * 25 + 1  # 100 Hz: the first ratio needs three 0.25 s blocks
     kappas = []
     for _ in range(60):
-        noise = NoiseEstimate((1e-4, 1e-4, 1e-4), RATE_PER_H)
+        noise = NoiseEstimate((1e-4, 1e-4, 1e-4), PRIOR_SAMPLES, RATE_PER_H)
         for y in rng.normal(0.0, 0.01, (n, 3)).tolist():
             noise.push(y, 0.01, KEEP, TAU_S, WARM)
         assert noise.blocks == blocks
