@@ -363,7 +363,11 @@ class LocalizationSection(_Section):
     exit_elevation_std_rad: float = Field(0.03, gt=0.0)
     """σ of ``exit_elevation_rad`` when the Reel message gives none, rad."""
     mocap_std_m: float = Field(0.002, gt=0.0)
-    """Horizontal σ of the motion-capture position (``azimuth = "mocap"``), m."""
+    """σ of the motion-capture position per axis, m (a Telemetry ``position_m`` without a
+    ``position_std_m`` of its own): the azimuth's with ``azimuth = "mocap"``, the bias
+    filter's position observation, and the floor-contact height band (lift-off once the
+    height stands out of it by the one false-alarm rate: 1.1 cm at 2 mm). Set it to the
+    system's real noise: too small reads a jittering marker as a lift-off."""
     position_max_std_m: float = Field(0.05, gt=0.0)
     """A Telemetry ``position_m`` whose ``position_std_m`` exceeds this on any axis (an onboard
     estimator not yet converged, a Flow deck's x/y odometry) is used as no position: not for

@@ -740,3 +740,38 @@ def test_flight_outside_the_calibrated_battery_range_is_flagged_and_told_once() 
     assert all(e["on_ground"] for e in est)
     assert {e["calibration_extrapolated"] for e in est} == {None}
     assert not events
+
+
+@pytest.mark.parametrize("own_std", [True, False])
+def test_the_floor_band_is_the_heights_own_sigma(own_std: bool) -> None:
+    """Lift-off by the height stands out of that height's noise: an onboard position (a
+    Lighthouse deck) resting on the floor with 1 cm of noise in z, armed at 0.9 of the weight,
+    stays on the ground when its ``position_std_m`` says 1 cm; read with motion capture's
+    σ (``[localization] mocap_std_m``, 2 mm, the contract's default without one) the same
+    noise is taken for lift-offs. 10 s at 250 Hz."""
+    rng = np.random.default_rng(21)
+    pipe = Pipeline(settings_for())
+    weight_n = 0.030 * 9.81
+    std = {"position_std_m": [0.01, 0.01, 0.01]} if own_std else {}
+    seq = 0
+    for _ in range(500):  # 2 s disarmed at rest: the resting height is learnt
+        pipe.handle(
+            _telemetry(seq, accel_mps2=[0.0, 0.0, 9.81], thrust_n=0.0, armed=False,
+                       position_m=[0.5, 0.0, 0.04], **std),
+            seq * 0.004,
+        )  # fmt: skip
+        seq += 1
+    airborne = 0
+    for z in (0.04 + rng.normal(0.0, 0.01, 2500)).tolist():
+        out = pipe.handle(
+            _telemetry(seq, accel_mps2=[0.0, 0.0, 9.81], thrust_n=0.9 * weight_n,
+                       position_m=[0.5, 0.0, z], **std),
+            seq * 0.004,
+        )  # fmt: skip
+        seq += 1
+        estimates = [json.loads(o.payload) for o in out if o.key.endswith("/estimate")]
+        airborne += sum(not e["on_ground"] for e in estimates)
+    if own_std:
+        assert airborne == 0
+    else:
+        assert airborne > 100

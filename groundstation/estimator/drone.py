@@ -286,7 +286,8 @@ class DroneEstimator:
         self.contact = contact_mod.ContactState()
         self.mocap_std_m = settings.localization.mocap_std_m
         """σ_p, m: the motion-capture position's noise per axis (``[localization]
-        mocap_std_m``): the contact stage's height band."""
+        mocap_std_m``): the contact stage's height band where a message gives no
+        ``position_std_m`` of its own."""
         self.bias_step_std_mps2 = flight_params(params.calibration).flight_bias_std_mps2
         """σ_δ, m/s²: how far the accelerometer's bias strays from the rest's once the
         propellers spin (``[calibration] flight_bias_std_mps2``, fitted by ``calibrate``;
@@ -502,7 +503,9 @@ class DroneEstimator:
             vertical_noise_var_mps4=None if noise_n2 is None else noise_n2 / (mass_kg * mass_kg),
             sample_sigmas=sample_sigmas,
             bias_step_std_mps2=self.bias_step_std_mps2,
-            height_std_m=self.mocap_std_m,
+            # The height's own σ where the message gives one (an onboard estimator's), else
+            # motion capture's (the contract's default for an absent position_std_m).
+            height_std_m=self.mocap_std_m if msg.position_std_m is None else msg.position_std_m[2],
         )
         self.contact = contact
         self._check_battery(msg.vbat_v, on_ground, now_s)
