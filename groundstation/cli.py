@@ -85,10 +85,23 @@ def _stop_on_signals(*, child: bool = False) -> threading.Event:
     return stop
 
 
-def _wait(stop: threading.Event) -> None:
-    # Event.wait with a timeout keeps the main thread responsive to signals.
+def _wait(stop: threading.Event, children: dict[str, Any] | None = None) -> None:
+    """Until ``stop`` is set (Event.wait with a timeout keeps the main thread responsive
+    to signals). A child process (name → Popen) that exits meanwhile is said once at ERROR,
+    with its status: the service goes on estimating without it (its own message, e.g. a
+    port another process took between our check and its bind, is on stderr above)."""
+    watched = dict(children or {})
     while not stop.wait(0.2):
-        pass
+        for name, child in list(watched.items()):
+            status = child.poll()
+            if status is not None:
+                _log.error(
+                    "the %s (pid %s) exited with status %s; the service goes on without it",
+                    name,
+                    child.pid,
+                    status,
+                )
+                del watched[name]
 
 
 def _add_common(p: argparse.ArgumentParser) -> None:
@@ -402,7 +415,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
     stop = _stop_on_signals()
     with ZenohBus(settings.zenoh) as bus:
         service = Service(settings, bus, replace_recording=args.force)
-        children = []
+        children: dict[str, Any] = {}
         try:
             try:
                 service.start()
@@ -410,13 +423,13 @@ def cmd_serve(args: argparse.Namespace) -> int:
                 print(f"groundstation serve: {exc}", file=sys.stderr, flush=True)
                 return 2
             if endpoint is not None and not args.headless:
-                children.append(_spawn_dashboard(args, settings, endpoint))
+                children["dashboard"] = _spawn_dashboard(args, settings, endpoint)
             if endpoint is not None and foxglove:
-                children.append(_spawn_foxglove(args, settings, endpoint))
+                children["Foxglove server"] = _spawn_foxglove(args, settings, endpoint)
             print(f"groundstation serve: running (instance {service.instance})", flush=True)
-            _wait(stop)
+            _wait(stop, children)
         finally:
-            for child in children:
+            for child in children.values():
                 _stop_child(child)
             service.close()
     return 0

@@ -51,6 +51,64 @@ def test_demo_moves_off_a_busy_default_dashboard_port_loudly(
             cli._demo_web_port(argparse.Namespace(web_port=port), settings)
 
 
+def test_demo_moves_off_a_busy_default_bus_port_loudly(
+    monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    """Only the demo's default bus endpoint moves when taken, at WARNING, to a port that is
+    free; the endpoint it listens on is the one it says."""
+    import socket
+
+    from groundstation import cli
+    from groundstation.config import load_settings
+
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen(1)
+        port = busy.getsockname()[1]
+        monkeypatch.setattr(cli, "ROUTER_ENDPOINT", f"tcp/127.0.0.1:{port}")
+        settings = load_settings(None, {}, use_env=False)
+        args = argparse.Namespace(listen=[], connect=[], config=None)
+        with caplog.at_level("WARNING", logger="groundstation"):
+            moved, line = cli._demo_bus(args, settings)
+        (endpoint,) = moved.zenoh.listen
+        moved_port = int(endpoint.rsplit(":", 1)[1])
+        assert moved_port not in (port, 0) and moved.zenoh.mode == "peer"
+        assert line == f"zenoh: peer on {endpoint}"
+        assert f"tcp/127.0.0.1:{port} is in use" in caplog.text
+        assert f"listens on {endpoint} instead" in caplog.text
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", moved_port))  # it was free to take
+
+
+def test_serve_says_once_when_a_child_exits_and_goes_on(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """A dashboard or Foxglove child that dies (a port taken between serve's check and the
+    child's bind) is said at ERROR once, with its status; serve keeps waiting for its stop."""
+    import subprocess
+    import sys
+    import threading
+
+    from groundstation import cli
+
+    child = subprocess.Popen([sys.executable, "-c", "raise SystemExit(2)"])
+    child.wait(30)
+    stop = threading.Event()
+    timer = threading.Timer(1.0, stop.set)
+    timer.start()
+    try:
+        with caplog.at_level("ERROR", logger="groundstation"):
+            cli._wait(stop, {"Foxglove server": child})
+    finally:
+        timer.cancel()
+    assert stop.is_set()
+    said = [r.getMessage() for r in caplog.records if "exited" in r.getMessage()]
+    assert said == [
+        f"the Foxglove server (pid {child.pid}) exited with status 2; the service goes on "
+        "without it"
+    ]
+
+
 def test_stopping_a_child_that_ignores_sigterm_kills_it_without_raising() -> None:
     """``serve`` stops its dashboard / Foxglove child with SIGTERM, then SIGKILL; a child that
     does not go (ignores SIGTERM, or a busy machine) must not turn the service's exit into a

@@ -19,7 +19,9 @@ from groundstation.config import Settings
 from groundstation.foxglove.offline import SceneTap
 from groundstation.foxglove.scene import (
     ELLIPSOID_SIGMAS,
+    MOCAP_RGBA,
     MODE_RGBA,
+    TRUTH_RGBA,
     DroneInputs,
     build_drone_scene,
     drone_mode,
@@ -133,6 +135,16 @@ def test_follow_and_landing_state_is_the_drones_colour(follow: dict[str, Any], m
     assert drone_mode(est) == mode
     assert build_drone_scene(DroneInputs("cf1", est), PARAMS).body_rgba == MODE_RGBA[mode]  # type: ignore[index]
     assert len(set(MODE_RGBA.values())) == len(MODE_RGBA)
+
+
+def test_motion_capture_and_truth_stand_apart_from_every_mode_colour() -> None:
+    # The marker beside a following drone must not read as the drone: RGB distance of at
+    # least 0.25 from every body colour (the marker was the following green's near twin).
+    for name, marker in (("mocap", MOCAP_RGBA), ("truth", TRUTH_RGBA)):
+        for mode, body in MODE_RGBA.items():
+            distance = math.dist(marker[:3], body[:3])
+            assert distance >= 0.25, (name, mode, distance)
+    assert math.dist(MOCAP_RGBA[:3], TRUTH_RGBA[:3]) >= 0.25
 
 
 def test_without_a_position_the_drone_is_drawn_at_motion_capture() -> None:

@@ -67,7 +67,9 @@ MODE_RGBA: dict[DroneMode, RGBA] = {
 TETHER_RGBA: RGBA = (0.16, 0.16, 0.16, 1.0)
 FLOOR_RUN_RGBA: RGBA = (0.59, 0.43, 0.24, 1.0)
 TENSION_RGBA: RGBA = (0.88, 0.19, 0.19, 1.0)
-MOCAP_RGBA: RGBA = (0.18, 0.62, 0.27, 1.0)
+MOCAP_RGBA: RGBA = (0.0, 0.8, 0.85, 1.0)
+"""Motion capture's marker: cyan, apart from every mode's colour (the dashboard's green is
+the body's "following" here)."""
 TRUTH_RGBA: RGBA = (0.9, 0.3, 0.85, 1.0)
 BASE_RGBA: RGBA = (0.53, 0.56, 0.59, 1.0)
 

@@ -14,7 +14,7 @@ deleted when the scene no longer has it:
                     by mode (flying, following, landing, stopped, on ground)
 ``{drone}/uncertainty``  ellipsoid of ± 2 σ of the estimated position
 ``{drone}/base``    a column from the floor to the exit point, and the exit point
-``{drone}/mocap``   the motion-capture position (green) and a line to the estimate
+``{drone}/mocap``   the motion-capture position (cyan) and a line to the estimate
 ``{drone}/truth``   the simulator's truth (magenta)
 ``{drone}/label``   id, mode, |T|
 ==================  =========================================================================

@@ -161,18 +161,58 @@ def test_serve_serves_the_scene_to_a_foxglove_client(procs: Procs) -> None:
     assert service.stop(signal.SIGTERM) == 0
 
 
-def test_serve_refuses_a_foxglove_port_in_use(procs: Procs) -> None:
+@pytest.mark.parametrize("command", ["serve", "demo"])
+def test_a_foxglove_port_in_use_is_refused(procs: Procs, command: str) -> None:
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as taken:
         taken.bind(("127.0.0.1", 0))
         taken.listen()
         port = taken.getsockname()[1]
         proc = procs.groundstation(
-            "serve", "serve", "--headless", "--foxglove-port", str(port), "--listen",
+            command, command, "--headless", "--foxglove-port", str(port), "--listen",
             f"tcp/127.0.0.1:{free_port()}",
         )  # fmt: skip
         assert proc.popen.wait(30) == 2
     out = proc.output()
     assert f"Foxglove WebSocket port 127.0.0.1:{port} is in use" in out, out
+
+
+def test_serve_runs_no_foxglove_server_unless_asked(procs: Procs) -> None:
+    """Off by default: ``serve`` without a port starts no child and listens on nothing but
+    its bus (checked in /proc, not from the log)."""
+    bus_port = free_port()
+    service = procs.groundstation(
+        "serve", "serve", "--headless", "--listen", f"tcp/127.0.0.1:{bus_port}"
+    )
+    wait_for_port(bus_port, timeout_s=30)
+    deadline = time.monotonic() + 30
+    while "running" not in service.output() and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert "running" in service.output(), service.output()
+    pid = service.popen.pid
+    children = Path(f"/proc/{pid}/task/{pid}/children").read_text().split()
+    assert children == [], children
+    assert _listening_ports(pid) == {bus_port}, service.output()
+    assert "foxglove" not in service.output().lower()
+    assert service.stop(signal.SIGTERM) == 0
+
+
+def _listening_ports(pid: int) -> set[int]:
+    """TCP ports the process listens on (its sockets' inodes matched in /proc/net/tcp*)."""
+    inodes = set()
+    for fd in Path(f"/proc/{pid}/fd").iterdir():
+        try:
+            target = fd.readlink().as_posix()
+        except OSError:
+            continue
+        if target.startswith("socket:["):
+            inodes.add(target[len("socket:[") : -1])
+    ports = set()
+    for table in ("/proc/net/tcp", "/proc/net/tcp6"):
+        for row in Path(table).read_text().splitlines()[1:]:
+            cols = row.split()
+            if cols[3] == "0A" and cols[9] in inodes:  # 0A: LISTEN
+                ports.add(int(cols[1].rsplit(":", 1)[1], 16))
+    return ports
 
 
 def test_a_recording_replayed_offline_opens_in_3d(procs: Procs, tmp_path: Path) -> None:
