@@ -505,6 +505,21 @@ def cmd_sim(args: argparse.Namespace) -> int:
 
     settings = _load(args)
     _check_scenario(settings.sim.scenario)
+    if args.once:
+        natural_s = SCENARIOS[settings.sim.scenario].duration_s
+        if natural_s is None:
+            print(
+                f"groundstation sim: scenario {settings.sim.scenario!r} runs until stopped; "
+                "--once needs a scenario with an end (see --list), or give --duration S",
+                file=sys.stderr,
+                flush=True,
+            )
+            return 2
+        asked_s = settings.sim.duration_s
+        end_s = natural_s if asked_s is None else min(asked_s, natural_s)
+        settings = settings.model_copy(
+            update={"sim": settings.sim.model_copy(update={"duration_s": end_s})}
+        )
     stop = _stop_on_signals()
     z = settings.zenoh
     with ZenohBus(z) as bus:
@@ -941,6 +956,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--list", action="store_true", help="list the scenarios")
     p.add_argument("--drones", metavar="ID", nargs="+", help="drone ids to simulate")
     p.add_argument("--duration", type=float, metavar="S", help="stop after S simulated seconds")
+    p.add_argument(
+        "--once",
+        action="store_true",
+        help="stop when the scenario ends (its natural length; with --duration, the earlier)",
+    )
     p.add_argument(
         "--speed", type=float, metavar="X", help="real-time factor (1 = wall clock, 2 = twice)"
     )

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import ast
 import importlib
+import re
 import sys
 from pathlib import Path
 
@@ -192,6 +193,39 @@ def test_every_room_is_described_in_the_architecture_page() -> None:
     text = (PACKAGE.parent / "docs" / "architecture.md").read_text()
     for room in ROOMS:
         assert f"**{room}**" in text, f"docs/architecture.md does not describe the {room} room"
+
+
+def test_every_module_is_in_the_readme_table() -> None:
+    """README's module table names every module and subpackage of groundstation/ (a cell
+    may name several: ``groundstation/messages.py``, ``config.py``)."""
+    rows = [
+        line
+        for line in (PACKAGE.parent / "README.md").read_text().splitlines()
+        if line.startswith("| `groundstation/")
+    ]
+    named = set()
+    for row in rows:
+        cell = row.split("|")[1]
+        named.update(re.findall(r"`(?:groundstation/)?([\w/]+?(?:\.py|/))`", cell))
+    missing = [
+        path.name + ("/" if path.is_dir() else "")
+        for path in sorted(PACKAGE.iterdir())
+        if (path.suffix == ".py" and path.stem not in ("__init__", "__main__"))
+        or (path.is_dir() and (path / "__init__.py").exists())
+    ]
+    missing = [name for name in missing if name not in named]
+    assert not missing, f"README's module table lacks {missing}"
+
+
+def test_no_change_history_in_docstrings_or_comments() -> None:
+    """The code says what is; git holds how it came to be ("issue N" belongs in commits)."""
+    found = []
+    for root in ("groundstation", "tests", "benchmarks", "scripts"):
+        for path in sorted((PACKAGE.parent / root).rglob("*.py")):
+            for lineno, line in enumerate(path.read_text().splitlines(), 1):
+                if re.search(r"\bissues? #?\d+\b", line, re.IGNORECASE):
+                    found.append(f"{path.relative_to(PACKAGE.parent)}:{lineno}")
+    assert not found, f"change history in the code: {found}"
 
 
 @pytest.mark.parametrize("module", PHYSICS)

@@ -436,3 +436,23 @@ def test_a_configured_motor_model_is_fitted_or_refused_and_never_half_written(
     argv = ["calibrate", str(a), str(b), "--config", str(cfg), "--out", str(refused)]
     assert main(argv) == 2
     assert "needs vbat_v" in capsys.readouterr().err and not refused.exists()
+
+
+def test_a_fit_outside_its_keys_range_is_said_and_not_written(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Exact motion capture (an ideal simulator's) gives the hover's velocity no scatter at
+    all: σ_v = 0 cannot be written ([calibration] needs > 0), so calibrate says so and writes
+    the rest, where it once failed with "the written configuration is invalid"."""
+    data = flight([PAPER_HOVER_SPOTS_M[0]], TRUTH, seed=1, hover_s=12.0)
+    # Positions on a 1 cm grid: every hover sample is its spot exactly, its velocity 0.
+    exact = dataclasses.replace(data, position_world_m=np.round(data.position_world_m, 2))
+    rec = tmp_path / "exact.mcap"
+    write_mcap(str(rec), exact)
+    out = tmp_path / "cal.toml"
+    assert main(["calibrate", str(rec), "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "hover velocity           not fitted: hover_velocity_std_mps = 0 is outside" in printed
+    cal = load_settings(out, use_env=False).for_drone("cf1").calibration
+    assert cal.hover_velocity_std_mps is None and cal.hover_velocity_time_s is None
+    assert abs(cal.thrust_scale - 0.93) < 0.01  # the rest of the fit is written

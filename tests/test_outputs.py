@@ -3,7 +3,7 @@
 The three ways a lab lost a flight (``replay j.mcap --offline --out j.mcap``, ``calibrate
 c1.mcap --out c1.mcap``, ``record --out`` onto an existing flight) each leave the file
 byte-identical; ``--force`` replaces an output, never an input. The end-to-end check with a
-real recording made by ``sim`` + ``record`` is tests/integration/test_outputs_cli.py.
+real recording made by ``sim`` + ``record`` is tests/integration/test_user_outputs.py.
 """
 
 from __future__ import annotations
@@ -171,6 +171,14 @@ def test_replay_figures_onto_a_file_or_old_figures_is_a_clear_error(
     rc = main(["replay", str(j), "--offline", "--out", str(out), "--figures", str(figs)])
     assert rc == 2 and "already holds figures (cf1_tension.png)" in capsys.readouterr().err
     assert (figs / "cf1_tension.png").read_bytes() == b"an earlier figure" and not out.exists()
+    # Asked with --force, the figures are replaced (and the directory's other files kept).
+    (figs / "notes.txt").write_text("kept")
+    rc = main(["replay", str(j), "--offline", "--out", str(out), "--figures", str(figs), "--force"])
+    assert rc == 0, capsys.readouterr().err
+    png = (figs / "cf1_tension.png").read_bytes()
+    assert png.startswith(b"\x89PNG") and (figs / "notes.txt").read_text() == "kept"
+    _no_partials(tmp_path)
+    _no_partials(figs)
 
 
 def test_replay_out_without_offline_is_an_error(

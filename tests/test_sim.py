@@ -254,6 +254,23 @@ def test_the_calibration_scenario_rests_disarmed_on_the_floor_then_tours_the_spo
     assert float(np.percentile(speed_h, 90)) >= 0.3
 
 
+def test_sim_once_stops_at_the_scenarios_end(capsys: pytest.CaptureFixture[str]) -> None:
+    """``sim --once`` flies the scenario's natural length and returns (the calibration
+    rehearsal ends by itself); a scenario without an end is refused before the bus opens."""
+    import socket
+
+    from groundstation.cli import main
+
+    assert main(["sim", "--scenario", "hover", "--once"]) == 2
+    assert "'hover' runs until stopped" in capsys.readouterr().err
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    argv = ["sim", "--scenario", "takeoff_ramp", "--once", "--speed", "20", "--mode", "peer"]
+    # 16 simulated seconds at 20x: it returns by itself (without --once it runs until stopped).
+    assert main([*argv, "--listen", f"tcp/127.0.0.1:{port}"]) == 0
+
+
 def test_sim_untethered_flag_sets_sim_untethered() -> None:
     from groundstation.cli import _load, _sim_overrides, build_parser
 

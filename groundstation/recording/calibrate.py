@@ -33,7 +33,7 @@ from groundstation.calibration import (
     fit_calibration,
     hover_mask,
 )
-from groundstation.config import ConfigError, Settings, load_settings
+from groundstation.config import CalibrationSection, ConfigError, Settings, load_settings
 from groundstation.estimator.drone import slow_accel_params
 from groundstation.hover_fit import (
     HOVER_FIT_MIN_S,
@@ -972,6 +972,15 @@ def hover_velocity_drone(rec: DroneRecording, settings: Settings) -> tuple[dict[
             f"capture (the service's hover test; need {HOVER_FIT_MIN_S:.0f} s): the "
             "filter's defaults stand"
         )
+    elif refused := _outside_bounds(
+        {
+            "hover_velocity_std_mps": round(fit.std_mps, 6),
+            "hover_velocity_time_s": round(fit.time_s, 4),
+        }
+    ):
+        lines.append(
+            f"    hover velocity           not fitted: {refused}: the filter's defaults stand"
+        )
     else:
         keys["hover_velocity_std_mps"] = round(fit.std_mps, 6)
         keys["hover_velocity_time_s"] = round(fit.time_s, 4)
@@ -986,6 +995,15 @@ def hover_velocity_drone(rec: DroneRecording, settings: Settings) -> tuple[dict[
         lines.append(
             f"    flight velocity          not fitted: {airborne_s:.1f} s of flight under "
             f"motion capture (need {HOVER_FIT_MIN_S:.0f} s): the bias filter's defaults stand"
+        )
+    elif refused := _outside_bounds(
+        {
+            "flight_velocity_std_mps": round(flight.velocity_std_mps, 6),
+            "flight_velocity_time_s": round(flight.velocity_time_s, 4),
+        }
+    ):
+        lines.append(
+            f"    flight velocity          not fitted: {refused}: the bias filter's defaults stand"
         )
     else:
         keys["flight_velocity_std_mps"] = round(flight.velocity_std_mps, 6)
@@ -1002,6 +1020,8 @@ def hover_velocity_drone(rec: DroneRecording, settings: Settings) -> tuple[dict[
                 "    flight_bias_std_mps2     not fitted: no flight followed a rest on the "
                 "floor (disarmed and still): the default stands"
             )
+        elif refused := _outside_bounds({"flight_bias_std_mps2": round(flight.bias_std_mps2, 6)}):
+            lines.append(f"    flight_bias_std_mps2     not fitted: {refused}: the default stands")
         else:
             keys["flight_bias_std_mps2"] = round(flight.bias_std_mps2, 6)
             lines.append(
@@ -1010,6 +1030,24 @@ def hover_velocity_drone(rec: DroneRecording, settings: Settings) -> tuple[dict[
                 "from the rest's)"
             )
     return keys, "\n".join(lines)
+
+
+def _outside_bounds(fitted: Mapping[str, float]) -> str | None:
+    """Why a fitted ``[calibration]`` value, as it would be written (rounded), cannot be:
+    it is outside the range its key accepts (e.g. a velocity scatter of 0 from a simulator's
+    exact motion capture, which would make the hover's thrust balance exact); None when
+    every value can be."""
+    for key, value in fitted.items():
+        lo, hi = -math.inf, math.inf
+        for bound in CalibrationSection.model_fields[key].metadata:
+            lo = getattr(bound, "gt", lo)
+            hi = getattr(bound, "lt", hi)
+        if not lo < value < hi:  # NaN too
+            why = f"{key} = {value:.4g} is outside the key's range ({lo:g}, {hi:g})"
+            if value == 0.0:
+                why += " (no scatter at all: an ideal simulator's exact motion capture?)"
+            return why
+    return None
 
 
 def _attitude_line(drone: str, source: str) -> str:
@@ -1075,7 +1113,9 @@ def _write_config(
             try:
                 load_settings(out.writing_path, use_env=False)
             except ConfigError as exc:
-                raise CalibrateInputError(f"the written configuration is invalid: {exc}") from None
+                raise CalibrateInputError(
+                    f"the configuration to be written is invalid (nothing written): {exc}"
+                ) from None
     except OutputError as exc:
         raise CalibrateInputError(str(exc)) from None
     echo(f"wrote {out.target}")
