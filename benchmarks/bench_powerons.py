@@ -14,7 +14,12 @@ with its own airframe constants as the airframe model sees them (the best any ai
 calibration could be), and the earlier per-flight oracle (the full model's own equivalent,
 accelerometer bias included, the accelerometer's mean trusted).
 
-Run:  python -m benchmarks.bench_powerons [--train 3] [--judge 3] [--out docs/powerons_benchmark.md]
+Run:  python -m benchmarks.bench_powerons [--train 3] [--judge 3] [--no-misalignment | --both]
+      [--out FILE]
+
+docs/powerons_benchmark.md holds both runs (``--both --out docs/powerons_benchmark.md``): the
+reading above them, written by hand, is kept, and the figures go to
+``docs/powerons_benchmark.json`` (:mod:`benchmarks.figures`).
 """
 
 from __future__ import annotations
@@ -32,6 +37,7 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks.figures import AT_START, DOCS, write_figures
 from groundstation.bus import Sample
 from groundstation.config import Settings, load_settings
 from groundstation.pipeline import Pipeline
@@ -226,19 +232,45 @@ def _cal_settings(cal: dict[str, Any]) -> Settings:
     return load_settings(None, {"calibration": cal}, use_env=False)
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--train", type=int, default=3, help="calibration power-ons (seeds 1..N)")
-    ap.add_argument("--judge", type=int, default=3, help="judged power-ons (the next seeds)")
-    ap.add_argument("--noise", type=float, default=0.8, help="accel vibration, m/s²")
-    ap.add_argument("--not-levelled", action="store_true", help="attitude not levelled")
-    ap.add_argument(
-        "--no-misalignment", action="store_true", help="no per-boot accelerometer misalignment"
-    )
-    ap.add_argument("--out", help="write the markdown page here")
-    args = ap.parse_args(argv)
+ROWS = {
+    "uncalibrated": "uncalibrated",
+    "calibrate --model airframe": "airframe",
+    "calibrate --model full": "full",
+    "told the truth: own airframe constants (slow stage on)": "told_airframe",
+    "told the truth: own full-model equivalent (bias known)": "told_full",
+}
+"""The table's configurations, each with its key in the figures."""
+
+PAGE = "powerons_benchmark"
+RUNS = "\n---\n\n# Calibrate on some power-ons"
+"""Where the page's runs begin: the reading above them is written by hand."""
+
+
+def score_figures(s: Score | None) -> dict[str, float] | None:
+    """A configuration's row as figures, in the table's units (within 2σ: a share); None
+    where ``calibrate`` refused."""
+    if s is None:
+        return None
+    return {
+        "position_median_cm": 100 * s.median_m,
+        "position_p95_cm": 100 * s.p95_m,
+        "tension_rmse_mn": 1e3 * s.tension_rmse_n,
+        "samples": s.samples,
+        "tension_within_2_sigma": s.tension_within_2_sigma,
+        "position_within_2_sigma": s.position_within_2_sigma,
+    }
+
+
+def _fig(key: str, scale: str = "") -> str:
+    return f"<!-- fig {PAGE}.json {key}{' ×' + scale if scale else ''} -->"
+
+
+def run(args: argparse.Namespace, misalignment: bool) -> tuple[str, dict[str, Any]]:
+    """One run (per-boot misalignment on or off): its section of the page, and its figures
+    (:data:`ROWS` → :func:`score_figures`)."""
     global MISALIGNMENT
-    MISALIGNMENT = not args.no_misalignment
+    MISALIGNMENT = misalignment
+    variant = "misalignment" if misalignment else "no_misalignment"
     t0 = time.time()
     levelled = not args.not_levelled
     train_seeds = list(range(1, args.train + 1))
@@ -305,10 +337,11 @@ def main(argv: list[str] | None = None) -> int:
     say(
         f"`python -m benchmarks.bench_powerons --train {args.train} --judge {args.judge} "
         f"--noise {args.noise}{' --not-levelled' if args.not_levelled else ''}"
-        f"{' --no-misalignment' if args.no_misalignment else ''}` "
-        f"({time.time() - t0:.0f} s). Realistic profile, every error class on, vibration "
+        f"{'' if misalignment else ' --no-misalignment'}` "
+        f"({time.time() - t0:.0f} s at commit {AT_START.commit}). Realistic profile, every "
+        f"error class on, vibration "
         f"{args.noise} m/s², attitude levelled on the accelerometer: {levelled}, per-boot "
-        f"misalignment: {MISALIGNMENT}. Power-ons = "
+        f"misalignment: {misalignment}. Power-ons = "
         f"seeds {train_seeds} calibrated (with motion capture), seeds {judge_seeds} judged "
         "(without). Each flight: 2 s on the floor, spool-up, climb, four paper spots 15 s each; "
         f"judged from {SETTLE_S:.0f} s after each spot is commanded. Position error is 3-D "
@@ -324,11 +357,15 @@ def main(argv: list[str] | None = None) -> int:
         if s is None:
             say(f"| {label} | refused | | | | | |")
         else:
+            k = f"{variant}.{ROWS[label]}"
             say(
-                f"| {label} | {100 * s.median_m:.1f} | {100 * s.p95_m:.1f} | "
-                f"{1e3 * s.tension_rmse_n:.2f} | {s.samples} | "
-                f"{100 * s.tension_within_2_sigma:.0f} % | "
-                f"{100 * s.position_within_2_sigma:.0f} % |"
+                f"| {label} | {100 * s.median_m:.1f}{_fig(f'{k}.position_median_cm')} | "
+                f"{100 * s.p95_m:.1f}{_fig(f'{k}.position_p95_cm')} | "
+                f"{1e3 * s.tension_rmse_n:.2f}{_fig(f'{k}.tension_rmse_mn')} | {s.samples} | "
+                f"{100 * s.tension_within_2_sigma:.0f} %"
+                f"{_fig(f'{k}.tension_within_2_sigma', '100')} | "
+                f"{100 * s.position_within_2_sigma:.0f} %"
+                f"{_fig(f'{k}.position_within_2_sigma', '100')} |"
             )
     say("")
     say(
@@ -353,11 +390,58 @@ def main(argv: list[str] | None = None) -> int:
         say("```")
         say(text.strip())
         say("```")
-    page = "\n".join(lines) + "\n"
-    if args.out:
-        Path(args.out).write_text(page, encoding="utf-8")
+    return "\n".join(lines) + "\n", {ROWS[label]: score_figures(s) for label, s in rows.items()}
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--train", type=int, default=3, help="calibration power-ons (seeds 1..N)")
+    ap.add_argument("--judge", type=int, default=3, help="judged power-ons (the next seeds)")
+    ap.add_argument("--noise", type=float, default=0.8, help="accel vibration, m/s²")
+    ap.add_argument("--not-levelled", action="store_true", help="attitude not levelled")
+    variants = ap.add_mutually_exclusive_group()
+    variants.add_argument(
+        "--no-misalignment", action="store_true", help="no per-boot accelerometer misalignment"
+    )
+    variants.add_argument(
+        "--both",
+        action="store_true",
+        help="both runs, with per-boot misalignment and without (docs/powerons_benchmark.md)",
+    )
+    ap.add_argument(
+        "--out",
+        help="write the markdown page here (docs/powerons_benchmark.md, with --both: the "
+        "reading above its runs kept, the figures to docs/powerons_benchmark.json)",
+    )
+    args = ap.parse_args(argv)
+    out = Path(args.out) if args.out else None
+    to_docs = out is not None and out.resolve() == DOCS / f"{PAGE}.md"
+    if to_docs and not args.both:
+        ap.error(f"docs/{PAGE}.md holds both runs: add --both")
+    runs = [run(args, m) for m in ((True, False) if args.both else (not args.no_misalignment,))]
+    page = "\n---\n\n".join(section for section, _ in runs)
+    if out is not None:
+        head = kept_head(out)
+        page = f"{head}\n---\n\n{page}" if head else page
+        out.write_text(page, encoding="utf-8")
+        if to_docs:
+            figures = {"misalignment": runs[0][1], "no_misalignment": runs[1][1]}
+            argv = ["--train", str(args.train), "--judge", str(args.judge)]
+            argv += ["--noise", f"{args.noise:g}"]
+            argv += ["--not-levelled"] if args.not_levelled else []
+            write_figures(PAGE, figures, [*argv, "--both", "--out", args.out])
     sys.stdout.write(page)
     return 0
+
+
+def kept_head(page: Path) -> str:
+    """The reading above an existing page's runs, written by hand ("" if none): a rerun keeps
+    it (:data:`RUNS`)."""
+    if not page.is_file():
+        return ""
+    old = page.read_text(encoding="utf-8")
+    at = old.find(RUNS)
+    return old[:at] if at > 0 else ""
 
 
 if __name__ == "__main__":

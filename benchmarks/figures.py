@@ -185,6 +185,24 @@ BENCHMARKS: dict[str, Benchmark] = {
             "benchmarks/bench_filter.py",
         ),
     ),
+    "change_test_benchmark": Benchmark(
+        # --minutes 60 --flights 60 --seed-base 10000 (--jobs N: the same figures)
+        ".venv/bin/python -m benchmarks.bench_change_test",
+        (
+            "groundstation/attitude.py",
+            "groundstation/tension.py",
+            "groundstation/tension_change.py",
+            "groundstation/tension_drift.py",
+            "groundstation/tension_kalman.py",
+            "groundstation/tension_noise.py",
+            "groundstation/thrust_model.py",
+            "benchmarks/bench_change_test.py",
+        ),
+    ),
+    "powerons_benchmark": Benchmark(
+        ".venv/bin/python -m benchmarks.bench_powerons",  # --both --out docs/powerons_benchmark.md
+        (*ESTIMATOR, *RECORDING, *SIMULATOR, "benchmarks/bench_powerons.py"),
+    ),
     "azimuth_sources": Benchmark(
         ".venv/bin/python -m benchmarks.bench_azimuth",
         (*ESTIMATOR, *SIMULATOR, "benchmarks/bench_azimuth.py"),

@@ -173,6 +173,8 @@ def flight_phases(
         hover_chi2 = exceedance_chi2(noise_params.false_alarms_per_h, spacing_s)
         last: float | None = None
         latest_rest = (math.nan, math.nan, math.nan)
+        tau = noise_params.noise_time_constant_s
+        warmup = noise_warmup_samples()
         for i in np.flatnonzero(data.segment == seg).tolist():
             stamp = float(data.stamp_s[i])
             dt = 0.0 if last is None else max(stamp - last, 0.0)
@@ -200,8 +202,7 @@ def flight_phases(
             density = None
             if air:
                 world = [r[0] * f[0] + r[1] * f[1] + r[2] * f[2] for r in R]
-                tau = noise_params.noise_time_constant_s
-                r0, r1, r2 = noise.push(world, dt, math.exp(-dt / tau), tau, noise_warmup_samples())
+                r0, r1, r2 = noise.push(world, dt, math.exp(-dt / tau), tau, warmup)
                 if spacing_s > 0.0:
                     density = (r0 + r1 + r2) / 3.0 * spacing_s
             else:

@@ -138,21 +138,23 @@ BUDGET: dict[str, tuple[int, int, int, int]] = {
     # there), the change test's history sized from the spacing, the noise estimate's
     # winsorisation read from an attribute derived per block: hover 7,424 -> 7,437 bytecodes
     # (+0.2 %), every regime +12 to +35 bytecodes, Python and C calls the same off motion
-    # capture.
+    # capture. Then (budgets kept) the per-sample sigmas asked only of an armed drone (the
+    # height band and the climb test judge nothing disarmed): +3 bytecodes per airborne
+    # message for the test, -1 on the ground disarmed.
     "hover": (106, 160, 11, 7801),
-    # (101.4, 160.0, 10.1, 7429) [104.3, 154.8, 10.3, 7437]
+    # (101.4, 160.0, 10.1, 7429) [104.3, 154.8, 10.3, 7443]
     "hover, motion capture, follow on": (153, 223, 15, 9786),
-    # (145.4, 212.0, 14.1, 9320) [137.3, 203.8, 14.3, 9140]
+    # (145.4, 212.0, 14.1, 9320) [137.3, 203.8, 14.4, 9148]
     "motion capture, following a 30 mN pull": (167, 244, 19, 10187),
-    # (158.6, 234.7, 18.1, 9747) [152.3, 228.7, 18.3, 9505]
+    # (158.6, 234.7, 18.1, 9747) [152.3, 228.7, 18.3, 9510]
     "plumb": (134, 248, 15, 9662),
-    # (127.4, 235.3, 14.1, 9202) [130.3, 233.8, 14.3, 9240]
+    # (127.4, 235.3, 14.1, 9202) [130.3, 233.8, 14.3, 9248]
     "tether on the floor": (155, 433, 15, 12494),
-    # (147.4, 412.0, 14.1, 11899) [150.3, 406.9, 14.3, 11910]
+    # (147.4, 412.0, 14.1, 11899) [150.3, 406.9, 14.3, 11915]
     "on the ground, disarmed": (78, 55, 14, 2816),
-    # (73.6, 52.0, 12.5, 2690) [74.6, 52.0, 12.5, 2724]
+    # (73.6, 52.0, 12.5, 2690) [74.6, 52.0, 12.5, 2726]
     "hover, reel with exit angles at 10 Hz": (172, 380, 12, 12585),
-    # (163.3, 361.5, 11.1, 11986) [166.2, 356.2, 11.3, 11990]
+    # (163.3, 361.5, 11.1, 11986) [166.3, 356.6, 11.3, 12010]
 }
 
 

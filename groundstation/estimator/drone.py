@@ -488,8 +488,9 @@ class DroneEstimator:
         # (read on the ground and armed only, where the test runs).
         on_floor_armed = self.contact.on_ground and msg.armed
         noise_n2 = self.filter.vertical_noise_var_n2() if on_floor_armed else None
-        # The per-sample tests' threshold (the climb's, the motion-capture height's).
-        judged = noise_n2 is not None or msg.position_m is not None
+        # The per-sample tests' threshold (the climb's, the motion-capture height's): both
+        # judge an armed drone only (disarmed is the ground at once).
+        judged = noise_n2 is not None or (msg.armed and msg.position_m is not None)
         sample_sigmas = self.filter.sigmas_at(dt_s) if judged else math.inf
         contact, on_ground = contact_decide(
             self.contact,
