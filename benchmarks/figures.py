@@ -58,6 +58,16 @@ DOCS = REPO / "docs"
 CONFIG_DEFAULTS = "groundstation/config.py:defaults"
 """The pseudo-file for the configuration's default values (:func:`config_defaults_hash`)."""
 
+TENSION_FILTER: tuple[str, ...] = (
+    "groundstation/attitude.py",
+    "groundstation/tension.py",
+    "groundstation/tension_change.py",
+    "groundstation/tension_drift.py",
+    "groundstation/tension_kalman.py",
+    "groundstation/tension_noise.py",
+)
+"""The tension filter alone (what a benchmark that drives ``TensionFilter`` directly runs)."""
+
 ESTIMATOR: tuple[str, ...] = (
     "groundstation/airframe.py",
     "groundstation/attitude.py",
@@ -175,29 +185,12 @@ BENCHMARKS: dict[str, Benchmark] = {
     ),
     "filter_benchmark": Benchmark(
         ".venv/bin/python -m benchmarks.bench_filter",
-        (
-            "groundstation/attitude.py",
-            "groundstation/tension.py",
-            "groundstation/tension_change.py",
-            "groundstation/tension_drift.py",
-            "groundstation/tension_kalman.py",
-            "groundstation/tension_noise.py",
-            "benchmarks/bench_filter.py",
-        ),
+        (*TENSION_FILTER, "benchmarks/bench_filter.py"),
     ),
     "change_test_benchmark": Benchmark(
         # --minutes 60 --flights 60 --seed-base 10000 (--jobs N: the same figures)
         ".venv/bin/python -m benchmarks.bench_change_test",
-        (
-            "groundstation/attitude.py",
-            "groundstation/tension.py",
-            "groundstation/tension_change.py",
-            "groundstation/tension_drift.py",
-            "groundstation/tension_kalman.py",
-            "groundstation/tension_noise.py",
-            "groundstation/thrust_model.py",
-            "benchmarks/bench_change_test.py",
-        ),
+        (*TENSION_FILTER, "groundstation/thrust_model.py", "benchmarks/bench_change_test.py"),
     ),
     "powerons_benchmark": Benchmark(
         ".venv/bin/python -m benchmarks.bench_powerons",  # --both --out docs/powerons_benchmark.md
