@@ -98,3 +98,29 @@ def test_kappas_prior_weighs_the_blocks_kappa_needs_to_stand_alone() -> None:
         kappas.append(noise.kappa)
     want = (NoiseEstimate.KAPPA_PRIOR * b + blocks) / (b + blocks)
     assert float(np.mean(kappas)) == pytest.approx(want, abs=0.05)
+
+
+def test_kappas_prior_weight_is_the_derived_one_to_the_digit() -> None:
+    """The same samples from two priors: κ's difference is the prior's share after B
+    blocks, b/(b + B), times the priors' difference, whatever the samples (the block ratios
+    are the same in both runs). 11.7 blocks and the 10 set by hand before give shares 0.04
+    apart here (near the most they can differ, at B ≈ 11), far beyond rounding; the averaged
+    test above cannot tell them apart."""
+
+    class OtherPrior(NoiseEstimate):
+        KAPPA_PRIOR = NoiseEstimate.KAPPA_PRIOR + 2.0
+
+    b = kappa_prior_blocks()
+    blocks = 12
+    n = (blocks + 2) * 25 + 1  # 100 Hz: the first ratio needs three 0.25 s blocks
+    samples = np.random.default_rng(3).normal(0.0, 0.01, (n, 3)).tolist()
+    runs = []
+    for cls in (NoiseEstimate, OtherPrior):
+        noise = cls((1e-4, 1e-4, 1e-4), PRIOR_SAMPLES, RATE_PER_H)
+        for y in samples:
+            noise.push(y, 0.01, KEEP, TAU_S, WARM)
+        assert noise.blocks == blocks
+        runs.append(noise.kappa)
+    share = (runs[1] - runs[0]) / 2.0
+    assert share == pytest.approx(b / (b + blocks), rel=1e-9)
+    assert abs(share - 10.0 / (10.0 + blocks)) > 0.03
