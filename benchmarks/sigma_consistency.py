@@ -10,8 +10,10 @@ model at the end of the flight: ``s_d`` (half the mean squared first difference 
 observation), ``κ`` (the long-run variance over ``s_d``, from 0.25 s block means) and
 ``r = s_d·κ``, the filter's R (tension_noise.NoiseEstimate), measured on the accelerometer
 model, which the filter observes; while the drone hovers the thrust balance enters through
-the velocity state (tension_kalman.HoverVelocity), and P is what σ_v allows it. Takes ~10 s
-per flight.
+the velocity state (tension_kalman.HoverVelocity), and P is what σ_v allows it. The last
+column is the true tension's own wander over the judged window, as a random walk's density
+(:func:`truth_wander`, from its Allan variance at 1 s and 2 s blocks): what
+``--wander`` would be if the filter were told the truth. Takes ~10 s per flight.
 
 The options change one prior of the hover's (T, v) filter at a time, to see which one sets
 the σ: ``--hover-velocity-std`` / ``--hover-velocity-time`` (σ_v and T_c, as
@@ -62,7 +64,29 @@ def flight(noise: float, spot: int, seed: int) -> dict[str, Any]:
         "kappa": float(noise_model.kappa),
         "s_d_mn": [1e3 * math.sqrt(v) for v in s_d],
         "r_mn": [1e3 * math.sqrt(v) for v in noise_model.long_run()],
+        "truth_wander_n2_per_s": [
+            truth_wander(f.t_s[w], f.true_tension_n[w], block_s) for block_s in WANDER_BLOCKS_S
+        ],
     }
+
+
+WANDER_BLOCKS_S = (1.0, 2.0)
+"""Block lengths of the truth's Allan variance, s (the judged window is 12 s long)."""
+
+
+def truth_wander(t_s: Any, tension_n: Any, block_s: float) -> float:
+    """The true tension's wander as a random walk's density, N²/s, mean over the axes: for a
+    random walk of density q the Allan variance of block means of length τ is q·τ/3, so
+    q = 3·AVAR(τ)/τ, AVAR = ½·mean((ȳ_(k+1) − ȳ_k)²) (fast swing adds to it at short τ:
+    an upper bound of the wander at that scale)."""
+    k = np.floor((np.asarray(t_s) - t_s[0]) / block_s).astype(int)
+    means = np.array(
+        [tension_n[k == i].mean(axis=0) for i in range(int(k.max())) if (k == i).any()]
+    )
+    if len(means) < 2:
+        return math.nan
+    avar = 0.5 * float((np.diff(means, axis=0) ** 2).mean())
+    return 3.0 * avar / block_s
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -101,9 +125,9 @@ def main(argv: list[str] | None = None) -> int:
         )
     print(
         "| spot | error RMS x/y/z mN | median σ x/y/z mN | within 2σ x/y/z | κ | "
-        "sqrt(s_d) x/y/z mN | sqrt(r) x/y/z mN |"
+        "sqrt(s_d) x/y/z mN | sqrt(r) x/y/z mN | truth's wander N²/s (1 s / 2 s blocks) |"
     )
-    print("| --- | --- | --- | --- | ---: | --- | --- |")
+    print("| --- | --- | --- | --- | ---: | --- | --- | --- |")
     for spot in (int(s) for s in args.spots.split(",")):
         r = flight(args.noise, spot, args.seed)
 
@@ -113,7 +137,8 @@ def main(argv: list[str] | None = None) -> int:
         print(
             f"| {spot} | {three(r['err_rms_mn'])} | {three(r['sigma_median_mn'])} | "
             f"{three(r['within_2_sigma'], '{:.0%}')} | {r['kappa']:.2f} | "
-            f"{three(r['s_d_mn'], '{:.1f}')} | {three(r['r_mn'], '{:.1f}')} |"
+            f"{three(r['s_d_mn'], '{:.1f}')} | {three(r['r_mn'], '{:.1f}')} | "
+            f"{three(r['truth_wander_n2_per_s'], '{:.2g}')} |"
         )
     return 0
 
