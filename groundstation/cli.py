@@ -369,14 +369,16 @@ CHILD_KILL_WAIT_S = 10.0
 SIGKILL, s: on a busy machine it can take more than a second."""
 
 
-def _stop_child(child: Any, timeout_s: float = 1.5) -> None:
-    """SIGTERM, then SIGKILL after ``timeout_s``. Never raises: a child slow to die (a busy
-    machine) is waited for up to :data:`CHILD_KILL_WAIT_S` and then left with a warning,
-    so the service's own exit status says how the service stopped, not how fast its child
-    did (it was a traceback and status 1)."""
+def _stop_child(child: Any, timeout_s: float = 1.5, *, signalled: bool = False) -> None:
+    """SIGTERM (unless ``signalled``: sent already), then SIGKILL after ``timeout_s``. Never
+    raises: a child slow to die (a busy machine) is waited for up to
+    :data:`CHILD_KILL_WAIT_S` and then left with a warning, so the service's own exit status
+    says how the service stopped, not how fast its child did (it was a traceback and status
+    1)."""
     if child.poll() is not None:
         return
-    child.send_signal(signal.SIGTERM)
+    if not signalled:
+        child.send_signal(signal.SIGTERM)
     try:
         child.wait(timeout_s)
         return
@@ -429,9 +431,13 @@ def cmd_serve(args: argparse.Namespace) -> int:
             print(f"groundstation serve: running (instance {service.instance})", flush=True)
             _wait(stop, children)
         finally:
+            # The children stop while the service closes (each waits for its own bus).
             for child in children.values():
-                _stop_child(child)
+                if child.poll() is None:
+                    child.send_signal(signal.SIGTERM)
             service.close()
+            for child in children.values():
+                _stop_child(child, signalled=True)
     return 0
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import signal
 
 import pytest
 
@@ -142,8 +143,11 @@ def test_stopping_a_child_that_outlives_the_kill_wait_warns_and_returns(
         def poll(self) -> None:
             return None
 
+        def __init__(self) -> None:
+            self.signals: list[int] = []
+
         def send_signal(self, sig: int) -> None:
-            pass
+            self.signals.append(sig)
 
         def kill(self) -> None:
             self.killed = True
@@ -154,5 +158,10 @@ def test_stopping_a_child_that_outlives_the_kill_wait_warns_and_returns(
     stuck = Stuck()
     with caplog.at_level("WARNING", logger="groundstation"):
         cli._stop_child(stuck, timeout_s=0.01)
-    assert stuck.killed
+    assert stuck.killed and stuck.signals == [signal.SIGTERM]
     assert "4242" in caplog.text and "SIGKILL" in caplog.text
+    # serve signals its children before it closes its own bus, then waits for them: no
+    # second SIGTERM (a second signal makes a child exit at once, status 1).
+    signalled = Stuck()
+    cli._stop_child(signalled, timeout_s=0.01, signalled=True)
+    assert signalled.killed and signalled.signals == []

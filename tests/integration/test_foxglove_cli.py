@@ -158,7 +158,10 @@ def test_serve_serves_the_scene_to_a_foxglove_client(procs: Procs) -> None:
         assert 0.02 < norm_n < 1.0 and tension[2] < 0
         checked += 1
     assert checked >= 5, f"{checked} scenes matched an Estimate of {len(got['scenes'])} received"
-    assert service.stop(signal.SIGTERM) == 0
+    # serve stops its Foxglove process too: up to 1.5 s of grace, then SIGKILL, and a killed
+    # child can take seconds to be reaped on a loaded machine (seen in CI: over 5 s in all).
+    # How fast a headless serve stops is test_service_robustness's.
+    assert service.stop(signal.SIGTERM, timeout_s=15.0) == 0
 
 
 @pytest.mark.parametrize("command", ["serve", "demo"])
