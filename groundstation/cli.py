@@ -215,6 +215,26 @@ def _check_scenario(name: str) -> None:
         )
 
 
+def _until_scenario_end(settings: Settings) -> Settings:
+    """``--once`` (sim, demo): the simulated run ends at the scenario's natural end, or at
+    ``[sim] duration_s`` (``sim --duration``) if that comes first. A scenario without an end
+    is a configuration error."""
+    from groundstation.sim import SCENARIOS
+
+    name = settings.sim.scenario
+    natural_s = SCENARIOS[name].duration_s
+    if natural_s is None:
+        raise ConfigError(
+            f"scenario {name!r} runs until stopped; --once needs a scenario with an end "
+            "(see sim --list), or a duration"
+        )
+    asked_s = settings.sim.duration_s
+    end_s = natural_s if asked_s is None else min(asked_s, natural_s)
+    return settings.model_copy(
+        update={"sim": settings.sim.model_copy(update={"duration_s": end_s})}
+    )
+
+
 def _zenoh_error_line(exc: Exception, settings: Settings | None) -> str:
     """One line for a zenoh session that could not open (no Rust source locations)."""
     detail = re.sub(r"\s+at /\S+\.rs:\d+\.?", "", str(exc)).strip()
@@ -512,20 +532,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
     settings = _load(args)
     _check_scenario(settings.sim.scenario)
     if args.once:
-        natural_s = SCENARIOS[settings.sim.scenario].duration_s
-        if natural_s is None:
-            print(
-                f"groundstation sim: scenario {settings.sim.scenario!r} runs until stopped; "
-                "--once needs a scenario with an end (see --list), or give --duration S",
-                file=sys.stderr,
-                flush=True,
-            )
-            return 2
-        asked_s = settings.sim.duration_s
-        end_s = natural_s if asked_s is None else min(asked_s, natural_s)
-        settings = settings.model_copy(
-            update={"sim": settings.sim.model_copy(update={"duration_s": end_s})}
-        )
+        settings = _until_scenario_end(settings)
     stop = _stop_on_signals()
     z = settings.zenoh
     with ZenohBus(z) as bus:
@@ -649,6 +656,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
     base = json.loads(json.dumps(DEMO_DEFAULTS))
     settings = _load(args, base=base)
     _check_scenario(settings.sim.scenario)
+    if args.once:
+        settings = _until_scenario_end(settings)
     settings, bus_line = _demo_bus(args, settings)
     if not args.headless:
         settings = _demo_web_port(args, settings)
@@ -674,7 +683,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
             while not stop.wait(0.2):
                 if deadline is not None and time.monotonic() > deadline:
                     break
-                if sim.wait(0.0) and sim.scenario.duration_s is not None and args.once:
+                if args.once and sim.wait(0.0):  # the scenario's end (_until_scenario_end)
                     break
         finally:
             sim.close()

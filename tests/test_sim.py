@@ -271,6 +271,40 @@ def test_sim_once_stops_at_the_scenarios_end(capsys: pytest.CaptureFixture[str])
     assert main([*argv, "--listen", f"tcp/127.0.0.1:{port}"]) == 0
 
 
+def test_demo_once_stops_at_the_scenarios_end(monkeypatch: pytest.MonkeyPatch) -> None:
+    """``demo --once`` ends with its scenario (it ran until stopped: the flag set no end of
+    the simulated run). The scenario is shortened to 1 s here: the demo runs in real time."""
+    import dataclasses
+    import os
+    import signal
+    import socket
+    import threading
+
+    from groundstation.cli import main
+    from groundstation.sim.scenarios import SCENARIOS
+
+    short = dataclasses.replace(SCENARIOS["takeoff_ramp"], duration_s=1.0)
+    monkeypatch.setitem(SCENARIOS, "takeoff_ramp", short)
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    argv = ["demo", "--headless", "--once", "--scenario", "takeoff_ramp"]
+    # A demo that does not end by itself is stopped by SIGTERM after 30 s (and fails).
+    hung = threading.Event()
+
+    def stop_it() -> None:
+        hung.set()
+        os.kill(os.getpid(), signal.SIGTERM)
+
+    guard = threading.Timer(30.0, stop_it)
+    guard.start()
+    try:
+        assert main([*argv, "--listen", f"tcp/127.0.0.1:{port}"]) == 0
+    finally:
+        guard.cancel()
+    assert not hung.is_set(), "demo --once did not end with its scenario"
+
+
 def test_sim_untethered_flag_sets_sim_untethered() -> None:
     from groundstation.cli import _load, _sim_overrides, build_parser
 
