@@ -973,7 +973,7 @@ def hover_velocity_drone(rec: DroneRecording, settings: Settings) -> tuple[dict[
             "filter's defaults stand"
         )
     elif refused := _outside_bounds(
-        {
+        hover := {
             "hover_velocity_std_mps": round(fit.std_mps, 6),
             "hover_velocity_time_s": round(fit.time_s, 4),
         }
@@ -982,8 +982,7 @@ def hover_velocity_drone(rec: DroneRecording, settings: Settings) -> tuple[dict[
             f"    hover velocity           not fitted: {refused}: the filter's defaults stand"
         )
     else:
-        keys["hover_velocity_std_mps"] = round(fit.std_mps, 6)
-        keys["hover_velocity_time_s"] = round(fit.time_s, 4)
+        keys.update(hover)
         lines.append(
             f"    hover_velocity_std_mps   {fit.std_mps:.4f}  hover_velocity_time_s "
             f"{fit.time_s:.3f}  ({fit.hover_s:.1f} s of hover in {fit.stretches} stretches: "
@@ -997,7 +996,7 @@ def hover_velocity_drone(rec: DroneRecording, settings: Settings) -> tuple[dict[
             f"motion capture (need {HOVER_FIT_MIN_S:.0f} s): the bias filter's defaults stand"
         )
     elif refused := _outside_bounds(
-        {
+        velocity := {
             "flight_velocity_std_mps": round(flight.velocity_std_mps, 6),
             "flight_velocity_time_s": round(flight.velocity_time_s, 4),
         }
@@ -1006,8 +1005,7 @@ def hover_velocity_drone(rec: DroneRecording, settings: Settings) -> tuple[dict[
             f"    flight velocity          not fitted: {refused}: the bias filter's defaults stand"
         )
     else:
-        keys["flight_velocity_std_mps"] = round(flight.velocity_std_mps, 6)
-        keys["flight_velocity_time_s"] = round(flight.velocity_time_s, 4)
+        keys.update(velocity)
         line = (
             f"    flight_velocity_std_mps  {flight.velocity_std_mps:.4f}  "
             f"flight_velocity_time_s {flight.velocity_time_s:.3f}  ({flight.airborne_s:.1f} s "
@@ -1020,10 +1018,12 @@ def hover_velocity_drone(rec: DroneRecording, settings: Settings) -> tuple[dict[
                 "    flight_bias_std_mps2     not fitted: no flight followed a rest on the "
                 "floor (disarmed and still): the default stands"
             )
-        elif refused := _outside_bounds({"flight_bias_std_mps2": round(flight.bias_std_mps2, 6)}):
+        elif refused := _outside_bounds(
+            bias_step := {"flight_bias_std_mps2": round(flight.bias_std_mps2, 6)}
+        ):
             lines.append(f"    flight_bias_std_mps2     not fitted: {refused}: the default stands")
         else:
-            keys["flight_bias_std_mps2"] = round(flight.bias_std_mps2, 6)
+            keys.update(bias_step)
             lines.append(
                 f"    flight_bias_std_mps2     {flight.bias_std_mps2:.4f}  ({flight.flights} "
                 "flights after a rest: how far the accelerometer's bias in the air strays "
