@@ -37,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.figures import AT_START, DOCS, write_figures
+from benchmarks.figures import AT_START, DOCS, kept_reading, write_figures
 from groundstation.bus import Sample
 from groundstation.config import Settings, load_settings
 from groundstation.pipeline import Pipeline
@@ -421,7 +421,7 @@ def main(argv: list[str] | None = None) -> int:
     runs = [run(args, m) for m in ((True, False) if args.both else (not args.no_misalignment,))]
     page = "\n---\n\n".join(section for section, _ in runs)
     if out is not None:
-        head = kept_head(out)
+        head = kept_reading(out, RUNS, above=True)
         page = f"{head}\n---\n\n{page}" if head else page
         out.write_text(page, encoding="utf-8")
         if to_docs:
@@ -432,16 +432,6 @@ def main(argv: list[str] | None = None) -> int:
             write_figures(PAGE, figures, [*argv, "--both", "--out", args.out])
     sys.stdout.write(page)
     return 0
-
-
-def kept_head(page: Path) -> str:
-    """The reading above an existing page's runs, written by hand ("" if none): a rerun keeps
-    it (:data:`RUNS`)."""
-    if not page.is_file():
-        return ""
-    old = page.read_text(encoding="utf-8")
-    at = old.find(RUNS)
-    return old[:at] if at > 0 else ""
 
 
 if __name__ == "__main__":

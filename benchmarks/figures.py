@@ -308,18 +308,24 @@ def measured_hashes(measures: tuple[str, ...]) -> dict[str, str]:
     return out
 
 
-def kept_reading(page: Path, mark: str) -> str:
+def kept_reading(page: Path, mark: str, *, above: bool = False) -> str:
     """The part of an existing page written by hand, from ``mark`` on ("" if none): a
-    benchmark that writes its page's tables appends it, so a rerun keeps the reading.
+    benchmark that writes its page's tables appends it, so a rerun keeps the reading. With
+    ``above``, the part before ``mark`` instead (a reading above the generated runs, which
+    ``mark`` begins; "" if the page starts with them).
 
     Args:
         page: the page the benchmark is about to write.
-        mark: where the hand-written part begins, e.g. ``"\n## Reading"``.
+        mark: where the hand-written part begins, e.g. ``"\n## Reading"`` (with ``above``:
+            where the generated part begins).
+        above: the hand-written part is above ``mark``.
     """
     if not page.is_file():
         return ""
     old = page.read_text(encoding="utf-8")
     at = old.find(mark)
+    if above:
+        return old[:at] if at > 0 else ""
     return old[at:] if at >= 0 else ""
 
 
