@@ -98,8 +98,20 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--hover-velocity-time", type=float, help="T_c, s (default: the filter's)")
     ap.add_argument("--thrust-noise", type=float, help="[drone] thrust_noise_n, N")
     ap.add_argument("--wander", type=float, help="hover_wander_n2_per_s, N^2/s")
+    ap.add_argument(
+        "--calibration",
+        help="a calibrate output: its [drones.cf1.calibration] hover_* keys (σ_v, T_c, q_w, "
+        "D) over the truth's calibration",
+    )
     args = ap.parse_args(argv)
     cal_over: dict[str, float] = {}
+    if args.calibration is not None:
+        import tomllib
+
+        with open(args.calibration, "rb") as fh:
+            table = tomllib.load(fh)["drones"][br.DRONE]["calibration"]
+        cal_over.update({k: v for k, v in table.items() if k.startswith("hover_")})
+        print(f"from {args.calibration}: {cal_over}")
     if args.hover_velocity_std is not None:
         cal_over["hover_velocity_std_mps"] = args.hover_velocity_std
     if args.hover_velocity_time is not None:

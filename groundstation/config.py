@@ -447,6 +447,18 @@ class CalibrationSection(_Section):
     hover_velocity_time_s: float | None = Field(None, gt=0.0, lt=60.0)
     """(added) T_c, the correlation time of that velocity, s (fitted with
     ``hover_velocity_std_mps``); none: 0.5."""
+    hover_wander_n2_per_s: float | None = Field(None, gt=0.0, lt=1e-3)
+    """(added) q_w, the random walk's spectral density of the tension the thrust balance
+    reads at hover (the tension's own wander and the balance's slow error), N²/s: the
+    hover's time constant is ``sqrt(r·dt/q_w)`` (groundstation.tension). Written by
+    ``groundstation calibrate`` from the hovers of its recordings under motion capture,
+    by maximum likelihood (groundstation.hover_fit.fit_hover_balance), where the data tell
+    it from no wander; none: 4.5e-8 (the realistic simulator, docs/constants.md)."""
+    hover_balance_density_n2s: float | None = Field(None, gt=0.0, lt=1e-3)
+    """(added) D, the thrust balance's white noise at hover as a force density, N²·s: the
+    process noise of the hover's velocity state, ``D/m²`` per second (fitted with
+    ``hover_wander_n2_per_s``); none: ``[drone] thrust_noise_n``² times the measured
+    sample spacing."""
     flight_velocity_std_mps: float | None = Field(None, gt=0.0, lt=10.0)
     """(added) σ_V, how far the flying drone's velocity strays from zero (per world axis),
     m/s: the accelerometer's bias is learnt in the air from the velocity it integrates to,

@@ -46,7 +46,7 @@ from groundstation.calibration import (
     _index_runs,
     _integrated_autocorr_time,
 )
-from groundstation.tension import TensionFilterParams
+from groundstation.tension import ObservationCalibration, TensionFilterParams, observe_tension
 from groundstation.tension_change import exceedance_chi2, noise_warmup_samples
 from groundstation.tension_noise import NoiseEstimate
 
@@ -397,3 +397,275 @@ def fit_flight(
         flights=len(deltas),
     )
     return fit, airborne_s
+
+
+BALANCE_BLOCK_S = VELOCITY_WINDOW_S
+"""Block of the thrust balance's fit, s (:func:`fit_hover_balance`): derived, the velocity
+derivative's width, so that the velocities at two block boundaries share no position and
+their errors are independent (the model's third term is then a difference of independent
+errors)."""
+
+BALANCE_MIN_BLOCKS = 4
+"""A hover stretch gives the balance fit its block differences only from this many blocks
+on (derived: ``slow_mod.HOVER_MEAN_S`` / :data:`BALANCE_BLOCK_S`, the hover test's own
+shortest stretch)."""
+
+
+@dataclass(frozen=True)
+class HoverBalanceFit:
+    """Result of :func:`fit_hover_balance`.
+
+    Attributes:
+        wander_n2_per_s: q_w, the random walk's spectral density of the tension the thrust
+            balance reads at hover (the true tension's wander and the balance's own slow
+            error together: what the filter's tension state must follow), N²/s.
+        balance_density_n2s: D, the thrust balance's white noise as a force density
+            (the filter's velocity state's process noise at hover is D/m²), N²·s.
+        velocity_error_std_mps: the motion-capture velocity's error at a block boundary,
+            per axis, m/s (a nuisance of the fit, printed).
+        wander_resolved: the data tell q_w from no wander at all: twice the log-likelihood
+            ratio against q_w at :data:`WANDER_FLOOR_N2_PER_S` (D and σ_e fitted again)
+            exceeds :data:`RESOLVED_LR` (q_w's ±2σ likelihood interval excludes zero); else
+            the value is not a measurement and is not written.
+        blocks: block differences used (per axis).
+        hover_s: seconds of hover used.
+        stretches: hover stretches used.
+    """
+
+    wander_n2_per_s: float
+    balance_density_n2s: float
+    velocity_error_std_mps: float
+    wander_resolved: bool
+    blocks: int
+    hover_s: float
+    stretches: int
+
+
+RESOLVED_LR = 4.0
+"""Twice the log-likelihood ratio at which the hover's wander counts as resolved: derived,
+the square of the 2 standard errors at which the service's σ is read everywhere (a
+χ² of one degree of freedom; the likelihood interval's ±2σ)."""
+
+WANDER_FLOOR_N2_PER_S = 1e-14
+"""Lower bound of q_w in the likelihood's search, N²/s: a numerical guard (a tension wander
+of 0.1 µN over 1 s, a millionth of a 30 g drone's weight), not a tunable."""
+
+
+def balance_blocks(
+    stamp_s: FloatArray,
+    balance_world_n: FloatArray,
+    velocity_world_mps: FloatArray,
+    mass_kg: float,
+    block_s: float = BALANCE_BLOCK_S,
+) -> FloatArray:
+    """The tension the thrust balance reads, per block of one hover stretch, (K, 3), N::
+
+        Y_k = (∫ h dt over block k) / Δt_k + m·(v(t_(k+1)) − v(t_k)) / Δt_k
+
+    Newton at hover (``m·dv/dt = T − h``, groundstation.tension_kalman.HoverVelocity)
+    integrated over the block: the block's mean tension, plus the balance's noise and the
+    boundary velocities' errors. Blocks start at the stretch's first sample and at the
+    first sample at or after each ``block_s`` from it; the last, shorter one is dropped.
+    """
+    t = np.asarray(stamp_s, float)
+    k = np.floor((t - t[0]) / block_s + 1e-9).astype(np.int64)
+    starts = np.flatnonzero(np.diff(np.concatenate(([-1], k))) != 0)
+    if starts.size < 2:
+        return np.empty((0, 3))
+    dt = np.diff(t)
+    hdt = balance_world_n[:-1] * dt[:, None]
+    cum = np.vstack([np.zeros((1, 3)), np.cumsum(hdt, axis=0)])
+    a, b = starts[:-1], starts[1:]
+    span = (t[b] - t[a])[:, None]
+    return (cum[b] - cum[a]) / span + mass_kg * (
+        velocity_world_mps[b] - velocity_world_mps[a]
+    ) / span
+
+
+def _balance_nll(
+    theta: FloatArray, diffs: list[FloatArray], block_s: float, mass_kg: float
+) -> float:
+    """Negative log-likelihood (constants dropped) of the block differences ΔY of
+    :func:`fit_hover_balance`'s model, θ = log(q_w, D, σ_e²); each column of each array one
+    stretch and axis."""
+    from scipy.linalg import cho_solve_banded, cholesky_banded
+
+    q, dens, ev = np.exp(theta)
+    c2 = (mass_kg / block_s) ** 2 * ev
+    g0 = 2.0 * q * block_s / 3.0 + 2.0 * dens / block_s + 6.0 * c2
+    g1 = q * block_s / 6.0 - dens / block_s - 4.0 * c2
+    g2 = c2
+    total = 0.0
+    for d in diffs:
+        n = d.shape[0]
+        ab = np.zeros((3, n))
+        ab[0, 2:] = g2
+        ab[1, 1:] = g1
+        ab[2, :] = g0
+        try:
+            ch = cholesky_banded(ab, lower=False)
+        except np.linalg.LinAlgError:
+            return math.inf
+        x = cho_solve_banded((ch, False), d)
+        total += 0.5 * (d.shape[1] * 2.0 * float(np.log(ch[2]).sum()) + float((d * x).sum()))
+    return total
+
+
+def fit_hover_balance(
+    data: CalibrationData,
+    hovering: NDArray[np.bool_],
+    balance_world_n: FloatArray,
+    *,
+    mass_kg: float,
+    min_hover_s: float = HOVER_FIT_MIN_S,
+    block_s: float = BALANCE_BLOCK_S,
+) -> tuple[HoverBalanceFit | None, float]:
+    """q_w and D of the hover's thrust balance from the recording, by maximum likelihood.
+
+    In each hover stretch under motion capture (:func:`_velocity_runs`, the service's hover
+    test), the block series ``Y_k`` of :func:`balance_blocks` is modelled per world axis as
+
+        Y_k = L̄_k + e_k + (m/B)·(ε_(k+1) − ε_k)
+
+    with L a random walk of density q_w (the tension as the balance reads it), e_k the
+    balance's white noise over the block (variance D/B) and ε_k the motion-capture
+    velocity's error at a boundary (variance σ_e², independent: :data:`BALANCE_BLOCK_S`).
+    Differenced once (the level is unknown per stretch), ΔY is a moving average of order 2
+    whose autocovariances are, with c² = (m/B)²·σ_e²:
+
+        γ0 = 2·q_w·B/3 + 2·D/B + 6·c²      (a random walk's block means: 2B/3, B/6 at lag 1)
+        γ1 = q_w·B/6 − D/B − 4·c²
+        γ2 = c²
+
+    and its exact Gaussian likelihood (banded Cholesky), summed over the stretches and the
+    three axes (one q_w and one D, as the filter has), is maximised over log(q_w, D, σ_e²)
+    (scipy L-BFGS-B). The three are told apart by the differences' autocovariance at lags
+    0–2: the wander by its positive lag-1 share, the balance's noise by a negative one at
+    lag 1 only, the velocity's error by lag 2.
+
+    Args:
+        data: the drone's samples (with motion-capture positions).
+        hovering: (n,) the hover test's verdict per sample.
+        balance_world_n: (n, 3) the thrust balance ``m·g·e3 − R·u·F`` per sample as the
+            service computes it (NaN where unknown), N.
+        mass_kg: the drone's mass, kg.
+        min_hover_s: below this much hover nothing is fitted.
+        block_s: the block, s.
+
+    Returns:
+        ``(fit or None, seconds of hover found)``.
+    """
+    from scipy.optimize import minimize
+
+    ok = hovering & np.all(np.isfinite(balance_world_n), axis=1)
+    vel, idx, runs, _dts, hover_s = _velocity_runs(data, ok)
+    diffs: list[FloatArray] = []
+    used_s = 0.0
+    for a, b in runs:
+        piece = idx[a:b]
+        y = balance_blocks(
+            data.stamp_s[piece], balance_world_n[piece], vel[piece], mass_kg, block_s
+        )
+        if y.shape[0] < BALANCE_MIN_BLOCKS:
+            continue
+        diffs.append(np.diff(y, axis=0))
+        used_s += y.shape[0] * block_s
+    if not diffs or used_s < min_hover_s:
+        return None, hover_s
+    # Start from the moments: γ0, γ1, γ2 pooled.
+    pooled = np.concatenate(diffs)
+    g0 = float((pooled**2).mean())
+    g2 = max(
+        float(
+            np.mean(
+                np.concatenate(
+                    [(d[2:] * d[:-2]).ravel() for d in diffs if len(d) > 2] or [np.zeros(1)]
+                )
+            )
+        ),
+        0.0,
+    )
+    c2_0 = max(g2, 1e-6 * g0)
+    dens0 = max(0.25 * (g0 - 6.0 * c2_0) * block_s, 1e-6 * g0 * block_s)
+    q0 = max(0.1 * g0 / block_s, 10.0 * WANDER_FLOOR_N2_PER_S)
+    ev0 = c2_0 * (block_s / mass_kg) ** 2
+    start = np.log([q0, dens0, ev0])
+    scale_n2 = g0
+    lo = np.log(
+        [
+            WANDER_FLOOR_N2_PER_S,
+            1e-9 * scale_n2 * block_s,
+            1e-9 * scale_n2 * (block_s / mass_kg) ** 2,
+        ]
+    )
+    hi = np.log(
+        [
+            1e3 * scale_n2 / block_s,
+            1e3 * scale_n2 * block_s,
+            1e3 * scale_n2 * (block_s / mass_kg) ** 2,
+        ]
+    )
+    res = minimize(
+        _balance_nll,
+        np.clip(start, lo, hi),
+        args=(diffs, block_s, mass_kg),
+        method="L-BFGS-B",
+        bounds=list(zip(lo.tolist(), hi.tolist(), strict=True)),
+    )
+    q, dens, ev = np.exp(res.x)
+    # The same without wander (q_w at the floor), D and σ_e fitted again.
+    nuisance = minimize(
+        lambda x: _balance_nll(np.concatenate((lo[:1], x)), diffs, block_s, mass_kg),
+        res.x[1:],
+        method="L-BFGS-B",
+        bounds=list(zip(lo[1:].tolist(), hi[1:].tolist(), strict=True)),
+    )
+    resolved = 2.0 * (float(nuisance.fun) - float(res.fun)) > RESOLVED_LR
+    fit = HoverBalanceFit(
+        wander_n2_per_s=float(q),
+        balance_density_n2s=float(dens),
+        velocity_error_std_mps=math.sqrt(float(ev)),
+        wander_resolved=resolved,
+        blocks=int(pooled.shape[0]),
+        hover_s=used_s,
+        stretches=len(diffs),
+    )
+    return fit, hover_s
+
+
+def balance_world_n(
+    data: CalibrationData,
+    mask: NDArray[np.bool_],
+    *,
+    mass_kg: float,
+    calibration: ObservationCalibration | None,
+) -> FloatArray:
+    """(n, 3) the thrust balance ``m·g·e3 − R·u·F`` (+ the rotor drag at the motion-capture
+    velocity) at the samples of ``mask``, world frame, N; NaN elsewhere and where no tension
+    is observed (disarmed, low thrust). The service's own observation
+    (:func:`~groundstation.tension.observe_tension`) of a drone that does not accelerate:
+    the accelerometer as reading ``Rᵀ·g·e3`` (plus the calibration's bias, which it
+    subtracts), so that ``m·R·f`` is ``m·g·e3``."""
+    out = np.full((len(data), 3), math.nan)
+    bias = np.zeros(3) if calibration is None else np.asarray(calibration.accel_bias_mps2)
+    vel = bridged_velocity(data)
+    for i in np.flatnonzero(mask).tolist():
+        rows = rows_from_quat_wxyz(tuple(data.quat_wxyz[i].tolist()))
+        f = np.array(rows[2]) * GRAVITY_MPS2 + bias  # Rᵀ·g·e3: R's third row
+        v = vel[i]
+        vbat = float(data.vbat_v[i]) if data.vbat_v is not None else math.nan
+        obs = observe_tension(
+            f,
+            data.quat_wxyz[i],
+            float(data.thrust_n[i]),
+            mass_kg,
+            armed=bool(data.armed[i]),
+            calibration=calibration,
+            vbat_v=vbat if math.isfinite(vbat) and vbat > 0.0 else None,
+            velocity_world_mps=(float(v[0]), float(v[1]), float(v[2]))
+            if np.all(np.isfinite(v))
+            else None,
+        )
+        if obs.tension_world_n is not None:
+            out[i] = obs.tension_world_n
+    return out

@@ -658,6 +658,11 @@ class TensionFilterParams:
             the drone hovers (``update(hover_model_world_n=...)``).
         hover_velocity_time_s: T_c, that velocity's correlation time, s: ``v = 0`` is
             observed with variance ``σ_v²·T_c/dt`` per sample.
+        hover_balance_density_n2s: D, the thrust balance's white noise at hover as a
+            force density, N²·s: the velocity state's process noise is ``D/m²`` per
+            second (``groundstation calibrate`` fits it with ``hover_wander_n2_per_s``,
+            groundstation.hover_fit.fit_hover_balance). None: ``thrust_noise_n²·dt_mean``,
+            the prior's per-sample noise at the measured spacing.
     """
 
     mass_kg: float = 0.030
@@ -679,6 +684,7 @@ class TensionFilterParams:
     drift_memory_s: float = 1.0
     hover_velocity_std_mps: float = 0.02
     hover_velocity_time_s: float = 0.5
+    hover_balance_density_n2s: float | None = None
 
     def __post_init__(self) -> None:
         positive = {
@@ -712,6 +718,11 @@ class TensionFilterParams:
                 raise ValueError(
                     f"TensionFilterParams.{name} must be finite and >= 0, got {value!r}"
                 )
+        d = self.hover_balance_density_n2s
+        if d is not None and not (math.isfinite(d) and d > 0.0):
+            raise ValueError(
+                f"TensionFilterParams.hover_balance_density_n2s must be finite and > 0, got {d!r}"
+            )
         if self.drift_min_time_constant_s > self.hover_time_constant_s:
             raise ValueError(
                 "TensionFilterParams needs drift_min_time_constant_s <= hover_time_constant_s, "
@@ -1534,8 +1545,14 @@ class TensionFilter:
             started = not hv.active
             if started:
                 hv.start(vv)
-            a_noise = p.thrust_noise_n / p.mass_kg  # q_v: the thrust's noise as accel.
-            accel_density = a_noise * a_noise * dt_mean
+            # q_v: the thrust balance's noise as an acceleration density (fitted, or the
+            # prior's per-sample noise at the measured spacing).
+            balance = p.hover_balance_density_n2s
+            if balance is None:
+                a_noise = p.thrust_noise_n / p.mass_kg
+                accel_density = a_noise * a_noise * dt_mean
+            else:
+                accel_density = balance / (p.mass_kg * p.mass_kg)
             rest_var = vv * p.hover_velocity_time_s / dt
             hv.step(
                 kf, x_prev, a_pred, q, hover_model_world_n, r, w, dt, p.mass_kg,

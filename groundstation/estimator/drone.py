@@ -167,6 +167,17 @@ def hover_velocity_params(section: CalibrationSection) -> tuple[float, float]:
     )
 
 
+def hover_balance_params(section: CalibrationSection) -> tuple[float, float | None]:
+    """``TensionFilterParams``' q_w (N²/s) and D (N²·s) where ``calibrate`` fitted them
+    (``[calibration] hover_wander_n2_per_s`` / ``hover_balance_density_n2s``); the
+    filter's defaults otherwise."""
+    wander = section.hover_wander_n2_per_s
+    return (
+        _FILTER_DEFAULTS.hover_wander_n2_per_s if wander is None else wander,
+        section.hover_balance_density_n2s,
+    )
+
+
 def calibrated_attitude_source(section: CalibrationSection, label: str) -> str | None:
     """The attitude a calibration's thrust axis holds in (:class:`DroneEstimator`).
 
@@ -322,6 +333,7 @@ class DroneEstimator:
         """A rest offset may be applied: the accelerometer model, and not as the fallback of
         an attitude from another source (its rest offset would carry the frames' tilt)."""
         hover_std_mps, hover_time_s = hover_velocity_params(params.calibration)
+        wander_n2_per_s, balance_n2s = hover_balance_params(params.calibration)
         self.filter_control = FilterControl(
             TensionFilterParams(
                 mass_kg=params.drone.mass_kg,
@@ -329,6 +341,8 @@ class DroneEstimator:
                 thrust_noise_n=params.drone.thrust_noise_n,
                 hover_velocity_std_mps=hover_std_mps,
                 hover_velocity_time_s=hover_time_s,
+                hover_wander_n2_per_s=wander_n2_per_s,
+                hover_balance_density_n2s=balance_n2s,
             ),
             self.contact_params.push_free_weight_ratio,
         )

@@ -34,10 +34,12 @@ from groundstation.calibration import (
     hover_mask,
 )
 from groundstation.config import CalibrationSection, ConfigError, Settings, load_settings
-from groundstation.estimator.drone import slow_accel_params
+from groundstation.estimator.drone import calibration_from_config, slow_accel_params
 from groundstation.hover_fit import (
     HOVER_FIT_MIN_S,
+    balance_world_n,
     fit_flight,
+    fit_hover_balance,
     fit_hover_velocity,
     flight_phases,
 )
@@ -875,13 +877,13 @@ def run_calibrate(
             rec = recs[d]
             afit = airframe_drone(rec, settings, untethered=untethered)
             echo(format_airframe(d, afit, rec.files, rec.segments))
-            hover_keys, hover_line = hover_velocity_drone(rec, settings)
-            echo(hover_line)
-            echo(_attitude_line(d, rec.attitude_source))
             source = f"groundstation calibrate {stamp} from {names}"
             table = _airframe_table(
                 afit, settings.for_drone(d).calibration, source, rec.attitude_source
             )
+            hover_keys, hover_line = hover_velocity_drone(rec, settings, table)
+            echo(hover_line)
+            echo(_attitude_line(d, rec.attitude_source))
             table.update(hover_keys)
             patch["drones"][d] = {"calibration": table}
             head = [
@@ -907,16 +909,15 @@ def run_calibrate(
         fit = cals[d].fit
         rec = recs[d]
         echo(format_fit(d, fit, rec.files))
-        hover_keys, hover_line = hover_velocity_drone(rec, settings)
+        source = f"groundstation calibrate {stamp} from {names}"
+        cal_table = _calibration_table(cals[d], source, rec.attitude_source)
+        hover_keys, hover_line = hover_velocity_drone(rec, settings, cal_table)
         echo(hover_line)
         echo(_attitude_line(d, rec.attitude_source))
         for note in cals[d].rest_note:
             echo(f"  {note}")
         params = settings.for_drone(d)
-        source = f"groundstation calibrate {stamp} from {names}"
-        tables: dict[str, Any] = {
-            "calibration": _calibration_table(cals[d], source, rec.attitude_source) | hover_keys
-        }
+        tables: dict[str, Any] = {"calibration": cal_table | hover_keys}
         if params.calibration.thrust_model != "vbat_linear":
             # the full model fits the straight battery line only: say so in what it writes
             tables["calibration"]["thrust_model"] = "vbat_linear"
@@ -949,10 +950,14 @@ def run_calibrate(
     return _write_config(settings, config_path, patch, comments, out_path, echo, force)
 
 
-def hover_velocity_drone(rec: DroneRecording, settings: Settings) -> tuple[dict[str, float], str]:
-    """σ_v and T_c of one drone's hovers, σ_V, T_V and σ_δ of its flights
-    (groundstation.hover_fit): the keys to write (none where there is too little under
-    motion capture) and the lines to print."""
+def hover_velocity_drone(
+    rec: DroneRecording, settings: Settings, fitted: Mapping[str, Any] | None = None
+) -> tuple[dict[str, float], str]:
+    """σ_v and T_c of one drone's hovers, q_w and D of their thrust balance, σ_V, T_V and σ_δ
+    of its flights (groundstation.hover_fit): the keys to write (none where there is too
+    little under motion capture) and the lines to print. ``fitted``: the ``[calibration]``
+    table this run writes, whose thrust model the balance is read with (None: the
+    configured one)."""
     params = settings.for_drone(rec.drone)
     bias = params.calibration.accel_bias_mps2
     phases = flight_phases(
@@ -988,6 +993,45 @@ def hover_velocity_drone(rec: DroneRecording, settings: Settings) -> tuple[dict[
             f"{fit.time_s:.3f}  ({fit.hover_s:.1f} s of hover in {fit.stretches} stretches: "
             "the velocity's scatter and correlation time, which bound the hover's thrust "
             "balance)"
+        )
+    section = params.calibration
+    if fitted is not None:
+        section = CalibrationSection.model_validate({**section.model_dump(), **fitted})
+    balance = balance_world_n(
+        rec.data,
+        phases.hovering,
+        mass_kg=params.drone.mass_kg,
+        calibration=calibration_from_config(section)[0],
+    )
+    bfit, _ = fit_hover_balance(rec.data, phases.hovering, balance, mass_kg=params.drone.mass_kg)
+    if bfit is None:
+        lines.append(
+            f"    hover balance            not fitted: {hover_s:.1f} s of hover under motion "
+            f"capture (need {HOVER_FIT_MIN_S:.0f} s): the filter's defaults stand"
+        )
+    elif refused := _outside_bounds(
+        balance_keys := {
+            **(
+                {"hover_wander_n2_per_s": float(f"{bfit.wander_n2_per_s:.4g}")}
+                if bfit.wander_resolved
+                else {}
+            ),
+            "hover_balance_density_n2s": float(f"{bfit.balance_density_n2s:.4g}"),
+        }
+    ):
+        lines.append(
+            f"    hover balance            not fitted: {refused}: the filter's defaults stand"
+        )
+    else:
+        keys.update(balance_keys)
+        lines.append(
+            f"    hover_wander_n2_per_s    {bfit.wander_n2_per_s:.3g}"
+            + ("" if bfit.wander_resolved else " (not resolved from no wander: not written)")
+            + f"  hover_balance_density_n2s {bfit.balance_density_n2s:.3g}  "
+            f"(motion-capture velocity error {bfit.velocity_error_std_mps * 1e3:.2f} mm/s; "
+            f"{bfit.hover_s:.1f} s of hover in {bfit.stretches} stretches, "
+            f"{bfit.blocks} block differences: the tension's wander and the thrust "
+            "balance's noise, by maximum likelihood)"
         )
     flight, airborne_s = fit_flight(rec.data, phases, accel_bias_mps2=bias)
     if flight is None:
