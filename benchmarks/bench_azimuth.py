@@ -45,7 +45,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.figures import AT_START, DOCS, kept_reading, write_figures
+from benchmarks.figures import AT_START, DOCS, kept_reading, marker, write_figures
 from groundstation.config import Settings, load_settings
 from groundstation.pipeline import Pipeline
 from groundstation.sim import Simulator
@@ -203,9 +203,9 @@ def _figures(results: dict[float, dict[str, Errors]]) -> dict[str, Any]:
 def _quoted(fig: dict[str, Any]) -> str:
     """One sentence that quotes the calibrated section's pooled figures (checked against
     docs/azimuth_sources.json by tests/test_docs_numbers.py)."""
-    key = "azimuth_sources.json realistic_calibrated"
     parts = [
-        f"{row} {fig[row]['all_spots_median_cm']:.1f}<!-- fig {key}.{row}.all_spots_median_cm -->"
+        f"{row} {fig[row]['all_spots_median_cm']:.1f}"
+        + marker("azimuth_sources.json", f"realistic_calibrated.{row}.all_spots_median_cm")
         for row, _, _ in ROWS
         if fig[row]["all_spots_median_cm"] is not None and " " not in row
     ]

@@ -37,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.figures import AT_START, DOCS, write_figures
+from benchmarks.figures import AT_START, DOCS, marker, write_figures
 from groundstation.tension import TensionFilter, TensionFilterParams
 
 DOC_PATH = Path(__file__).resolve().parent.parent / "docs" / "change_test_benchmark.md"
@@ -198,7 +198,7 @@ def figures_of(res: dict[str, Any]) -> dict[str, Any]:
 
 
 def _fig(key: str) -> str:
-    return f"<!-- fig {FIGURES} {key} -->"
+    return marker(FIGURES, key)
 
 
 def render(fig: dict[str, Any], cmd: str, wall_s: float) -> str:

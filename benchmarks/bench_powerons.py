@@ -37,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.figures import AT_START, DOCS, kept_reading, write_figures
+from benchmarks.figures import AT_START, DOCS, kept_reading, marker, write_figures
 from groundstation.bus import Sample
 from groundstation.config import Settings, load_settings
 from groundstation.pipeline import Pipeline
@@ -262,7 +262,7 @@ def score_figures(s: Score | None) -> dict[str, float] | None:
 
 
 def _fig(key: str, scale: str = "") -> str:
-    return f"<!-- fig {PAGE}.json {key}{' ×' + scale if scale else ''} -->"
+    return marker(f"{PAGE}.json", key, scale)
 
 
 def run(args: argparse.Namespace, misalignment: bool) -> tuple[str, dict[str, Any]]:

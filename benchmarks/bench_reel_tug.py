@@ -51,7 +51,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.figures import AT_START, DOCS, kept_reading, write_figures
+from benchmarks.figures import AT_START, DOCS, kept_reading, marker, write_figures
 from benchmarks.told_noise import TAUS_S, glr_random_walk
 from groundstation.config import Settings, load_settings
 from groundstation.pipeline import Pipeline
@@ -335,19 +335,21 @@ def main(argv: list[str] | None = None) -> int:
         per = ", ".join("never" if r["t90_s"] is None else f"{r['t90_s']:.2f}" for r in fig["runs"])
         lines.append(
             f"| {profile} | {fig['seeds']} | {fig['jump_mn']:.1f} | "
-            f"{fig['pre_tug_error_mn']:.2f}<!-- fig reel_tug.json {profile}.pre_tug_error_mn --> "
-            f"| {s(fig['t90_s'])}"
-            + ("" if fig["t90_s"] is None else f"<!-- fig reel_tug.json {profile}.t90_s -->")
+            f"{fig['pre_tug_error_mn']:.2f}"
+            + marker("reel_tug.json", f"{profile}.pre_tug_error_mn")
+            + f" | {s(fig['t90_s'])}"
+            + ("" if fig["t90_s"] is None else marker("reel_tug.json", f"{profile}.t90_s"))
             + f" | {s(fig['oracle_t90_s'])} | {s(fig['told_noise_t90_s'])}"
             + (
                 ""
                 if fig["told_noise_t90_s"] is None
-                else f"<!-- fig reel_tug.json {profile}.told_noise_t90_s -->"
-                f" (τ {fig['told_noise_best_tau_s']:g} s)"
+                else marker("reel_tug.json", f"{profile}.told_noise_t90_s")
+                + f" (τ {fig['told_noise_best_tau_s']:g} s)"
             )
             + f" | {s(fig['told_noise_detection_s'])}"
             + f" | {s(fig['first_within_10pct_s'])}"
-            + f" | {fig['mean_error_mn']:.2f}<!-- fig reel_tug.json {profile}.mean_error_mn -->"
+            + f" | {fig['mean_error_mn']:.2f}"
+            + marker("reel_tug.json", f"{profile}.mean_error_mn")
             + f" | {per} |"
         )
     page = "\n".join(lines) + "\n"

@@ -439,6 +439,13 @@ in metres quoted in cm)."""
 MARKER = re.compile(r"<!-- fig\b[^>]*-->")
 
 
+def marker(file: str, key: str, scale: str = "") -> str:
+    """The marker a page writes after a number it quotes (:data:`QUOTE`): ``file`` the
+    figures file (``reel_tug.json``), ``key`` the figure's dotted key, ``scale`` the factor
+    if the page quotes it in other units (``"100"``: metres quoted in cm)."""
+    return f"<!-- fig {file} {key}{' ×' + scale if scale else ''} -->"
+
+
 @dataclass(frozen=True)
 class Quote:
     """A number a page quotes, with the figure it names."""
