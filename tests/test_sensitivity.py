@@ -18,7 +18,8 @@ def test_the_rows_are_the_tables_hand_set_rows() -> None:
     names = sens.hand_set_rows(CONSTANTS_MD)
     assert len(names) == total
     assert len(set(names)) == len(names)
-    assert "TensionFilterParams.hover_wander_n2_per_s" in names
+    assert "TensionFilterParams.hover_time_constant_s" in names
+    assert "TensionFilterParams.hover_wander_n2_per_s" not in names  # fitted by calibrate
     assert "TensionFilterParams.mass_kg" not in names  # physical
 
 
