@@ -21,6 +21,7 @@ from groundstation.hover_fit import (
     balance_blocks,
     balance_world_n,
     fit_hover_balance,
+    fit_hover_velocity,
 )
 from groundstation.pipeline import Pipeline
 from groundstation.tension import (
@@ -44,12 +45,12 @@ def _balanced_hover(
     *,
     seed: int,
     mocap_std_m: float = 0.0005,
-) -> tuple[CalibrationData, np.ndarray]:
+) -> tuple[CalibrationData, np.ndarray, np.ndarray]:
     """A level hover whose tension (what the balance reads) is a random walk of density
     ``wander_n2_per_s`` per axis; the velocity an AR(1) (0.01 m/s, 0.3 s) moved by Newton,
     ``m·dv/dt = T − h``; the thrust balance h read with white noise of density
     ``density_n2s``; motion capture's positions with ``mocap_std_m`` of noise. Returns the
-    recording and the balance per sample."""
+    recording, the balance and the true tension per sample."""
     rng = np.random.default_rng(seed)
     n = round(seconds / DT_S)
     a = math.exp(-DT_S / 0.3)
@@ -69,7 +70,7 @@ def _balanced_hover(
         np.full(n, MASS_KG * G),
         position_world_m=p,
     )
-    return data, h
+    return data, h, tension
 
 
 @pytest.mark.parametrize(("wander", "density"), [(1e-9, 9e-8), (1e-7, 9e-8), (4.5e-8, 1e-6)])
@@ -78,7 +79,7 @@ def test_the_likelihood_finds_the_wander_and_the_balance_noise(
 ) -> None:
     """Five minutes of hover: q_w within a factor of 2.5 (a random walk's density from
     block increments is a slow statistic) and D within 30 %, whatever their ratio."""
-    data, h = _balanced_hover(300.0, wander, density, seed=11)
+    data, h, _ = _balanced_hover(300.0, wander, density, seed=11)
     fit, hover_s = fit_hover_balance(data, np.ones(len(data), bool), h, mass_kg=MASS_KG)
     assert fit is not None and hover_s == pytest.approx(300.0, abs=0.5)
     assert fit.wander_resolved
@@ -89,14 +90,14 @@ def test_the_likelihood_finds_the_wander_and_the_balance_noise(
 def test_no_wander_is_not_taken_for_one() -> None:
     """A tension that does not move: the likelihood does not tell q_w from zero, and
     ``calibrate`` would not write it."""
-    data, h = _balanced_hover(120.0, 0.0, 9e-8, seed=12)
+    data, h, _ = _balanced_hover(120.0, 0.0, 9e-8, seed=12)
     fit, _ = fit_hover_balance(data, np.ones(len(data), bool), h, mass_kg=MASS_KG)
     assert fit is not None and not fit.wander_resolved
     assert fit.balance_density_n2s == pytest.approx(9e-8, rel=0.3)
 
 
 def test_too_little_hover_fits_nothing() -> None:
-    data, h = _balanced_hover(2.5, 1e-8, 9e-8, seed=13)
+    data, h, _ = _balanced_hover(2.5, 1e-8, 9e-8, seed=13)
     fit, hover_s = fit_hover_balance(data, np.ones(len(data), bool), h, mass_kg=MASS_KG)
     assert fit is None and 0.0 < hover_s < 3.0
 
@@ -104,7 +105,7 @@ def test_too_little_hover_fits_nothing() -> None:
 def test_the_blocks_are_newton_integrated_over_each_block() -> None:
     """With no noise, Y_k is the block's mean tension exactly: the balance's mean plus
     m·Δv/Δt."""
-    data, h = _balanced_hover(4.0, 1e-6, 1e-30, seed=14, mocap_std_m=0.0)
+    data, _, _ = _balanced_hover(4.0, 1e-6, 1e-30, seed=14, mocap_std_m=0.0)
     rng = np.random.default_rng(0)
     v = rng.normal(0.0, 0.01, (len(data), 3))
     tension = rng.normal(0.0, 0.01, (len(data), 3))
@@ -148,6 +149,49 @@ def test_the_balance_is_the_services_hover_model() -> None:
         rows = np.array(rotation_rows(quat[i]))
         want = obs.tension_world_n - MASS_KG * (rows @ (accel[i] - bias) - [0.0, 0.0, G])
         np.testing.assert_allclose(got[i], want, atol=1e-12)
+
+
+@pytest.mark.parametrize(("wander", "density"), [(1e-9, 9e-8), (1e-7, 9e-8), (1e-7, 1e-6)])
+def test_fitted_from_one_hover_the_sigma_is_honest_on_another(
+    wander: float, density: float
+) -> None:
+    """The σ follows the recordings: fitted (σ_v, T_c, q_w, D) from five minutes of one hover
+    under motion capture, the filter run on another hover of the same drone (the
+    accelerometer model with 1 m/s² of white vibration, the thrust balance as read) holds
+    the true tension within 2σ per axis in 90–98 % of the samples after 20 s; the priors
+    do not in these regimes (100 %, 89 %, 73 %), and their error is no smaller."""
+    data, h, _ = _balanced_hover(300.0, wander, density, seed=5)
+    hovering = np.ones(len(data), bool)
+    fit, _ = fit_hover_balance(data, hovering, h, mass_kg=MASS_KG)
+    velocity, _ = fit_hover_velocity(data, hovering)
+    assert fit is not None and velocity is not None
+    prior = TensionFilterParams()
+    fitted = TensionFilterParams(
+        hover_wander_n2_per_s=fit.wander_n2_per_s
+        if fit.wander_resolved
+        else prior.hover_wander_n2_per_s,
+        hover_balance_density_n2s=fit.balance_density_n2s,
+        hover_velocity_std_mps=velocity.std_mps,
+        hover_velocity_time_s=velocity.time_s,
+    )
+    judged, h2, truth = _balanced_hover(120.0, wander, density, seed=6)
+    rng = np.random.default_rng(7)
+    vibration = rng.normal(0.0, MASS_KG * 1.0, (len(judged), 3))
+    share, rms = {}, {}
+    for name, params in (("prior", prior), ("fitted", fitted)):
+        f = TensionFilter(params)
+        inside, errors = [], []
+        for i in range(len(judged)):
+            est = f.update(truth[i] + vibration[i], DT_S, hover_model_world_n=h2[i])
+            if i * DT_S >= 20.0:
+                e = est.tension_world_n - truth[i]
+                errors.append(e)
+                inside.append(np.abs(e) <= 2.0 * est.std_n)
+        share[name] = float(np.mean(inside))
+        rms[name] = float(np.sqrt(np.mean(np.square(errors))))
+    assert 0.90 <= share["fitted"] <= 0.98, share
+    assert not 0.90 <= share["prior"] <= 0.98, share
+    assert rms["fitted"] <= rms["prior"], rms
 
 
 def test_the_fitted_density_is_the_velocitys_process_noise() -> None:
