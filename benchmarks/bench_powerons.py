@@ -239,6 +239,10 @@ ROWS = {
     "told the truth: own airframe constants (slow stage on)": "told_airframe",
     "told the truth: own full-model equivalent (bias known)": "told_full",
     "told the truth: own airframe constants, calibrate's hover fit": "told_airframe_hover_fit",
+    "the same two, judged with motion capture: the prior": "told_airframe_mocap",
+    "the same two, judged with motion capture: calibrate's hover fit": (
+        "told_airframe_hover_fit_mocap"
+    ),
 }
 """The table's configurations, each with its key in the figures."""
 
@@ -348,6 +352,27 @@ def run(args: argparse.Namespace, misalignment: bool) -> tuple[str, dict[str, An
         rows["told the truth: own airframe constants (slow stage on)"] = score(own_air)
         rows["told the truth: own full-model equivalent (bias known)"] = score(own_full)
         rows["told the truth: own airframe constants, calibrate's hover fit"] = score(own_fit)
+        # the same power-ons flown again with motion capture reaching the service
+        with_mocap = [
+            record(seed, args.noise, mocap=True, levelled=levelled) for seed in judge_seeds
+        ]
+        for label, extra in (
+            ("the same two, judged with motion capture: the prior", {}),
+            ("the same two, judged with motion capture: calibrate's hover fit", hover_fit),
+        ):
+            rows[label] = score(
+                [
+                    judge(
+                        served(
+                            r,
+                            _cal_settings(
+                                {**r.errors["airframe_equivalent"], **extra, "source": "truth"}
+                            ),
+                        )
+                    )
+                    for r in with_mocap
+                ]
+            )
 
     say("# Calibrate on some power-ons, judge others (realistic simulator)")
     say("")
