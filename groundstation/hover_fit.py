@@ -46,7 +46,12 @@ from groundstation.calibration import (
     _index_runs,
     _integrated_autocorr_time,
 )
-from groundstation.tension import ObservationCalibration, TensionFilterParams, observe_tension
+from groundstation.tension import (
+    ObservationCalibration,
+    TensionFilterParams,
+    observe_tension,
+    rotation_rows,
+)
 from groundstation.tension_change import exceedance_chi2, noise_warmup_samples
 from groundstation.tension_noise import NoiseEstimate
 
@@ -264,13 +269,13 @@ def bridged_velocity(data: CalibrationData) -> FloatArray:
 
 
 def _velocity_runs(
-    data: CalibrationData, mask: NDArray[np.bool_]
+    data: CalibrationData, mask: NDArray[np.bool_], velocity_world_mps: FloatArray | None = None
 ) -> tuple[FloatArray, NDArray[np.int64], list[tuple[int, int]], list[float], float]:
     """The motion-capture velocity (:func:`bridged_velocity`) and the runs of ``mask`` where it
     is known that last at least the hover test's window (``slow_accel.HOVER_MEAN_S``) and 3
     samples: ``(velocity, indices, runs into the indices, each run's median period, seconds
     they span)``."""
-    vel = bridged_velocity(data)
+    vel = bridged_velocity(data) if velocity_world_mps is None else velocity_world_mps
     idx = np.flatnonzero(mask & np.all(np.isfinite(vel), axis=1))
     runs: list[tuple[int, int]] = []
     dts: list[float] = []
@@ -297,6 +302,7 @@ def fit_hover_velocity(
     hovering: NDArray[np.bool_],
     *,
     min_hover_s: float = HOVER_FIT_MIN_S,
+    velocity_world_mps: FloatArray | None = None,
 ) -> tuple[HoverVelocityFit | None, float]:
     """σ_v and T_c from the motion-capture velocity in the hover stretches (module doc).
 
@@ -304,11 +310,13 @@ def fit_hover_velocity(
         data: the drone's samples (with motion-capture positions).
         hovering: (n,) the hover test's verdict per sample (:func:`hover_flags`).
         min_hover_s: below this much hover nothing is fitted.
+        velocity_world_mps: :func:`bridged_velocity` of ``data`` if already computed
+            (``calibrate`` computes it once for every fit), else None.
 
     Returns:
         ``(fit or None, seconds of hover found)``.
     """
-    vel, idx, runs, dts, hover_s = _velocity_runs(data, hovering)
+    vel, idx, runs, dts, hover_s = _velocity_runs(data, hovering, velocity_world_mps)
     if not runs or hover_s < min_hover_s:
         return None, hover_s
     v = vel[idx]
@@ -351,6 +359,7 @@ def fit_flight(
     *,
     accel_bias_mps2: tuple[float, float, float] = (0.0, 0.0, 0.0),
     min_airborne_s: float = HOVER_FIT_MIN_S,
+    velocity_world_mps: FloatArray | None = None,
 ) -> tuple[FlightFit | None, float]:
     """The bias filter's model of the flight (groundstation.bias_kalman) from the recording::
 
@@ -360,12 +369,13 @@ def fit_flight(
         σ_δ²  = mean(δ²) over the flights that follow a rest and the three axes
 
     ``v_mocap`` is :func:`bridged_velocity`, ``a_mocap`` its time derivative; a flight is a run
-    of airborne samples of at least ``slow_accel.HOVER_MEAN_S`` with a velocity.
+    of airborne samples of at least ``slow_accel.HOVER_MEAN_S`` with a velocity
+    (``velocity_world_mps``: that velocity if already computed, else None).
 
     Returns:
         ``(fit or None, seconds of flight found)``.
     """
-    vel, idx, runs, dts, airborne_s = _velocity_runs(data, phases.airborne)
+    vel, idx, runs, dts, airborne_s = _velocity_runs(data, phases.airborne, velocity_world_mps)
     if not runs or airborne_s < min_airborne_s:
         return None, airborne_s
     v = vel[idx]
@@ -519,6 +529,7 @@ def fit_hover_balance(
     mass_kg: float,
     min_hover_s: float = HOVER_FIT_MIN_S,
     block_s: float = BALANCE_BLOCK_S,
+    velocity_world_mps: FloatArray | None = None,
 ) -> tuple[HoverBalanceFit | None, float]:
     """q_w and D of the hover's thrust balance from the recording, by maximum likelihood.
 
@@ -551,6 +562,8 @@ def fit_hover_balance(
         mass_kg: the drone's mass, kg.
         min_hover_s: below this much hover nothing is fitted.
         block_s: the block, s.
+        velocity_world_mps: :func:`bridged_velocity` of ``data`` if already computed
+            (``calibrate`` computes it once for every fit), else None.
 
     Returns:
         ``(fit or None, seconds of hover found)``.
@@ -558,7 +571,7 @@ def fit_hover_balance(
     from scipy.optimize import minimize
 
     ok = hovering & np.all(np.isfinite(balance_world_n), axis=1)
-    vel, idx, runs, _dts, hover_s = _velocity_runs(data, ok)
+    vel, idx, runs, _dts, hover_s = _velocity_runs(data, ok, velocity_world_mps)
     diffs: list[FloatArray] = []
     used_s = 0.0
     for a, b in runs:
@@ -572,39 +585,24 @@ def fit_hover_balance(
         used_s += y.shape[0] * block_s
     if not diffs or used_s < min_hover_s:
         return None, hover_s
-    # Start from the moments: γ0, γ1, γ2 pooled.
+    # Start from the moments (γ0, γ2 pooled); the search spans the data's own scale, in
+    # the units of q_w, D and σ_e² (``units``: γ0 taken as each one's alone).
     pooled = np.concatenate(diffs)
     g0 = float((pooled**2).mean())
-    g2 = max(
-        float(
-            np.mean(
-                np.concatenate(
-                    [(d[2:] * d[:-2]).ravel() for d in diffs if len(d) > 2] or [np.zeros(1)]
-                )
-            )
-        ),
-        0.0,
-    )
+    lag2 = [(d[2:] * d[:-2]).ravel() for d in diffs if len(d) > 2]
+    g2 = max(float(np.concatenate(lag2).mean()), 0.0) if lag2 else 0.0
+    velocity_units = (block_s / mass_kg) ** 2
+    units = g0 * np.array([1.0 / block_s, block_s, velocity_units])
     c2_0 = max(g2, 1e-6 * g0)
-    dens0 = max(0.25 * (g0 - 6.0 * c2_0) * block_s, 1e-6 * g0 * block_s)
-    q0 = max(0.1 * g0 / block_s, 10.0 * WANDER_FLOOR_N2_PER_S)
-    ev0 = c2_0 * (block_s / mass_kg) ** 2
-    start = np.log([q0, dens0, ev0])
-    scale_n2 = g0
-    lo = np.log(
+    start = np.log(
         [
-            WANDER_FLOOR_N2_PER_S,
-            1e-9 * scale_n2 * block_s,
-            1e-9 * scale_n2 * (block_s / mass_kg) ** 2,
+            max(0.1 * units[0], 10.0 * WANDER_FLOOR_N2_PER_S),
+            max(0.25 * (g0 - 6.0 * c2_0) * block_s, 1e-6 * units[1]),
+            c2_0 * velocity_units,
         ]
     )
-    hi = np.log(
-        [
-            1e3 * scale_n2 / block_s,
-            1e3 * scale_n2 * block_s,
-            1e3 * scale_n2 * (block_s / mass_kg) ** 2,
-        ]
-    )
+    lo = np.log([WANDER_FLOOR_N2_PER_S, *(1e-9 * units[1:])])
+    hi = np.log(1e3 * units)
     res = minimize(
         _balance_nll,
         np.clip(start, lo, hi),
@@ -639,21 +637,23 @@ def balance_world_n(
     *,
     mass_kg: float,
     calibration: ObservationCalibration | None,
+    velocity_world_mps: FloatArray | None = None,
 ) -> FloatArray:
     """(n, 3) the thrust balance ``m·g·e3 − R·u·F`` (+ the rotor drag at the motion-capture
     velocity) at the samples of ``mask``, world frame, N; NaN elsewhere and where no tension
     is observed (disarmed, low thrust). The service's own observation
     (:func:`~groundstation.tension.observe_tension`) of a drone that does not accelerate:
     the accelerometer as reading ``Rᵀ·g·e3`` (plus the calibration's bias, which it
-    subtracts), so that ``m·R·f`` is ``m·g·e3``."""
+    subtracts), so that ``m·R·f`` is ``m·g·e3``. ``velocity_world_mps``: :func:`bridged_velocity`
+    of ``data`` if already computed, else None."""
     out = np.full((len(data), 3), math.nan)
     bias = np.zeros(3) if calibration is None else np.asarray(calibration.accel_bias_mps2)
-    vel = bridged_velocity(data)
+    vel = bridged_velocity(data) if velocity_world_mps is None else velocity_world_mps
     for i in np.flatnonzero(mask).tolist():
-        rows = rows_from_quat_wxyz(tuple(data.quat_wxyz[i].tolist()))
+        rows = rotation_rows(data.quat_wxyz[i])  # the service's, once for both uses
         f = np.array(rows[2]) * GRAVITY_MPS2 + bias  # Rᵀ·g·e3: R's third row
         v = vel[i]
-        vbat = float(data.vbat_v[i]) if data.vbat_v is not None else math.nan
+        vbat = float(data.vbat_v[i])
         obs = observe_tension(
             f,
             data.quat_wxyz[i],
@@ -665,6 +665,7 @@ def balance_world_n(
             velocity_world_mps=(float(v[0]), float(v[1]), float(v[2]))
             if np.all(np.isfinite(v))
             else None,
+            rotation_rows_world_body=rows,
         )
         if obs.tension_world_n is not None:
             out[i] = obs.tension_world_n

@@ -38,6 +38,7 @@ from groundstation.estimator.drone import calibration_from_config, slow_accel_pa
 from groundstation.hover_fit import (
     HOVER_FIT_MIN_S,
     balance_world_n,
+    bridged_velocity,
     fit_flight,
     fit_hover_balance,
     fit_hover_velocity,
@@ -970,7 +971,8 @@ def hover_velocity_drone(
     )
     keys: dict[str, float] = {}
     lines: list[str] = []
-    fit, hover_s = fit_hover_velocity(rec.data, phases.hovering)
+    velocity = bridged_velocity(rec.data)  # motion capture's, once for every fit below
+    fit, hover_s = fit_hover_velocity(rec.data, phases.hovering, velocity_world_mps=velocity)
     if fit is None:
         lines.append(
             f"    hover velocity           not fitted: {hover_s:.1f} s of hover under motion "
@@ -1002,11 +1004,18 @@ def hover_velocity_drone(
         phases.hovering,
         mass_kg=params.drone.mass_kg,
         calibration=calibration_from_config(section)[0],
+        velocity_world_mps=velocity,
     )
-    bfit, _ = fit_hover_balance(rec.data, phases.hovering, balance, mass_kg=params.drone.mass_kg)
+    bfit, balance_s = fit_hover_balance(
+        rec.data,
+        phases.hovering,
+        balance,
+        mass_kg=params.drone.mass_kg,
+        velocity_world_mps=velocity,
+    )
     if bfit is None:
         lines.append(
-            f"    hover balance            not fitted: {hover_s:.1f} s of hover under motion "
+            f"    hover balance            not fitted: {balance_s:.1f} s of hover under motion "
             f"capture (need {HOVER_FIT_MIN_S:.0f} s): the filter's defaults stand"
         )
     elif refused := _outside_bounds(
@@ -1033,14 +1042,16 @@ def hover_velocity_drone(
             f"{bfit.blocks} block differences: the tension's wander and the thrust "
             "balance's noise, by maximum likelihood)"
         )
-    flight, airborne_s = fit_flight(rec.data, phases, accel_bias_mps2=bias)
+    flight, airborne_s = fit_flight(
+        rec.data, phases, accel_bias_mps2=bias, velocity_world_mps=velocity
+    )
     if flight is None:
         lines.append(
             f"    flight velocity          not fitted: {airborne_s:.1f} s of flight under "
             f"motion capture (need {HOVER_FIT_MIN_S:.0f} s): the bias filter's defaults stand"
         )
     elif refused := _outside_bounds(
-        velocity := {
+        flight_keys := {
             "flight_velocity_std_mps": round(flight.velocity_std_mps, 6),
             "flight_velocity_time_s": round(flight.velocity_time_s, 4),
         }
@@ -1049,7 +1060,7 @@ def hover_velocity_drone(
             f"    flight velocity          not fitted: {refused}: the bias filter's defaults stand"
         )
     else:
-        keys.update(velocity)
+        keys.update(flight_keys)
         line = (
             f"    flight_velocity_std_mps  {flight.velocity_std_mps:.4f}  "
             f"flight_velocity_time_s {flight.velocity_time_s:.3f}  ({flight.airborne_s:.1f} s "
