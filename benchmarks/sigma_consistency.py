@@ -1,7 +1,8 @@
 """Why the published tension σ is wider than the error on a hover (a diagnosis, no page).
 
 ``python -m benchmarks.sigma_consistency [--noise 1.0] [--spots 0,2,4] [--seed 500]
-[--hover-velocity-std MPS] [--hover-velocity-time S] [--thrust-noise N] [--wander N2PS]``
+[--hover-velocity-std MPS] [--hover-velocity-time S] [--thrust-noise N] [--wander N2PS]
+[--balance N2S] [--calibration FILE]``
 
 Realistic simulator, calibration = truth (``benchmarks.bench_realistic.fly``), 20 s hovers,
 judged from 8 s. Per flight and world axis: the error's RMS against the median published
@@ -18,23 +19,22 @@ column is the true tension's own wander over the judged window, as a random walk
 The options change one prior of the hover's (T, v) filter at a time, to see which one sets
 the σ: ``--hover-velocity-std`` / ``--hover-velocity-time`` (σ_v and T_c, as
 ``[calibration] hover_velocity_std_mps`` / ``hover_velocity_time_s``), ``--thrust-noise``
-(``[drone] thrust_noise_n``, the velocity's process noise while hovering) and ``--wander``
-(``TensionFilterParams.hover_wander_n2_per_s``, the tension's random walk, which has no key).
+(``[drone] thrust_noise_n``, the prior of the velocity's process noise while hovering),
+``--wander`` (``[calibration] hover_wander_n2_per_s``, the tension's random walk) and
+``--balance`` (``[calibration] hover_balance_density_n2s``, the thrust balance's white noise,
+which takes the place of ``thrust_noise_n``'s), or a ``calibrate`` output's hover keys.
 """
 
 from __future__ import annotations
 
 import argparse
-import functools
 import math
 from typing import Any
 
 import numpy as np
 
 from benchmarks import bench_realistic as br
-from groundstation.estimator import drone as drone_mod
 from groundstation.pipeline import Pipeline
-from groundstation.tension import TensionFilterParams
 
 
 def flight(noise: float, spot: int, seed: int) -> dict[str, Any]:
@@ -97,7 +97,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--hover-velocity-std", type=float, help="σ_v, m/s (default: the filter's)")
     ap.add_argument("--hover-velocity-time", type=float, help="T_c, s (default: the filter's)")
     ap.add_argument("--thrust-noise", type=float, help="[drone] thrust_noise_n, N")
-    ap.add_argument("--wander", type=float, help="hover_wander_n2_per_s, N^2/s")
+    ap.add_argument("--wander", type=float, help="[calibration] hover_wander_n2_per_s, N^2/s")
+    ap.add_argument("--balance", type=float, help="[calibration] hover_balance_density_n2s, N^2*s")
     ap.add_argument(
         "--calibration",
         help="a calibrate output: its [drones.cf1.calibration] hover_* keys (σ_v, T_c, q_w, "
@@ -116,6 +117,10 @@ def main(argv: list[str] | None = None) -> int:
         cal_over["hover_velocity_std_mps"] = args.hover_velocity_std
     if args.hover_velocity_time is not None:
         cal_over["hover_velocity_time_s"] = args.hover_velocity_time
+    if args.wander is not None:
+        cal_over["hover_wander_n2_per_s"] = args.wander
+    if args.balance is not None:
+        cal_over["hover_balance_density_n2s"] = args.balance
     if cal_over:
         truth = br._true_calibration
 
@@ -131,10 +136,6 @@ def main(argv: list[str] | None = None) -> int:
             return load(path, over, **k)
 
         br.load_settings = with_thrust_noise  # type: ignore[assignment]
-    if args.wander is not None:
-        drone_mod.TensionFilterParams = functools.partial(  # type: ignore[misc]
-            TensionFilterParams, hover_wander_n2_per_s=args.wander
-        )
     print(
         "| spot | error RMS x/y/z mN | median σ x/y/z mN | within 2σ x/y/z | κ | "
         "sqrt(s_d) x/y/z mN | sqrt(r) x/y/z mN | truth's wander N²/s (1 s / 2 s blocks) |"
