@@ -70,10 +70,6 @@ _ZERO3: Vec3 = (0.0, 0.0, 0.0)
 HOVER_MEAN_S = STILL_WINDOW_S
 """The hover test's mean acceleration window, s: the one window of stillness
 (:data:`groundstation.attitude.STILL_WINDOW_S`, the rest's too)."""
-HOVER_SPEED_LEAK_S = 2.0
-"""Without motion capture the hover test's speed is the corrected acceleration's leaky
-integral with this time constant, s (twice ``HOVER_MEAN_S``: it forgets the integral's
-drift, keeps a manoeuvre of a second or two)."""
 Phase = Literal["rest", "air", "hold"]
 """``rest``: on the floor, disarmed and still (v = 0 and b measured exactly); ``air``:
 flying (the filter observes); ``hold``: anything else (spool-up, landing, armed on the
@@ -172,8 +168,9 @@ class SlowAccelState:
         accel_1s_body_mps2: the 1 s mean of ``f − β − Rᵀ·g·e3``, body frame, m/s².
         quasi_static: the drone hovers (both below their thresholds).
         regime_velocity_world_mps: the velocity the hover test uses: the filter's while
-            motion capture is in use, else the corrected acceleration's leaky integral with a
-            2 s leak, world frame, m/s.
+            motion capture is in use, else the corrected acceleration's leaky integral with
+            the flight velocity's correlation time T_V as its leak
+            (``BiasKalmanParams.velocity_time_s``), world frame, m/s.
         hover_hold_s: time left before a hover may begin again after a change of the
             tension ended one (:func:`end_hover`), s.
     """
@@ -363,16 +360,20 @@ def slow_accel_step(
         velocity = rv = v
     else:
         # The corrected world acceleration's leaky integrals: high passes that keep a
-        # manoeuvre of a few seconds (the drag's, τ_v) or of a second or two (the hover
-        # test's). The filter's own velocity is held near zero by its bound, a model of the
-        # flight's low frequencies (which is what β needs), not a measure of a manoeuvre:
-        # as the drag's velocity it read NanoBench worse with the onboard attitude, in a
-        # development variant not kept (docs/estimator_design.md, *The bias as a state*).
+        # manoeuvre of a few seconds (the drag's, τ_v) or what the flight's own velocity
+        # keeps (the hover test's, whose leak is that velocity's correlation time T_V,
+        # fitted by calibrate with σ_V: a velocity held longer than the flights hold one is
+        # the integral's drift, a bias error ε held at ε·T_V, not a manoeuvre). The
+        # filter's own velocity is held near zero by its bound, a model of the flight's
+        # low frequencies (which is what β needs), not a measure of a manoeuvre: as the
+        # drag's velocity it read NanoBench worse with the onboard attitude, in a
+        # development variant not kept (docs/estimator_design.md, *The bias as a state*);
+        # so did the drag's leak at T_V (NanoBench's median 4.39 -> 9.47 mN).
         ux, uy, uz = state.drag_velocity_world_mps if state.in_air else _ZERO3
         leak = math.exp(-dt_s / params.velocity_time_constant_s)
         velocity = (ux * leak + awx * dt_s, uy * leak + awy * dt_s, uz * leak + awz * dt_s)
         ox, oy, oz = state.regime_velocity_world_mps
-        leak2 = math.exp(-dt_s / HOVER_SPEED_LEAK_S)
+        leak2 = math.exp(-dt_s / params.flight.velocity_time_s)
         rv = (ox * leak2 + awx * dt_s, oy * leak2 + awy * dt_s, oz * leak2 + awz * dt_s)
     a1 = (a1x + k1 * (ex - a1x), a1y + k1 * (ey - a1y), a1z + k1 * (ez - a1z))
     # The thresholds: the drone hovers while its 1 s mean acceleration and its speed are
@@ -398,7 +399,7 @@ def slow_accel_step(
         if density is not None:
             var1 += density / ((2.0 - k1) * HOVER_MEAN_S)
             if leak2 < 1.0:
-                held = params.flight.flight_bias_std_mps2 * HOVER_SPEED_LEAK_S
+                held = params.flight.flight_bias_std_mps2 * params.flight.velocity_time_s
                 var_v += density * dt_s / (1.0 - leak2 * leak2) + held * held
         vx, vy, vz = rv
         quasi = (

@@ -144,21 +144,24 @@ BUDGET: dict[str, tuple[int, int, int, int]] = {
     # velocity takes its process noise from a fitted density where calibrate wrote one
     # (TensionFilterParams.hover_balance_density_n2s; one attribute read and one test per
     # hovering message): hover 7,443 -> 7,449 bytecodes, every regime +0 to +6, Python, C
-    # and numpy calls the same.
+    # and numpy calls the same. Then (budgets kept) the hover test's speed leaks with the
+    # flight velocity's fitted correlation time (BiasKalmanParams.velocity_time_s, two
+    # attribute chains where a module constant was read): +4 bytecodes per airborne message
+    # off motion capture (hover 7,449 -> 7,453), calls the same.
     "hover": (106, 160, 11, 7801),
-    # (101.4, 160.0, 10.1, 7429) [104.3, 154.8, 10.3, 7449]
+    # (101.4, 160.0, 10.1, 7429) [104.3, 154.8, 10.3, 7453]
     "hover, motion capture, follow on": (153, 223, 15, 9786),
     # (145.4, 212.0, 14.1, 9320) [137.3, 203.8, 14.4, 9148]
     "motion capture, following a 30 mN pull": (167, 244, 19, 10187),
     # (158.6, 234.7, 18.1, 9747) [152.3, 228.7, 18.3, 9510]
     "plumb": (134, 248, 15, 9662),
-    # (127.4, 235.3, 14.1, 9202) [130.3, 233.8, 14.3, 9248]
+    # (127.4, 235.3, 14.1, 9202) [130.3, 233.8, 14.3, 9258]
     "tether on the floor": (155, 433, 15, 12494),
-    # (147.4, 412.0, 14.1, 11899) [150.3, 406.9, 14.3, 11915]
+    # (147.4, 412.0, 14.1, 11899) [150.3, 406.9, 14.3, 11925]
     "on the ground, disarmed": (78, 55, 14, 2816),
     # (73.6, 52.0, 12.5, 2690) [74.6, 52.0, 12.5, 2726]
     "hover, reel with exit angles at 10 Hz": (172, 380, 12, 12585),
-    # (163.3, 361.5, 11.1, 11986) [166.3, 356.6, 11.3, 12010]
+    # (163.3, 361.5, 11.1, 11986) [166.3, 356.6, 11.3, 12020]
 }
 
 
