@@ -12,9 +12,9 @@ this command says why, from the simulator's truth of the same flights:
 
 - per flight and dwell, over the samples that page judges (from ``SETTLE_S`` after the
   spot is commanded to the dwell's end), the true tension's standard deviation per world
-  axis and its block-mean random-walk density ``1.5·mean(Δȳ²)/B`` (B = 0.25 s, the fit's
-  block: a random walk's block means differ by ``2·q·B/3``; a swing about a mean reads as
-  wander at that scale too);
+  axis and its block-mean random-walk density (``sigma_consistency.truth_wander_by_axis``
+  at B = 0.25 s, the fit's block: ``3·AVAR(B)/B``; a swing about a mean reads as wander at
+  that scale too);
 - the balance fit of ``calibrate``'s own likelihood per world axis (q_w, D), on the same
   flights with the airframe constants ``calibrate`` fits from them, over the hover test's
   whole stretches and over the judged windows alone.
@@ -35,29 +35,22 @@ from typing import Any
 import numpy as np
 
 from benchmarks import bench_powerons as bp
+from benchmarks.sigma_consistency import truth_wander_by_axis
 from groundstation import hover_fit as hf
 from groundstation.config import load_settings
 from groundstation.estimator.drone import calibration_from_config
 from groundstation.recording.calibrate import read_recordings, run_calibrate, slow_accel_params
 from groundstation.recording.reader import copy_messages
 
-BLOCK_S = hf.BALANCE_BLOCK_S
-
-
-def truth_by_axis(stamp_s: np.ndarray, tension_n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(std per axis, N; block-mean random-walk density per axis, N²/s) of one window."""
-    k = np.floor((stamp_s - stamp_s[0]) / BLOCK_S).astype(int)
-    means = np.array(
-        [tension_n[k == i].mean(axis=0) for i in range(int(k.max())) if (k == i).any()]
-    )
-    d = np.diff(means, axis=0)
-    return tension_n.std(axis=0), 1.5 * (d * d).mean(axis=0) / BLOCK_S
-
 
 def fit_by_axis(
     data: Any, mask: np.ndarray, balance: np.ndarray, velocity: np.ndarray, mass_kg: float
 ) -> list[str]:
-    """``calibrate``'s balance likelihood on one world axis at a time: "q_w / D" per axis."""
+    """``calibrate``'s balance likelihood on one world axis at a time: "q_w / D" per axis.
+
+    ``fit_hover_balance`` sums its likelihood over the three axes and ``balance_blocks``
+    takes three columns, so the likelihood it maximises is swapped for the same one on one
+    column (hover_fit._balance_nll, restored after each fit)."""
     out = []
     nll = hf._balance_nll
     for axis in range(3):
@@ -108,7 +101,8 @@ def main(argv: list[str] | None = None) -> int:
             tension = np.array([rec.truth[s]["tension_n"] for s in stamps], float)
             for i, (a, b) in enumerate(rec.judged_from_s):
                 w = (stamps >= a) & (stamps <= b)
-                std, q = truth_by_axis(stamps[w], tension[w])
+                std = tension[w].std(axis=0)
+                q = truth_wander_by_axis(stamps[w], tension[w], hf.BALANCE_BLOCK_S)
                 print(
                     f"| {seed} | {i} | {'/'.join(f'{1e3 * x:.2f}' for x in std)} | "
                     f"{'/'.join(f'{x:.2g}' for x in q)} |"

@@ -74,19 +74,24 @@ WANDER_BLOCKS_S = (1.0, 2.0)
 """Block lengths of the truth's Allan variance, s (the judged window is 12 s long)."""
 
 
-def truth_wander(t_s: Any, tension_n: Any, block_s: float) -> float:
-    """The true tension's wander as a random walk's density, N²/s, mean over the axes: for a
+def truth_wander_by_axis(t_s: Any, tension_n: Any, block_s: float) -> Any:
+    """The true tension's wander as a random walk's density per world axis, (3,) N²/s: for a
     random walk of density q the Allan variance of block means of length τ is q·τ/3, so
     q = 3·AVAR(τ)/τ, AVAR = ½·mean((ȳ_(k+1) − ȳ_k)²) (fast swing adds to it at short τ:
-    an upper bound of the wander at that scale)."""
+    an upper bound of the wander at that scale); NaN with fewer than two whole blocks."""
     k = np.floor((np.asarray(t_s) - t_s[0]) / block_s).astype(int)
     means = np.array(
         [tension_n[k == i].mean(axis=0) for i in range(int(k.max())) if (k == i).any()]
     )
     if len(means) < 2:
-        return math.nan
-    avar = 0.5 * float((np.diff(means, axis=0) ** 2).mean())
+        return np.full(3, math.nan)
+    avar = 0.5 * (np.diff(means, axis=0) ** 2).mean(axis=0)
     return 3.0 * avar / block_s
+
+
+def truth_wander(t_s: Any, tension_n: Any, block_s: float) -> float:
+    """:func:`truth_wander_by_axis`, mean over the axes, N²/s."""
+    return float(truth_wander_by_axis(t_s, tension_n, block_s).mean())
 
 
 def main(argv: list[str] | None = None) -> int:
