@@ -146,9 +146,18 @@ def _settings(
 
 
 def _true_calibration(
-    noise_mps2: float, seed: int, classes: dict[str, bool], scenario: str = "hover"
+    noise_mps2: float,
+    seed: int,
+    classes: dict[str, bool],
+    scenario: str = "hover",
+    thrust_model: str = "vbat_linear",
 ) -> dict[str, Any]:
     """The flight's drawn errors as ``[calibration]`` values (the simulator's equivalent).
+
+    ``thrust_model``: the battery's law as the straight line (``vbat_linear``, first order
+    about the simulator's reference voltage, what every page uses) or as the motor-voltage
+    model, which is the simulator's law at every voltage (``motor_voltage``;
+    groundstation.sim.sensors).
 
     ``scenario`` is the flight's own: the accelerometer bias that stands for the per-boot
     misalignment and scale is exact at one attitude only, the flight's hover (the
@@ -162,8 +171,12 @@ def _true_calibration(
     # sees them (thrust scale and battery term, the thrust axis in the frame the attitude is
     # reported in); the accelerometer's per-power-on errors are left to the service, which
     # learns them at this power-on (accel_slow, the default), exactly as after `calibrate`.
-    eq = errors["airframe_equivalent"]
-    cal: dict[str, Any] = {k: eq[k] for k in CAL_KEYS}
+    if thrust_model == "vbat_linear":
+        eq = errors["airframe_equivalent"]
+        cal: dict[str, Any] = {k: eq[k] for k in CAL_KEYS}
+    else:
+        drone = sim.drones[DRONE]
+        cal = drone.errors.airframe_equivalent(drone.sensors.attitude_levelled, thrust_model)  # type: ignore[union-attr]
     cal["source"] = f"simulator truth (seed {seed})"
     return cal
 
@@ -210,10 +223,12 @@ def fly(
     *,
     classes: dict[str, bool] | None = None,
     calibrated: bool = True,
+    thrust_model: str = "vbat_linear",
 ) -> Flight:
-    """Runs one flight through the pipeline; records what the oracle needs."""
+    """Runs one flight through the pipeline; records what the oracle needs (``thrust_model``:
+    the truth calibration's battery law, :func:`_true_calibration`)."""
     classes = classes or {}
-    true_cal = _true_calibration(noise_mps2, seed, classes, scenario)
+    true_cal = _true_calibration(noise_mps2, seed, classes, scenario, thrust_model)
     settings = _settings(noise_mps2, seed, classes, true_cal if calibrated else None)
     sim = Simulator(settings, _NullBus(), scenario=scenario)  # type: ignore[arg-type]
     pipe = Pipeline(settings)

@@ -46,27 +46,13 @@ from groundstation.recording.reader import copy_messages
 def fit_by_axis(
     data: Any, mask: np.ndarray, balance: np.ndarray, velocity: np.ndarray, mass_kg: float
 ) -> list[str]:
-    """``calibrate``'s balance likelihood on one world axis at a time: "q_w / D" per axis.
-
-    ``fit_hover_balance`` sums its likelihood over the three axes and ``balance_blocks``
-    takes three columns, so the likelihood it maximises is swapped for the same one on one
-    column (hover_fit._balance_nll, restored after each fit)."""
+    """``calibrate``'s balance likelihood on one world axis at a time: "q_w / D" per axis
+    (``fit_hover_balance`` with ``axes`` one axis; calibrate sums the three)."""
     out = []
-    nll = hf._balance_nll
     for axis in range(3):
-
-        def one_axis(
-            theta: Any, diffs: list[np.ndarray], block_s: float, m: float, axis: int = axis
-        ) -> float:
-            return nll(theta, [d[:, axis : axis + 1] for d in diffs], block_s, m)
-
-        hf._balance_nll = one_axis  # type: ignore[assignment]
-        try:
-            fit, _ = hf.fit_hover_balance(
-                data, mask, balance, mass_kg=mass_kg, velocity_world_mps=velocity
-            )
-        finally:
-            hf._balance_nll = nll
+        fit, _ = hf.fit_hover_balance(
+            data, mask, balance, mass_kg=mass_kg, velocity_world_mps=velocity, axes=(axis,)
+        )
         out.append(
             "-" if fit is None else f"{fit.wander_n2_per_s:.2g} / {fit.balance_density_n2s:.2g}"
         )

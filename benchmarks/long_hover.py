@@ -2,7 +2,7 @@
 and the published tension σ over them (a diagnosis, no page).
 
 ``python -m benchmarks.long_hover [--flights 24] [--minutes 4] [--noise 0.8] [--seed-base 7000]
-[--jobs 2]``
+[--jobs 2] [--thrust-model vbat_linear|motor_voltage]``
 
 The change test's false-alarm rate (``TensionFilterParams.false_alarms_per_h``, 0.005 per
 hour per drone) is measured on the tension filter alone in docs/change_test_benchmark.md
@@ -10,7 +10,10 @@ hour per drone) is measured on the tension filter alone in docs/change_test_benc
 (``benchmarks.bench_realistic.fly``: the realistic simulator's rigid body, lumped-mass
 tether, controller, motor lag and vibration; the pipeline with its hover test, slow stage
 and contact stage, as the service runs it without motion capture; calibration = the
-flight's own airframe constants, the hover priors the defaults), each flight a hover at one
+flight's own airframe constants, the hover priors the defaults; ``--thrust-model``: the
+battery's law in them as the straight line, first order about the simulator's reference
+voltage, or as the motor-voltage model, the simulator's law at every voltage:
+groundstation.sim.sensors), each flight a hover at one
 of the paper's six spots (in turn) for ``--minutes`` (4: a Crazyflie's battery lasts ~7,
 and the simulator's drains), judged from ``SETTLE_S`` on. Nothing pulls and nothing moves
 the drone, so every change detection in the judged time is a false one, as far as the
@@ -43,10 +46,10 @@ SETTLE_S = 20.0
 regime; bench_realistic judges its 20 s hovers from 8 s)."""
 
 
-def one(job: tuple[int, int, float, float]) -> dict[str, Any]:
-    """One flight: ``(spot, seed, minutes, noise)`` → what is judged."""
-    spot, seed, minutes, noise = job
-    f = br.fly(br._scenario_for_spot(spot), 60.0 * minutes, noise, seed)
+def one(job: tuple[int, int, float, float, str]) -> dict[str, Any]:
+    """One flight: ``(spot, seed, minutes, noise, thrust_model)`` → what is judged."""
+    spot, seed, minutes, noise, thrust_model = job
+    f = br.fly(br._scenario_for_spot(spot), 60.0 * minutes, noise, seed, thrust_model=thrust_model)
     w = f.t_s >= SETTLE_S
     err = f.est_tension_n[w] - f.true_tension_n[w]
     std = f.est_tension_std_n[w]
@@ -84,9 +87,18 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--noise", type=float, default=0.8, help="vibration, m/s^2 (0.8)")
     ap.add_argument("--seed-base", type=int, default=7000)
     ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument(
+        "--thrust-model",
+        choices=("vbat_linear", "motor_voltage"),
+        default="vbat_linear",
+        help="the truth calibration's battery law (vbat_linear)",
+    )
     args = ap.parse_args(argv)
     spots = len(PAPER_HOVER_SPOTS_M)
-    jobs = [(k % spots, args.seed_base + k, args.minutes, args.noise) for k in range(args.flights)]
+    jobs = [
+        (k % spots, args.seed_base + k, args.minutes, args.noise, args.thrust_model)
+        for k in range(args.flights)
+    ]
     t0 = time.perf_counter()
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:
         rows = list(pool.map(one, jobs))
@@ -99,7 +111,8 @@ def main(argv: list[str] | None = None) -> int:
     print(
         f"Realistic simulator, {args.noise} m/s^2, {args.flights} hovers of {args.minutes:g} min "
         f"(seeds {args.seed_base}-{args.seed_base + args.flights - 1}, the paper's six spots in "
-        f"turn), judged from {SETTLE_S:g} s; {time.perf_counter() - t0:.0f} s wall."
+        f"turn), judged from {SETTLE_S:g} s; truth calibration's battery law "
+        f"{args.thrust_model}; {time.perf_counter() - t0:.0f} s wall."
     )
     print()
     print(

@@ -312,6 +312,7 @@ def fit_hover_velocity(
         min_hover_s: below this much hover nothing is fitted.
         velocity_world_mps: :func:`bridged_velocity` of ``data`` if already computed
             (``calibrate`` computes it once for every fit), else None.
+        axes: the world axes (0, 1, 2: x, y, z) whose likelihoods are summed.
 
     Returns:
         ``(fit or None, seconds of hover found)``.
@@ -530,6 +531,7 @@ def fit_hover_balance(
     min_hover_s: float = HOVER_FIT_MIN_S,
     block_s: float = BALANCE_BLOCK_S,
     velocity_world_mps: FloatArray | None = None,
+    axes: tuple[int, ...] = (0, 1, 2),
 ) -> tuple[HoverBalanceFit | None, float]:
     """q_w and D of the hover's thrust balance from the recording, by maximum likelihood.
 
@@ -549,7 +551,8 @@ def fit_hover_balance(
         γ2 = c²
 
     and its exact Gaussian likelihood (banded Cholesky), summed over the stretches and the
-    three axes (one q_w and one D, as the filter has), is maximised over log(q_w, D, σ_e²)
+    world axes ``axes`` (all three: one q_w and one D, as the filter has; one of them, for a
+    diagnosis per axis), is maximised over log(q_w, D, σ_e²)
     (scipy L-BFGS-B). The three are told apart by the differences' autocovariance at lags
     0–2: the wander by its positive lag-1 share, the balance's noise by a negative one at
     lag 1 only, the velocity's error by lag 2.
@@ -581,7 +584,7 @@ def fit_hover_balance(
         )
         if y.shape[0] < BALANCE_MIN_BLOCKS:
             continue
-        diffs.append(np.diff(y, axis=0))
+        diffs.append(np.diff(y, axis=0)[:, list(axes)])
         used_s += y.shape[0] * block_s
     if not diffs or used_s < min_hover_s:
         return None, hover_s

@@ -96,6 +96,23 @@ def test_no_wander_is_not_taken_for_one() -> None:
     assert fit.balance_density_n2s == pytest.approx(9e-8, rel=0.3)
 
 
+def test_one_axis_at_a_time() -> None:
+    """``axes`` sums the likelihood over the axes named: a wander in y only is found on y
+    alone and not on x alone; all three together find it diluted between them."""
+    data, h, _ = _balanced_hover(300.0, 0.0, 9e-8, seed=14)
+    walked, h_walk, _ = _balanced_hover(300.0, 3e-7, 9e-8, seed=14)
+    h[:, 1] = h_walk[:, 1]  # the same hover, with y's balance from the wandering one
+    assert np.allclose(walked.position_world_m, data.position_world_m)  # same motion
+    fit_x, _ = fit_hover_balance(data, np.ones(len(data), bool), h, mass_kg=MASS_KG, axes=(0,))
+    fit_y, _ = fit_hover_balance(data, np.ones(len(data), bool), h, mass_kg=MASS_KG, axes=(1,))
+    fit_all, _ = fit_hover_balance(data, np.ones(len(data), bool), h, mass_kg=MASS_KG)
+    assert fit_x is not None and fit_y is not None and fit_all is not None
+    assert not fit_x.wander_resolved and fit_y.wander_resolved
+    assert 3e-7 / 2.5 < fit_y.wander_n2_per_s < 3e-7 * 2.5
+    assert fit_all.wander_n2_per_s < fit_y.wander_n2_per_s
+    assert fit_x.blocks == fit_y.blocks == fit_all.blocks  # blocks of time, any axes
+
+
 def test_too_little_hover_fits_nothing() -> None:
     data, h, _ = _balanced_hover(2.5, 1e-8, 9e-8, seed=13)
     fit, hover_s = fit_hover_balance(data, np.ones(len(data), bool), h, mass_kg=MASS_KG)

@@ -292,6 +292,40 @@ def test_battery_sags_and_the_thrust_map_drifts_with_it() -> None:
     assert all("vbat_v" not in it["telemetry"] for it in off)
 
 
+def test_motor_voltage_equivalent_is_the_battery_law_at_every_voltage() -> None:
+    """The estimator's motor-voltage model (groundstation.tension's, read from the
+    configuration as the service reads it) given the simulator's equivalent returns the true
+    motor thrust from Telemetry's thrust and battery, to rounding, as the battery sags; the
+    straight line (the first-order equivalent) drifts from it as the voltage leaves V_ref."""
+    from groundstation.config import CalibrationSection
+    from groundstation.estimator.drone import calibration_from_config
+
+    drone = _drone(_only("thrust_map", "battery"))
+    items = _fly(drone, 10.0)
+    thrust = _arrays(items, "telemetry", "thrust_n")
+    vbat = _arrays(items, "telemetry", "vbat_v")
+    truth = _arrays(items, "truth", "motor_thrust_n")
+    motor = drone.errors.airframe_equivalent(False, "motor_voltage")
+    assert motor["thrust_model"] == "motor_voltage"
+    cal, _ = calibration_from_config(CalibrationSection(**motor))
+    assert cal.motor_model_in_force
+    got = np.array([cal.thrust_n(float(t), float(v)) for t, v in zip(thrust, vbat, strict=True)])
+    np.testing.assert_allclose(got, truth, rtol=1e-9)
+    # Far below V_ref the line and the law part: F ∝ (V/V_ref)² against its tangent.
+    line = drone.errors.airframe_equivalent(False)
+    lin, _ = calibration_from_config(CalibrationSection(**line))
+    v_low = 3.3
+    f_law = cal.thrust_n(0.3, v_low)
+    assert f_law == pytest.approx(
+        0.3 * (v_low / 4.05) ** 2 / (1 + drone.errors.thrust_report_error)
+    )
+    assert abs(lin.thrust_n(0.3, v_low) - f_law) > 1e-3  # over 1 mN of 0.3 N
+    with pytest.raises(ValueError, match="exponent of 2"):
+        _drone(_only("thrust_map", "battery", thrust_vbat_exponent=1.5)).errors.airframe_equivalent(
+            False, "motor_voltage"
+        )
+
+
 def test_motor_lag_delays_the_thrust_by_its_time_constant() -> None:
     def step_response(tau_s: float) -> float:
         body = RigidDrone(

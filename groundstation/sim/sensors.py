@@ -38,7 +38,12 @@ terms, so a fitted calibration can be checked against :meth:`DrawnErrors.equival
   γ/((1 + e)·V_ref)``, ``thrust_vbat_ref_v = V_ref`` (the first-order expansion of
   ``(V/V_ref)^γ/(1 + e)``; 0.2 % off at 0.16 V from V_ref); ``thrust_scale_hover_start``: the
   exact ``1/((1 + e)(V_ref/V)^γ)`` at the flight's first hover voltage (for an estimator that
-  does not use ``vbat_v``).
+  does not use ``vbat_v``). With γ = 2 the law is exactly the estimator's motor-voltage model
+  (``thrust_model = "motor_voltage"``) read through a map quadratic in the motor command,
+  ``thrust_n/4 = a·pwm²``: a motor's true thrust is ``f_ref·(v/v_ref)²`` in its voltage
+  ``v = V·pwm/65535``, so ``F = thrust_n·(V/V_ref)²/(1 + e)`` for ``f_ref = a·65535²/(1 + e)``
+  and ``v_ref = V_ref`` (one motor's true thrust at full duty on a battery at ``V_ref``; any
+  ``a > 0`` gives the same ``F``: :meth:`DrawnErrors.airframe_equivalent`).
 
 Noise: per IMU sample and axis ``n_k = σ_k·(√β·c_k + √(1 − β)·w_k)`` with ``c_k = a·c_{k−1} +
 √(1 − a²)·ε_k`` a unit AR(1) (vibration, coloured) and ``w_k`` white; ``β = lag1/a`` so the lag-1
@@ -87,6 +92,13 @@ __all__ = [
 ]
 
 GRAVITY_MPS2 = 9.81
+
+PWM_FULL_SCALE = 65535.0
+"""The Crazyflie's motor command at full duty (its 16-bit ratio)."""
+QUADRATIC_MAP_FULL_DUTY_N = 0.16
+"""One motor's reported thrust at full duty in the map of the motor-voltage equivalent,
+N (about the Crazyflie 2.x nominal map's at pwm 65535; any value > 0 gives the same
+thrust, it only sets the scale of ``thrust_pwm_map`` and ``thrust_motor_ref_n``)."""
 
 
 @dataclass(frozen=True)
@@ -202,11 +214,16 @@ class DrawnErrors:
         w, x, y, z = quat_wxyz_from_z_axis(self.level_reading_mps2())
         return np.array([w, -x, -y, -z])
 
-    def airframe_equivalent(self, levelled: bool) -> dict[str, Any]:
+    def airframe_equivalent(
+        self, levelled: bool, thrust_model: str = "vbat_linear"
+    ) -> dict[str, Any]:
         """The airframe constants as the airframe calibration sees them for this flight.
 
-        Thrust scale and battery term as :meth:`equivalent`; the thrust axis in the frame
-        the attitude is reported in (``Qᵀ·n_B`` when the attitude is levelled on the
+        Thrust scale and battery term as :meth:`equivalent` (``thrust_model = "vbat_linear"``:
+        the straight line, first order in ``V − V_ref``) or, with ``thrust_model =
+        "motor_voltage"``, the motor-voltage model that is this law exactly at every voltage
+        (module docstring; γ must be 2, else ValueError); the thrust axis in the frame the
+        attitude is reported in (``Qᵀ·n_B`` when the attitude is levelled on the
         accelerometer: then it differs from flight to flight by the per-boot tilt).
         """
         n_b = (
@@ -221,6 +238,25 @@ class DrawnErrors:
         ay = math.asin(float(np.clip(n_b[0], -1.0, 1.0)))
         ax = math.atan2(-float(n_b[1]), float(n_b[2]))
         one_e = 1.0 + self.thrust_report_error
+        if thrust_model == "motor_voltage":
+            if self.thrust_vbat_exponent != 2.0:
+                raise ValueError(
+                    f"thrust_vbat_exponent {self.thrust_vbat_exponent!r}: the motor-voltage "
+                    "model is this law only for an exponent of 2"
+                )
+            a = QUADRATIC_MAP_FULL_DUTY_N / PWM_FULL_SCALE**2
+            return {
+                "thrust_model": "motor_voltage",
+                "thrust_pwm_map": [a, 0.0, 0.0],
+                "thrust_motor_ref_n": QUADRATIC_MAP_FULL_DUTY_N / one_e,
+                "thrust_motor_ref_v": self.thrust_vbat_ref_v,
+                "thrust_motor_exponent": 2.0,
+                "thrust_scale": 1.0,
+                "thrust_vbat_ref_v": self.thrust_vbat_ref_v,
+                "thrust_axis_rad": [ax, ay],
+            }
+        if thrust_model != "vbat_linear":
+            raise ValueError(f"thrust_model {thrust_model!r}")
         return {
             "thrust_scale": 1.0 / one_e,
             "thrust_vbat_slope_per_v": self.thrust_vbat_exponent / (one_e * self.thrust_vbat_ref_v),
