@@ -312,7 +312,6 @@ def fit_hover_velocity(
         min_hover_s: below this much hover nothing is fitted.
         velocity_world_mps: :func:`bridged_velocity` of ``data`` if already computed
             (``calibrate`` computes it once for every fit), else None.
-        axes: the world axes (0, 1, 2: x, y, z) whose likelihoods are summed.
 
     Returns:
         ``(fit or None, seconds of hover found)``.
@@ -567,6 +566,7 @@ def fit_hover_balance(
         block_s: the block, s.
         velocity_world_mps: :func:`bridged_velocity` of ``data`` if already computed
             (``calibrate`` computes it once for every fit), else None.
+        axes: the world axes (0, 1, 2: x, y, z) whose likelihoods are summed.
 
     Returns:
         ``(fit or None, seconds of hover found)``.
